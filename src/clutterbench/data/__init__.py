@@ -1,0 +1,1 @@
+"""Dataset stages: sharded generation, splitting, and the PyTorch Dataset."""

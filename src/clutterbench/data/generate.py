@@ -1,0 +1,229 @@
+"""Sharded, parallel, resumable generation of labelled scenes (stage `generate`).
+
+A dataset is `n_scenes` scenes cut into shards of `shard_size`; each shard is one .npz
+written atomically, stamped with the hash of everything that determines its content. An
+interrupted run continues from the finished shards; a shard made under other params is
+regenerated. Same params and seed -> byte-identical shards.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import multiprocessing as mp
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from clutterbench.config import as_dict, bounded
+from clutterbench.errors import ClutterbenchError
+from clutterbench.io import load_npz, save_npz, write_json
+from clutterbench.progress import progress_bar
+from clutterbench.sim.catalog import CATALOGUES
+from clutterbench.sim.families import FAMILIES
+from clutterbench.sim.labelling import REJECT_REASONS, generate_labelled_scene
+from clutterbench.sim.physics import PhysicsConfig
+from clutterbench.sim.render import CameraConfig, ensure_renderer
+
+FORMAT_VERSION = 1
+
+
+@dataclasses.dataclass(frozen=True)
+class DatasetConfig:
+    n_scenes: int = bounded(ge=1)
+    """Number of accepted scenes."""
+    families: Mapping[str, float] = dataclasses.field(default_factory=dict)
+    """Scene family -> relative weight (thesis ch. 6: shelved : stacked : random = 1 : 1 : 3)."""
+    catalogue: Literal["same", "various", "new"] = "various"
+    """Box catalogue the sizes are drawn from."""
+    n_objects: tuple[int, int] = bounded((5, 10), ge=1, le=30)
+    """Inclusive range of the number of boxes per scene."""
+    pulls: bool = False
+    """Also simulate pulling each box out with each other box held (thesis ch. 4 pairs)."""
+    moved_threshold_m: float = bounded(0.005, gt=0.0)
+    """A box 'moved' when its centre moved more than this (thesis: 6.4 mm ch. 5, 5.0 mm
+    ch. 6). Applied when labels are derived, so changing it regenerates nothing."""
+
+    def __post_init__(self) -> None:
+        if not self.families:
+            raise ValueError("families: give at least one scene family")
+        for name, w in self.families.items():
+            if name not in FAMILIES:
+                raise ValueError(f"families.{name}: unknown family (known: {', '.join(FAMILIES)})")
+            if w <= 0:
+                raise ValueError(f"families.{name}: weight must be > 0")
+        if self.n_objects[0] > self.n_objects[1]:
+            raise ValueError("n_objects: the range must be [low, high] with low <= high")
+        assert self.catalogue in CATALOGUES
+
+
+@dataclasses.dataclass(frozen=True)
+class GenerateConfig:
+    shard_size: int = bounded(50, ge=1)
+    """Scenes per shard file (the unit of resuming and of parallel work)."""
+    workers: int = bounded(2, ge=1)
+    """Worker processes, each with its own renderer."""
+    max_attempts: int = bounded(30, ge=1)
+    """A scene is redrawn (counted as rejected) at most this often before the stage fails."""
+    datasets: Mapping[str, DatasetConfig] = dataclasses.field(default_factory=dict)
+    """Dataset name -> what to generate."""
+
+
+@dataclasses.dataclass(frozen=True)
+class SimConfig:
+    physics: PhysicsConfig = PhysicsConfig()
+    """PhysX settings shared by data generation and the simulated trials."""
+    camera: CameraConfig = CameraConfig()
+    """The depth camera in front of the shelf."""
+
+
+def config_hash(dataset: str, ds: DatasetConfig, sim: SimConfig, seed: int) -> str:
+    ds_fields = {k: v for k, v in as_dict(ds).items() if k != "moved_threshold_m"}
+    payload = {
+        "format": FORMAT_VERSION,
+        "dataset": dataset,
+        "ds": ds_fields,
+        "sim": as_dict(sim),
+        "seed": seed,
+    }
+    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def shard_path(out_dir: Path, shard: int) -> Path:
+    return out_dir / f"shard-{shard:05d}.npz"
+
+
+def _shard_is_done(path: Path, digest: str) -> bool:
+    if not path.exists():
+        return False
+    try:
+        return str(load_npz(path)["config_hash"]) == digest
+    except ClutterbenchError:
+        return False  # corrupt (e.g. a crash of an older writer): regenerate it
+
+
+def make_shard(job: dict[str, Any]) -> dict[str, Any]:
+    """Generate and write one shard; runs in a worker process."""
+    ds: DatasetConfig = job["ds"]
+    sim: SimConfig = job["sim"]
+    ensure_renderer()
+    scenes = [
+        generate_labelled_scene(
+            seed=job["seed"],
+            dataset=job["dataset"],
+            index=i,
+            family_weights=dict(ds.families),
+            catalogue=ds.catalogue,
+            n_objects=ds.n_objects,
+            pulls=ds.pulls,
+            physics=sim.physics,
+            camera=sim.camera,
+            max_attempts=job["max_attempts"],
+        )
+        for i in job["indices"]
+    ]
+    n_max = ds.n_objects[1]
+    s = len(scenes)
+    arrays: dict[str, np.ndarray] = {
+        "config_hash": np.array(job["digest"]),
+        "scene_index": np.array(job["indices"], dtype=np.int64),
+        "n_objects": np.array([sc.spec.n for sc in scenes], dtype=np.int16),
+        "family": np.array([sc.spec.family for sc in scenes]),
+        "depth_m": np.stack([sc.depth_m for sc in scenes]).astype(np.float32),
+        "instance": np.stack([sc.instance for sc in scenes]).astype(np.uint8),
+        "sizes_m": np.zeros((s, n_max, 3), np.float32),
+        "poses": np.zeros((s, n_max, 7), np.float64),
+        "removal_m": np.full((s, n_max, n_max), np.nan, np.float32),
+        "spec_json": np.array([sc.spec.to_json() for sc in scenes]),
+        "rejected": np.array(
+            [[sc.rejected[r] for r in REJECT_REASONS] for sc in scenes], dtype=np.int32
+        ),
+        "steps": np.array([sc.steps for sc in scenes], dtype=np.int64),
+    }
+    if ds.pulls:
+        arrays["pull_m"] = np.full((s, n_max, n_max + 1, n_max), np.nan, np.float32)
+    for k, sc in enumerate(scenes):
+        n = sc.spec.n
+        arrays["sizes_m"][k, :n] = sc.spec.sizes_m
+        arrays["poses"][k, :n] = sc.spec.poses
+        arrays["removal_m"][k, :n, :n] = sc.removal_m
+        if ds.pulls:
+            # support slot n (no support) is stored in the last slot, n_max
+            arrays["pull_m"][k, :n, :n, :n] = sc.pull_m[:, :n]
+            arrays["pull_m"][k, :n, n_max, :n] = sc.pull_m[:, n]
+    save_npz(job["path"], arrays)
+    return {"shard": job["shard"], "scenes": s}
+
+
+def generate_dataset(
+    name: str, ds: DatasetConfig, gen: GenerateConfig, sim: SimConfig, seed: int, out_dir: Path
+) -> dict[str, Any]:
+    """Write (or finish) every shard of dataset `name` under `out_dir`; returns the manifest."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    digest = config_hash(name, ds, sim, seed)
+    n_shards = -(-ds.n_scenes // gen.shard_size)
+    for stale in out_dir.glob("shard-*.npz"):  # shards beyond a shrunken dataset
+        if int(stale.stem.split("-")[1]) >= n_shards:
+            stale.unlink()
+    jobs = []
+    for shard in range(n_shards):
+        path = shard_path(out_dir, shard)
+        if _shard_is_done(path, digest):
+            continue
+        lo, hi = shard * gen.shard_size, min((shard + 1) * gen.shard_size, ds.n_scenes)
+        jobs.append(
+            {
+                "shard": shard,
+                "indices": list(range(lo, hi)),
+                "path": path,
+                "ds": ds,
+                "sim": sim,
+                "seed": seed,
+                "dataset": name,
+                "digest": digest,
+                "max_attempts": gen.max_attempts,
+            }
+        )
+    done_before = ds.n_scenes - sum(len(j["indices"]) for j in jobs)
+    with progress_bar(f"generate {name}", total=ds.n_scenes, completed=done_before) as advance:
+        if gen.workers == 1 or len(jobs) <= 1:
+            for job in jobs:
+                advance(make_shard(job)["scenes"])
+        else:
+            ctx = mp.get_context("spawn")  # fresh processes: one renderer each, no forked GL
+            with ctx.Pool(min(gen.workers, len(jobs))) as pool:
+                for result in pool.imap_unordered(make_shard, jobs):
+                    advance(result["scenes"])
+    return write_manifest(name, ds, digest, n_shards, out_dir)
+
+
+def write_manifest(
+    name: str, ds: DatasetConfig, digest: str, n_shards: int, out_dir: Path
+) -> dict[str, Any]:
+    families: dict[str, int] = {}
+    rejected = dict.fromkeys(REJECT_REASONS, 0)
+    n_objects, steps = [], 0
+    for shard in range(n_shards):
+        z = load_npz(shard_path(out_dir, shard))
+        for f in z["family"]:
+            families[str(f)] = families.get(str(f), 0) + 1
+        for r, c in zip(REJECT_REASONS, z["rejected"].sum(axis=0)):
+            rejected[r] += int(c)
+        n_objects += z["n_objects"].tolist()
+        steps += int(z["steps"].sum())
+    manifest = {
+        "dataset": name,
+        "config_hash": digest,
+        "n_scenes": ds.n_scenes,
+        "n_shards": n_shards,
+        "shards": [shard_path(out_dir, s).name for s in range(n_shards)],
+        "families": dict(sorted(families.items())),
+        "rejected": rejected,
+        "n_objects_mean": float(np.mean(n_objects)),
+        "physics_steps": steps,
+    }
+    write_json(out_dir / "manifest.json", manifest)
+    return manifest

@@ -1,0 +1,1 @@
+"""Report tables: our metrics with the thesis figure beside them."""

@@ -1,0 +1,98 @@
+"""Build comparison tables (ours | thesis) and write them as Markdown + CSV.
+
+Thesis figures come only from the one data file (reports/thesis_figures.yaml) and appear
+only in the "(thesis)" columns.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import yaml
+
+from clutterbench.errors import ClutterbenchError
+from clutterbench.io import write_text
+
+
+def load_thesis_figures(path: Path) -> dict[str, Any]:
+    path = Path(path)
+    if not path.exists():
+        raise ClutterbenchError(f"thesis figures file not found: {path}")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ClutterbenchError(f"thesis figures file {path} is not valid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise ClutterbenchError(f"thesis figures file {path} must map table ids to tables")
+    return data
+
+
+def thesis_row(figures: Mapping[str, Any], table: str, row: str) -> dict[str, Any]:
+    """One row of a thesis table by its `row:` label ({} if the thesis has none)."""
+    if table not in figures:
+        raise ClutterbenchError(f"thesis figures: no table '{table}'")
+    for r in figures[table].get("rows", []):
+        if r.get("row") == row:
+            return r
+    return {}
+
+
+@dataclasses.dataclass(frozen=True)
+class Column:
+    key: str
+    """Metric key in our metrics and in the thesis row."""
+    header: str
+    fmt: str = "{:.3f}"
+
+
+def _fmt(value: Any, fmt: str) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "—"
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return fmt.format(value)
+    return str(value)
+
+
+def comparison_frame(
+    rows: Sequence[tuple[str, Mapping[str, Any], Mapping[str, Any]]],
+    columns: Sequence[Column],
+    row_header: str,
+) -> pd.DataFrame:
+    """rows: (label, ours, thesis). Each column appears as 'header' and 'header (thesis)'."""
+    records = []
+    for label, ours, thesis in rows:
+        rec: dict[str, Any] = {row_header: label}
+        for c in columns:
+            rec[c.header] = ours.get(c.key)
+            rec[f"{c.header} (thesis)"] = thesis.get(c.key)
+        records.append(rec)
+    return pd.DataFrame.from_records(records)
+
+
+def write_table(
+    frame: pd.DataFrame,
+    columns: Sequence[Column],
+    out_dir: Path,
+    name: str,
+    title: str,
+    notes: Sequence[str] = (),
+) -> None:
+    """reports/tables/<name>.md (formatted) and <name>.csv (raw values)."""
+    fmts = {c.header: c.fmt for c in columns} | {f"{c.header} (thesis)": c.fmt for c in columns}
+    header = list(frame.columns)
+    lines = [
+        f"# {title}",
+        "",
+        "| " + " | ".join(header) + " |",
+        "|" + "|".join("---" for _ in header) + "|",
+    ]
+    for _, r in frame.iterrows():
+        lines.append("| " + " | ".join(_fmt(r[h], fmts.get(h, "{}")) for h in header) + " |")
+    lines += [""] + [f"- {n}" for n in notes]
+    write_text(out_dir / f"{name}.md", "\n".join(lines).rstrip() + "\n")
+    write_text(out_dir / f"{name}.csv", frame.to_csv(index=False))

@@ -1,0 +1,1 @@
+"""SAPIEN 3 shelf simulation: shelf, box catalogues, scene families, actions, rendering."""

@@ -1,0 +1,60 @@
+"""Small pure pose helpers. Quaternions are (w, x, y, z) as in SAPIEN; lengths in metres."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def quat_from_axis_angle(axis: np.ndarray, angle_rad: float) -> np.ndarray:
+    axis = np.asarray(axis, dtype=np.float64)
+    axis = axis / np.linalg.norm(axis)
+    half = 0.5 * angle_rad
+    return np.concatenate([[np.cos(half)], np.sin(half) * axis])
+
+
+def quat_mul(q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """Hamilton product q1 * q2 (apply q2 first, then q1)."""
+    w1, x1, y1, z1 = q1
+    w2, x2, y2, z2 = q2
+    return np.array(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ]
+    )
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def random_quat(rng: np.random.Generator) -> np.ndarray:
+    """Uniformly distributed rotation (Shoemake)."""
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0 else -q
+
+
+def box_aabb_half_extents(size_m: np.ndarray, quat: np.ndarray) -> np.ndarray:
+    """Half extents of the world-axis-aligned bounding box of a rotated box."""
+    return np.abs(quat_to_matrix(quat)) @ (0.5 * np.asarray(size_m, dtype=np.float64))
+
+
+def aabb_overlap_xy(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray, hi_b: np.ndarray) -> bool:
+    """Whether two AABBs overlap in the horizontal (x, y) plane."""
+    return bool(np.all(lo_a[:2] < hi_b[:2]) and np.all(lo_b[:2] < hi_a[:2]))
+
+
+def displacement_m(pos_before: np.ndarray, pos_after: np.ndarray) -> np.ndarray:
+    """Per-object centre displacement (thesis 5.2.2 / 6.2.1 'change of the centre position')."""
+    assert pos_before.shape == pos_after.shape and pos_before.shape[-1] == 3
+    return np.linalg.norm(pos_after - pos_before, axis=-1)

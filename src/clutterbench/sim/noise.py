@@ -1,0 +1,32 @@
+"""Parametric depth noise (the thesis adds random noise to simulated depth, 5.2.2)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from clutterbench.config import bounded
+
+
+@dataclasses.dataclass(frozen=True)
+class DepthNoiseConfig:
+    sigma_m: float = bounded(0.001, ge=0.0)
+    """Depth-independent Gaussian noise (m)."""
+    sigma_quadratic_per_m: float = bounded(0.002, ge=0.0)
+    """Depth-dependent term: sigma += k * depth^2, as structured-light sensors behave."""
+    dropout: float = bounded(0.005, ge=0.0, le=1.0)
+    """Fraction of pixels set to 0 (missing returns)."""
+
+
+def add_depth_noise(
+    depth_m: np.ndarray, cfg: DepthNoiseConfig, rng: np.random.Generator
+) -> np.ndarray:
+    """Noisy copy of `depth_m` (float32 metres); invalid (0) pixels stay 0."""
+    assert depth_m.dtype == np.float32, "depth must be float32 metres"
+    valid = depth_m > 0
+    sigma = cfg.sigma_m + cfg.sigma_quadratic_per_m * depth_m.astype(np.float64) ** 2
+    noisy = depth_m + (rng.standard_normal(depth_m.shape) * sigma).astype(np.float32)
+    noisy[rng.random(depth_m.shape) < cfg.dropout] = 0.0
+    noisy[~valid] = 0.0
+    return noisy.astype(np.float32)

@@ -1,0 +1,27 @@
+"""Stage generate@<dataset>: labelled shelf scenes, sharded, parallel, resumable."""
+
+import sys
+from pathlib import Path
+
+from clutterbench.config import BaseConfig, load_section
+from clutterbench.data.generate import GenerateConfig, SimConfig, generate_dataset
+from clutterbench.errors import ClutterbenchError
+from clutterbench.stage import run_stage
+
+
+def generate(params: dict, base: BaseConfig) -> None:
+    name = sys.argv[1] if len(sys.argv) > 1 else ""
+    gen = load_section(GenerateConfig, "generate", params)
+    sim = load_section(SimConfig, "sim", params)
+    if name not in gen.datasets:
+        raise ClutterbenchError(
+            f"generate.datasets.{name}: no such dataset (known: {', '.join(gen.datasets)})"
+        )
+    manifest = generate_dataset(
+        name, gen.datasets[name], gen, sim, base.seed, Path("data/generate") / name
+    )
+    print(f"{name}: {manifest['n_scenes']} scenes, rejected {manifest['rejected']}")
+
+
+if __name__ == "__main__":
+    run_stage(generate)

@@ -1,0 +1,29 @@
+"""Stage report: metrics -> Markdown + CSV tables with the thesis column beside ours."""
+
+from pathlib import Path
+
+from clutterbench.config import BaseConfig, load_section
+from clutterbench.data.generate import GenerateConfig
+from clutterbench.io import write_json
+from clutterbench.report.config import ReportConfig
+from clutterbench.report.datasets import dataset_stats, datasets_table
+from clutterbench.report.tables import load_thesis_figures
+from clutterbench.stage import run_stage
+
+
+def report(params: dict, base: BaseConfig) -> None:
+    cfg = load_section(ReportConfig, "report", params)
+    gen = load_section(GenerateConfig, "generate", params)
+    figures = load_thesis_figures(Path(cfg.thesis_figures))
+    stats = {
+        name: dataset_stats(
+            Path("data/generate"), Path("data/split"), name, ds.moved_threshold_m, ds.pulls
+        )
+        for name, ds in gen.datasets.items()
+    }
+    write_json(Path("reports/metrics/datasets.json"), {"scale": base.scale, "datasets": stats})
+    datasets_table(stats, figures, Path("reports/tables"))
+
+
+if __name__ == "__main__":
+    run_stage(report)
