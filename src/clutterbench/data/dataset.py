@@ -45,7 +45,8 @@ class CollapseDataset(Dataset):
     """Items are dicts of float32 tensors (1, H, W): depth_m, target, collapse.
 
     One item per (scene, target box) pair: thesis 5.2.2 / 6.2.1 sample a target per
-    simulation; we use every box of every scene, since the removal matrix labels them all.
+    simulation; we use every visible box of every scene, since the removal matrix labels
+    them all.
     """
 
     def __init__(
@@ -57,12 +58,20 @@ class CollapseDataset(Dataset):
         noise: DepthNoiseConfig | None = None,
         flip: bool = False,
         seed: int = 0,
+        min_target_pixels: int = 10,
     ):
         record = read_json(split_file)
         if not isinstance(record, dict) or split not in record:
             raise ClutterbenchError(f"{split_file}: no '{split}' split")
         self.scenes = load_scenes(gen_dir, record["dataset"], record[split])
-        self.pairs = [(s, x) for s, n in enumerate(self.scenes["n_objects"]) for x in range(n)]
+        # A box hidden behind others cannot be chosen as a target from the camera's view.
+        visible = [np.bincount(inst.ravel(), minlength=256) for inst in self.scenes["instance"]]
+        self.pairs = [
+            (s, x)
+            for s, n in enumerate(self.scenes["n_objects"])
+            for x in range(n)
+            if visible[s][x + 1] >= min_target_pixels
+        ]
         self.threshold_m, self.noise, self.flip = threshold_m, noise, flip
         self.rng = np.random.default_rng(seed)
 

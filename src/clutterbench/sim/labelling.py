@@ -35,6 +35,8 @@ class LabelledScene:
     rejected: dict[str, int]
     steps: int
     pictures: int
+    sapien_s: float
+    """Wall time spent inside SAPIEN step/render calls, rejected attempts included."""
 
 
 def scene_rng(seed: int, dataset: str, index: int, attempt: int) -> np.random.Generator:
@@ -116,7 +118,7 @@ def generate_labelled_scene(
     rejected = dict.fromkeys(REJECT_REASONS, 0)
     names = sorted(family_weights)
     weights = np.array([family_weights[k] for k in names], dtype=np.float64)
-    steps = 0
+    steps, sapien_s = 0, 0.0
     for attempt in range(max_attempts):
         rng = scene_rng(seed, dataset, index, attempt)
         family = names[int(rng.choice(len(names), p=weights / weights.sum()))]
@@ -124,9 +126,10 @@ def generate_labelled_scene(
         world, clusters, reason = place_and_settle(
             family, catalogue, n, rng, physics, shelf, render=True
         )
-        steps += world.steps_taken
         if reason is not None:
             rejected[reason] += 1
+            steps += world.steps_taken
+            sapien_s += world.sapien_s
             continue
         depth_m, instance = render_depth_instance(world, camera)
         spec = SceneSpec(
@@ -143,11 +146,11 @@ def generate_labelled_scene(
                 "clusters": clusters,
             },
         )
-        before = world.steps_taken
         removal = removal_matrix(world)
         pull = pull_tensor(world) if pulls else None
-        steps += world.steps_taken - before
-        return LabelledScene(spec, depth_m, instance, removal, pull, rejected, steps, 1)
+        steps += world.steps_taken
+        sapien_s += world.sapien_s
+        return LabelledScene(spec, depth_m, instance, removal, pull, rejected, steps, 1, sapien_s)
     raise RuntimeError(
         f"{dataset} scene {index}: rejected {max_attempts} times ({rejected}); "
         "the family cannot fit these boxes"

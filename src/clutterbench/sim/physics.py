@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import numpy as np
 import sapien
@@ -71,6 +72,7 @@ class BoxWorld:
         self.bodies: list[physx.PhysxRigidDynamicComponent] = []
         self.entities: list[sapien.Entity] = []
         self.steps_taken = 0
+        self.sapien_s = 0.0  # wall time inside SAPIEN step/render calls (for the benchmark)
         # The room floor under the shelf, so a box that falls out comes to rest (not rendered).
         self.scene.add_ground(-ROOM_FLOOR_BELOW_SHELF_M, render=False, material=self.material)
         for name, half, centre in shelf.boards():
@@ -135,8 +137,10 @@ class BoxWorld:
 
     # -- stepping ---------------------------------------------------------------------------
     def step(self, n: int = 1) -> None:
+        t0 = time.perf_counter()
         for _ in range(n):
             self.scene.step()
+        self.sapien_s += time.perf_counter() - t0
         self.steps_taken += n
 
     def at_rest(self) -> bool:

@@ -7,6 +7,7 @@ renderer alive makes every later scene cost milliseconds (shared/PLATFORM.md).
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import numpy as np
 import sapien
@@ -58,10 +59,12 @@ def render_depth_instance(world: BoxWorld, cam: CameraConfig) -> tuple[np.ndarra
         "depth", cam.image_size, cam.image_size, np.deg2rad(cam.fovy_deg), cam.near_m, cam.far_m
     )
     camera.entity.set_pose(sapien.Pose(cam.position_m(world.shelf.height_m)))
+    t0 = time.perf_counter()
     world.scene.update_render()
     camera.take_picture()
     position = camera.get_picture("Position")  # OpenGL camera frame: depth = -z
     seg = camera.get_picture("Segmentation")[..., 1]  # per-scene entity id
+    world.sapien_s += time.perf_counter() - t0
     world.scene.remove_camera(camera)
     depth_m = (-position[..., 2]).astype(np.float32)
     depth_m[position[..., 3] >= 1.0] = 0.0  # w >= 1: nothing hit before the far plane

@@ -1,0 +1,129 @@
+"""`make bench`: simulation throughput, written to reports/bench/.
+
+Measures in one process (one core): labelled scenes per second (place + settle + render +
+every removal), render time per picture, and the raw SAPIEN cost of the same work (the
+wall time inside SAPIEN's step and render calls of the very same run) so that the pipeline's
+overhead is a ratio.
+"""
+
+from __future__ import annotations
+
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+from clutterbench.config import load_params, load_section
+from clutterbench.data.generate import GenerateConfig, SimConfig
+from clutterbench.io import write_json, write_text
+from clutterbench.progress import progress_bar
+from clutterbench.sim.labelling import build_world, generate_labelled_scene
+from clutterbench.sim.render import ensure_renderer, render_depth_instance
+
+BENCH_DATASET = "ch6"  # 5-10 boxes, shelved : stacked : random = 1 : 1 : 3
+N_SCENES = 60
+
+
+def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -> dict:
+    params = load_params("params.yaml")
+    params = {**params, "base": {**params["base"], "scale": "default"}}
+    sim = load_section(SimConfig, "sim", params)
+    ds = load_section(GenerateConfig, "generate", params).datasets[BENCH_DATASET]
+    ensure_renderer()
+    # Warm-up: the first picture of a process compiles shaders (~3 s), paid once per worker.
+    warm = generate_labelled_scene(
+        seed=99,
+        dataset="warmup",
+        index=0,
+        family_weights=dict(ds.families),
+        catalogue=ds.catalogue,
+        n_objects=ds.n_objects,
+        pulls=False,
+        physics=sim.physics,
+        camera=sim.camera,
+        max_attempts=30,
+    )
+    scenes, t0 = [], time.perf_counter()
+    with progress_bar("bench: labelled scenes", total=n_scenes) as advance:
+        for i in range(n_scenes):
+            scenes.append(
+                generate_labelled_scene(
+                    seed=0,
+                    dataset="bench",
+                    index=i,
+                    family_weights=dict(ds.families),
+                    catalogue=ds.catalogue,
+                    n_objects=ds.n_objects,
+                    pulls=False,
+                    physics=sim.physics,
+                    camera=sim.camera,
+                    max_attempts=30,
+                )
+            )
+            advance(1)
+    pipeline_s = time.perf_counter() - t0
+    steps = [s.steps for s in scenes]
+
+    # Raw cost, measured in the same run: wall time inside SAPIEN's own step and render
+    # calls; the rest is the pipeline's overhead (placement, rest checks, state restore).
+    sapien_s = sum(s.sapien_s for s in scenes)
+
+    # Render: per picture of the pipeline's own function, and SAPIEN's raw take_picture.
+    world = build_world(warm.spec, sim.physics, render=True)
+    render_depth_instance(world, sim.camera)
+    t0 = time.perf_counter()
+    for _ in range(n_scenes):
+        render_depth_instance(world, sim.camera)
+    render_s = (time.perf_counter() - t0) / n_scenes
+    cam = world.scene.add_camera(
+        "raw",
+        sim.camera.image_size,
+        sim.camera.image_size,
+        np.deg2rad(sim.camera.fovy_deg),
+        sim.camera.near_m,
+        sim.camera.far_m,
+    )
+    world.scene.update_render()
+    cam.take_picture()
+    t0 = time.perf_counter()
+    for _ in range(n_scenes):
+        world.scene.update_render()
+        cam.take_picture()
+        cam.get_picture("Position")
+    raw_picture_s = (time.perf_counter() - t0) / n_scenes
+
+    result = {
+        "dataset": BENCH_DATASET,
+        "image_size": sim.camera.image_size,
+        "scenes": n_scenes,
+        "objects_mean": float(np.mean([s.spec.n for s in scenes])),
+        "rejected_attempts": int(sum(sum(s.rejected.values()) for s in scenes)),
+        "physics_steps_per_scene": float(np.mean(steps)),
+        "labelled_scenes_per_s_per_core": n_scenes / pipeline_s,
+        "ms_per_labelled_scene": 1e3 * pipeline_s / n_scenes,
+        "render_ms_per_picture": 1e3 * render_s,
+        "raw_render_ms_per_picture": 1e3 * raw_picture_s,
+        "sapien_step_render_ms_per_scene": 1e3 * sapien_s / n_scenes,
+        "overhead_ratio": pipeline_s / sapien_s,
+        "machine": f"{platform.processor() or platform.machine()}, 1 process",
+    }
+    write_json(out_dir / "sim.json", result)
+    lines = ["# Simulation benchmark (one core)", "", "| measure | value |", "|---|---|"]
+    lines += [
+        f"| {k} | {v:.3f} |" if isinstance(v, float) else f"| {k} | {v} |"
+        for k, v in result.items()
+    ]
+    lines += [
+        "",
+        "Targets: >= 20 labelled scenes / s / core; overhead_ratio <= 2 "
+        "(pipeline time / time inside SAPIEN step + render calls in the same run).",
+    ]
+    write_text(out_dir / "sim.md", "\n".join(lines) + "\n")
+    return result
+
+
+if __name__ == "__main__":
+    res = bench_sim()
+    for k, v in res.items():
+        print(f"{k}: {v}")

@@ -1,0 +1,355 @@
+"""`clutterbench` command line: inspect, make and act on single scene specs.
+
+    clutterbench scene show SPEC.json --out scene.png
+    clutterbench scene act SPEC.json --remove K [--support J] [--pull] [--mcap out.mcap]
+    clutterbench scene make OUT.json --stack N [--size-mm H W D]
+
+User-facing problems (ClutterbenchError) end a command with one red line on stderr,
+"error: <message>", and exit code 2. Heavy imports (SAPIEN, matplotlib) happen inside the
+commands so that `--help` stays fast.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.text import Text
+
+from clutterbench.errors import ClutterbenchError
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from clutterbench.sim.physics import PhysicsConfig
+
+EXIT_USER_ERROR = 2
+STACK_GAP_M = 0.0005
+"""Clearance between stacked boxes (and the bottom box and the floor) in `scene make`."""
+DECISION_TOPIC = "/planner/decision"
+
+app = typer.Typer(
+    help="clutterbench: box-clutter scenes on a shelf.",
+    no_args_is_help=True,
+    pretty_exceptions_show_locals=False,
+)
+scene_app = typer.Typer(
+    help="Inspect, make and act on one scene spec (JSON).", no_args_is_help=True
+)
+app.add_typer(scene_app, name="scene")
+
+
+# -- errors -------------------------------------------------------------------------------------
+def _print_error(message: str) -> None:
+    # soft_wrap: one line however long the message; Text: no markup parsing of the message.
+    Console(stderr=True).print(Text(f"error: {message}", style="red"), soft_wrap=True)
+
+
+@contextlib.contextmanager
+def _user_errors() -> Iterator[None]:
+    """Turn a ClutterbenchError into the one-line error and exit code 2."""
+    try:
+        yield
+    except ClutterbenchError as exc:
+        _print_error(str(exc))
+        raise typer.Exit(EXIT_USER_ERROR) from None
+
+
+def main() -> None:
+    """Console-script entry point (`clutterbench = clutterbench.cli:main`)."""
+    try:
+        app()
+    except ClutterbenchError as exc:  # raised outside a command body (should not happen)
+        _print_error(str(exc))
+        sys.exit(EXIT_USER_ERROR)
+
+
+# -- shared helpers ---------------------------------------------------------------------------
+def _physics_config() -> PhysicsConfig:
+    """Physics parameters: params.yaml's `physics` section if there is one, else defaults.
+
+    The params.yaml layout for simulation is not final; change only this helper.
+    """
+    from clutterbench.config import load_params, load_section
+    from clutterbench.sim.physics import PhysicsConfig
+
+    path = Path("params.yaml")
+    if path.exists() and "physics" in load_params(path):
+        return load_section(PhysicsConfig, "physics", path=path)
+    return PhysicsConfig()
+
+
+def _box_names(n: int) -> list[str]:
+    return [f"box_{i}" for i in range(n)]
+
+
+# -- scene show ---------------------------------------------------------------------------------
+def _instance_rgb(instance: np.ndarray) -> np.ndarray:
+    """Instance ids -> RGB float image: a distinct colour per id, background black."""
+    import numpy as np
+    from matplotlib import colormaps
+
+    # tab20's ten dark hues first, then its ten light ones: neighbouring ids differ in hue.
+    tab20 = colormaps["tab20"]
+    palette = [tab20(i)[:3] for i in (*range(0, 20, 2), *range(1, 20, 2))]
+    rgb = np.zeros((*instance.shape, 3))
+    for k in np.unique(instance):
+        if k == 0:
+            continue
+        rgb[instance == k] = palette[(int(k) - 1) % len(palette)]
+    return rgb
+
+
+def _write_scene_png(path: Path, depth_m: np.ndarray, instance: np.ndarray, title: str) -> None:
+    import numpy as np
+    from matplotlib import colormaps
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from clutterbench.io import atomic_path
+
+    fig = Figure(figsize=(10.0, 4.6), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)  # Agg, without pyplot's global state
+    ax_d, ax_i = fig.subplots(1, 2)
+
+    cmap = colormaps["viridis"].with_extremes(bad="black")
+    valid = depth_m > 0
+    shown = np.ma.masked_where(~valid, depth_m)
+    vmin, vmax = (
+        (float(depth_m[valid].min()), float(depth_m[valid].max())) if valid.any() else (0.0, 1.0)
+    )
+    im = ax_d.imshow(shown, cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest")
+    ax_d.set_title("depth (black = no return)")
+    fig.colorbar(im, ax=ax_d, label="depth (m)", shrink=0.9)
+
+    ax_i.imshow(_instance_rgb(instance), interpolation="nearest")
+    ax_i.set_title("instance ids (k + 1 = box k, 0 = background)")
+    for k in np.unique(instance):
+        if k == 0:
+            continue
+        rows, cols = np.nonzero(instance == k)
+        ax_i.text(
+            float(cols.mean()),
+            float(rows.mean()),
+            str(int(k)),
+            color="white",
+            ha="center",
+            va="center",
+            fontsize=9,
+            fontweight="bold",
+            bbox={"facecolor": "black", "alpha": 0.5, "pad": 1, "linewidth": 0},
+        )
+    for ax in (ax_d, ax_i):
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.suptitle(title)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+
+
+@scene_app.command("show")
+def scene_show(
+    spec_path: Annotated[Path, typer.Argument(metavar="SPEC.json", help="Scene spec to render.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="PNG to write (depth | instance).")],
+) -> None:
+    """Render a spec's depth and instance images (no physics step) into one PNG."""
+    with _user_errors():
+        from clutterbench.sim.labelling import build_world
+        from clutterbench.sim.render import render_depth_instance
+        from clutterbench.sim.spec import SceneSpec
+
+        spec = SceneSpec.load(spec_path)
+        world = build_world(spec, _physics_config(), render=True)
+        depth_m, instance = render_depth_instance(world, spec.camera)
+        _write_scene_png(
+            out, depth_m, instance, f"{spec_path.name}: {spec.n} boxes ({spec.family})"
+        )
+        typer.echo(f"wrote {out}")
+
+
+# -- scene act ----------------------------------------------------------------------------------
+def _check_indices(n: int, target: int, support: int | None) -> None:
+    if not 0 <= target < n:
+        raise ClutterbenchError(f"--remove {target}: no such box (the scene has boxes 0..{n - 1})")
+    if support is not None:
+        if not 0 <= support < n:
+            raise ClutterbenchError(
+                f"--support {support}: no such box (the scene has boxes 0..{n - 1})"
+            )
+        if support == target:
+            raise ClutterbenchError(f"--support {support}: must differ from the removed box")
+
+
+def _outcome_objects(
+    disp: np.ndarray, target: int, support: int | None, threshold_m: float
+) -> list[dict[str, Any]]:
+    objects = []
+    for i, d in enumerate(disp):
+        if i == target:
+            objects.append({"index": i, "displacement_m": None, "moved": None})
+            continue
+        d = 0.0 if i == support else float(d)
+        objects.append({"index": i, "displacement_m": d, "moved": bool(d > threshold_m)})
+    return objects
+
+
+@scene_app.command("act")
+def scene_act(
+    spec_path: Annotated[Path, typer.Argument(metavar="SPEC.json", help="Scene spec to act on.")],
+    remove: Annotated[int, typer.Option("--remove", metavar="K", help="Box to take out.")],
+    support: Annotated[
+        int | None, typer.Option("--support", metavar="J", help="Box held fixed during the action.")
+    ] = None,
+    pull: Annotated[
+        bool,
+        typer.Option(
+            "--pull", help="Pull the box out toward the camera instead of lifting it out."
+        ),
+    ] = False,
+    threshold_m: Annotated[
+        float, typer.Option("--threshold-m", help="A box moved if displaced more than this (m).")
+    ] = 0.005,
+    mcap: Annotated[
+        Path | None,
+        typer.Option(
+            "--mcap", help="Also write the episode as an MCAP log (renders before and after)."
+        ),
+    ] = None,
+) -> None:
+    """Remove (or pull) one box, let the scene settle, print each box's displacement as JSON."""
+    with _user_errors():
+        from clutterbench.sim.labelling import build_world
+        from clutterbench.sim.spec import SceneSpec
+
+        if not (math.isfinite(threshold_m) and threshold_m >= 0):
+            raise ClutterbenchError(f"--threshold-m {threshold_m}: must be a number >= 0")
+        spec = SceneSpec.load(spec_path)
+        _check_indices(spec.n, remove, support)
+        cfg = _physics_config()
+        world = build_world(spec, cfg, render=mcap is not None)
+        action = "pull" if pull else "remove"
+        decision = {"action": action, "target": remove, "support": support}
+
+        episode = contextlib.nullcontext()
+        if mcap is not None:
+            from clutterbench.logs.mcap_episode import EpisodeWriter
+
+            episode = EpisodeWriter(
+                mcap,
+                metadata={
+                    "spec": spec_path.name,
+                    "family": spec.family,
+                    "n_boxes": spec.n,
+                    "threshold_m": threshold_m,
+                    "timestep_s": cfg.timestep_s,
+                },
+            )
+        with episode as ep:
+            if ep is not None:
+                _log_snapshot(ep, world, spec, 0.0)
+            # A loaded spec is at rest already: this only confirms it.
+            if not world.settle().at_rest:
+                Console(stderr=True).print(
+                    Text(
+                        f"warning: {spec_path} is not at rest after {cfg.settle_max_s} s",
+                        style="yellow",
+                    ),
+                    soft_wrap=True,
+                )
+            if ep is not None:
+                ep.write_json(world.steps_taken * cfg.timestep_s, DECISION_TOPIC, decision)
+            act = world.pull if pull else world.remove
+            disp = act(remove, support=support)
+            objects = _outcome_objects(disp, remove, support, threshold_m)
+            moved = [o["index"] for o in objects if o["moved"]]
+            if ep is not None:
+                _log_snapshot(ep, world, spec, world.steps_taken * cfg.timestep_s)
+                ep.set_outcome(
+                    {
+                        **{k: str(v) for k, v in decision.items()},
+                        "moved_count": len(moved),
+                        "moved": ",".join(map(str, moved)),
+                        "sim_time_s": world.steps_taken * cfg.timestep_s,
+                    }
+                )
+        typer.echo(json.dumps({**decision, "threshold_m": threshold_m, "objects": objects}))
+
+
+def _log_snapshot(ep: Any, world: Any, spec: Any, t_s: float) -> None:
+    from clutterbench.sim.render import render_depth_instance
+
+    depth_m, instance = render_depth_instance(world, spec.camera)
+    ep.write_depth(t_s, depth_m)
+    ep.write_instance(t_s, instance)
+    ep.write_poses(t_s, _box_names(world.n), world.poses())
+
+
+# -- scene make ---------------------------------------------------------------------------------
+@scene_app.command("make")
+def scene_make(
+    out: Annotated[Path, typer.Argument(metavar="OUT.json", help="Spec to write.")],
+    stack: Annotated[int, typer.Option("--stack", metavar="N", help="Boxes in the stack.")],
+    size_mm: Annotated[
+        tuple[float, float, float],
+        typer.Option("--size-mm", metavar="H W D", help="Box height, width, depth (mm)."),
+    ] = (20.0, 100.0, 100.0),
+) -> None:
+    """Write a settled spec of N identical boxes stacked straight up at the shelf's centre."""
+    with _user_errors():
+        import numpy as np
+
+        from clutterbench.sim.physics import BoxWorld
+        from clutterbench.sim.shelf import Shelf
+        from clutterbench.sim.spec import SceneSpec
+
+        h, w, d = (v / 1000.0 for v in size_mm)
+        shelf = Shelf()
+        if stack < 1:
+            raise ClutterbenchError(f"--stack {stack}: need at least one box")
+        if min(h, w, d) <= 0:
+            raise ClutterbenchError(f"--size-mm {size_mm}: sizes must be positive")
+        if w > shelf.width_m or d > shelf.depth_m:
+            raise ClutterbenchError(
+                f"--size-mm {size_mm}: footprint does not fit the shelf "
+                f"({shelf.width_m * 1000:g} x {shelf.depth_m * 1000:g} mm)"
+            )
+        if stack * (h + STACK_GAP_M) > shelf.height_m:
+            raise ClutterbenchError(
+                f"--stack {stack}: a stack of {stack} x {size_mm[0]:g} mm "
+                f"does not fit under the shelf top ({shelf.height_m * 1000:g} mm)"
+            )
+        size = np.array([d, w, h])  # local extents (x, y, z)
+        world = BoxWorld(shelf, _physics_config(), render=False)
+        for k in range(stack):
+            z = (k + 1) * STACK_GAP_M + (k + 0.5) * h
+            world.add_box(size, np.array([shelf.depth_m / 2, 0.0, z, 1.0, 0.0, 0.0, 0.0]))
+        result = world.settle()
+        if not result.at_rest:
+            raise ClutterbenchError(f"the stack of {stack} did not come to rest")
+        if not np.all(shelf.contains(world.positions())):
+            raise ClutterbenchError(f"a box of the stack of {stack} fell off the shelf")
+        spec = SceneSpec(
+            sizes_m=np.array(world.sizes_m),
+            poses=world.poses(),
+            shelf=shelf,
+            family="stack",
+            meta={
+                "stack": stack,
+                "size_mm": list(size_mm),
+                "gap_mm": STACK_GAP_M * 1000,
+                "settle_steps": result.steps,
+            },
+        )
+        spec.save(out)
+        typer.echo(f"wrote {out} ({stack} boxes, settled in {result.steps} steps)")
+
+
+if __name__ == "__main__":
+    main()

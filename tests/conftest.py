@@ -1,0 +1,27 @@
+"""Shared fixtures: the repository root and a tiny-scale sim config."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from clutterbench.sim.physics import PhysicsConfig
+from clutterbench.sim.render import CameraConfig
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def root() -> Path:
+    return ROOT
+
+
+@pytest.fixture(scope="session")
+def physics() -> PhysicsConfig:
+    return PhysicsConfig()
+
+
+@pytest.fixture(scope="session")
+def camera() -> CameraConfig:
+    return CameraConfig(image_size=64)

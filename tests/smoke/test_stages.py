@@ -1,0 +1,131 @@
+"""Stage smoke tests: the real stages, through dvc, on the tiny profile."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from clutterbench.config import load_params, load_section
+from clutterbench.data.dataset import CollapseDataset
+from clutterbench.data.generate import GenerateConfig, SimConfig, generate_dataset
+
+pytestmark = pytest.mark.slow
+COPY = ["dvc.yaml", "params.yaml", "stages", "src", "reports/thesis_figures.yaml"]
+
+
+def tiny_copy(root: Path, dst: Path) -> Path:
+    dst.mkdir(parents=True)
+    for item in COPY:
+        src = root / item
+        (dst / item).parent.mkdir(parents=True, exist_ok=True)
+        if src.is_dir():
+            shutil.copytree(src, dst / item, ignore=shutil.ignore_patterns("__pycache__"))
+        else:
+            shutil.copy(src, dst / item)
+    params = yaml.safe_load((dst / "params.yaml").read_text())
+    params["base"]["scale"] = "tiny"
+    (dst / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
+    run(["dvc", "init", "--no-scm", "-q"], dst)
+    return dst
+
+
+def run(cmd: list[str], cwd: Path, check: bool = True) -> subprocess.CompletedProcess:
+    env = {
+        **os.environ,
+        "DVC_NO_ANALYTICS": "1",
+        "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}",
+    }
+    out = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True)
+    if check and out.returncode != 0:
+        raise AssertionError(f"{cmd} failed:\n{out.stdout[-3000:]}\n{out.stderr[-3000:]}")
+    return out
+
+
+def digest_tree(path: Path) -> dict[str, str]:
+    return {
+        str(p.relative_to(path)): hashlib.md5(p.read_bytes()).hexdigest()
+        for p in sorted(path.rglob("*"))
+        if p.is_file()
+    }
+
+
+@pytest.fixture(scope="module")
+def repro_twice(root, tmp_path_factory):
+    a = tiny_copy(root, tmp_path_factory.mktemp("a") / "repo")
+    run(["dvc", "repro", "generate", "split"], a)
+    run(["dvc", "repro"], a)
+    b = tiny_copy(root, tmp_path_factory.mktemp("b") / "repo")
+    run(["dvc", "repro"], b)
+    return a, b
+
+
+def test_dvc_repro_tiny_end_to_end(repro_twice):
+    a, _ = repro_twice
+    params = load_params(a / "params.yaml")
+    gen = load_section(GenerateConfig, "generate", params)
+    for name in gen.datasets:
+        assert len(list((a / "data/generate" / name).glob("shard-*.npz"))) >= 1
+        assert (a / "data/split" / f"{name}.json").exists()
+    assert "ch6" in (a / "reports/tables/datasets.md").read_text()
+    status = run(["dvc", "status"], a).stdout
+    assert "changed" not in status
+
+
+def test_same_params_give_byte_identical_data_and_tables(repro_twice):
+    a, b = repro_twice
+    assert digest_tree(a / "data") == digest_tree(b / "data")
+    assert digest_tree(a / "reports/tables") == digest_tree(b / "reports/tables")
+
+
+def test_dataset_yields_masks(repro_twice):
+    a, _ = repro_twice
+    ds = CollapseDataset(a / "data/generate", a / "data/split/ch6.json", "train", 0.005)
+    assert len(ds) > 0
+    for i in range(len(ds)):
+        item = ds[i]
+        assert item["depth_m"].shape == (1, 64, 64)
+        assert item["target"].sum() >= 10  # every target is visible
+        assert (item["target"] * item["collapse"]).sum() == 0  # the target never "collapses"
+
+
+def test_generate_resumes_from_finished_shards(root, tmp_path):
+    params = load_params(root / "params.yaml")
+    params["base"]["scale"] = "tiny"
+    gen = load_section(GenerateConfig, "generate", params)
+    gen = GenerateConfig(shard_size=2, workers=1, max_attempts=30, datasets=gen.datasets)
+    sim = load_section(SimConfig, "sim", params)
+    ds = gen.datasets["ch6"]
+    out = tmp_path / "ch6"
+    generate_dataset("ch6", ds, gen, sim, 0, out)
+    first = digest_tree(out)
+    (out / "shard-00001.npz").unlink()
+    mtime = (out / "shard-00000.npz").stat().st_mtime_ns
+    generate_dataset("ch6", ds, gen, sim, 0, out)
+    assert (out / "shard-00000.npz").stat().st_mtime_ns == mtime  # kept, not redone
+    assert digest_tree(out) == first
+
+
+def test_bad_params_stop_the_stage_with_one_line(root, tmp_path):
+    repo = tiny_copy(root, tmp_path / "repo")
+    params = yaml.safe_load((repo / "params.yaml").read_text())
+    params["generate"]["datasets"]["ch6"]["n_objects"] = [5, "ten"]
+    (repo / "params.yaml").write_text(yaml.safe_dump(params))
+    out = run([sys.executable, "stages/generate.py", "ch6"], repo, check=False)
+    assert out.returncode == 2
+    assert out.stderr.strip().count("\n") == 0
+    assert "generate.datasets.ch6.n_objects[1]" in out.stderr
+    assert not (repo / "data/generate/ch6").exists()
+
+
+def test_missing_data_is_one_line(root, tmp_path):
+    repo = tiny_copy(root, tmp_path / "repo")
+    out = run([sys.executable, "stages/split.py", "ch6"], repo, check=False)
+    assert out.returncode == 2 and "missing file" in out.stderr
+    assert out.stderr.strip().count("\n") == 0

@@ -1,0 +1,142 @@
+"""`clutterbench scene ...` on the committed three-box stack (tests/data/stack3.json)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import pytest
+from typer.testing import CliRunner
+
+from clutterbench.cli import _physics_config, app
+from clutterbench.logs.mcap_episode import read_episode
+from clutterbench.sim.physics import PhysicsConfig
+from clutterbench.sim.spec import SceneSpec
+
+STACK3 = Path(__file__).resolve().parents[1] / "data" / "stack3.json"
+BOX_H_M = 0.020
+
+runner = CliRunner()
+
+
+@pytest.fixture(autouse=True)
+def _isolated_cwd(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # No params.yaml from the repository: physics defaults, as stack3.json was made with.
+    monkeypatch.chdir(tmp_path)
+
+
+def _act(*args: str) -> dict:
+    result = runner.invoke(app, ["scene", "act", str(STACK3), *args])
+    assert result.exit_code == 0, result.output
+    return json.loads(result.stdout)
+
+
+def _by_index(out: dict) -> dict[int, dict]:
+    return {o["index"]: o for o in out["objects"]}
+
+
+def test_stack3_spec_is_three_stacked_boxes() -> None:
+    spec = SceneSpec.load(STACK3)
+    assert spec.n == 3
+    z = spec.poses[:, 2]
+    assert z == pytest.approx([0.01, 0.03, 0.05], abs=1e-3)
+
+
+def test_removing_bottom_box_drops_the_two_above() -> None:
+    out = _act("--remove", "0")
+    assert (out["action"], out["target"], out["support"]) == ("remove", 0, None)
+    assert out["threshold_m"] == pytest.approx(0.005)
+    objs = _by_index(out)
+    assert objs[0] == {"index": 0, "displacement_m": None, "moved": None}
+    for i in (1, 2):
+        assert objs[i]["moved"] is True
+        assert objs[i]["displacement_m"] == pytest.approx(BOX_H_M, abs=0.003)
+
+
+def test_removing_top_box_moves_nothing() -> None:
+    objs = _by_index(_act("--remove", "2"))
+    assert objs[2]["displacement_m"] is None and objs[2]["moved"] is None
+    for i in (0, 1):
+        assert objs[i]["moved"] is False
+        assert objs[i]["displacement_m"] < 0.005
+
+
+def test_support_holds_the_stack_above() -> None:
+    out = _act("--remove", "0", "--support", "1")
+    assert out["support"] == 1
+    objs = _by_index(out)
+    assert objs[1] == {"index": 1, "displacement_m": 0.0, "moved": False}
+    assert objs[2]["moved"] is False
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--remove", "3"],
+        ["--remove", "-1"],
+        ["--remove", "0", "--support", "7"],
+        ["--remove", "1", "--support", "1"],
+    ],
+)
+def test_bad_index_is_a_one_line_error(args: list[str]) -> None:
+    result = runner.invoke(app, ["scene", "act", str(STACK3), *args])
+    assert result.exit_code == 2
+    assert result.stdout == ""
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ")
+
+
+def test_missing_spec_is_an_error(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["scene", "act", str(tmp_path / "nope.json"), "--remove", "0"])
+    assert result.exit_code == 2
+    assert result.stderr.startswith("error: scene spec not found")
+
+
+def test_show_writes_two_panel_png(tmp_path: Path) -> None:
+    out = tmp_path / "scene.png"
+    result = runner.invoke(app, ["scene", "show", str(STACK3), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    image = cv2.imread(str(out))
+    assert image is not None
+    assert image.shape[1] > image.shape[0]
+    assert [p.name for p in tmp_path.iterdir()] == ["scene.png"]  # no temp file left
+
+
+def test_act_writes_mcap_episode(tmp_path: Path) -> None:
+    path = tmp_path / "ep.mcap"
+    out = _act("--remove", "0", "--mcap", str(path))
+    assert [o["moved"] for o in out["objects"]] == [None, True, True]
+    episode = read_episode(path)
+    topics = episode["topics"]
+    assert topics["/tf"] == 2
+    assert topics["/camera/depth"] == 2 and topics["/camera/instance"] == 2
+    assert topics["/planner/decision"] == 1
+    outcome = episode["metadata"]["outcome"]
+    assert outcome["moved_count"] == "2" and outcome["moved"] == "1,2"
+
+
+def test_make_writes_a_settled_stack(tmp_path: Path) -> None:
+    path = tmp_path / "stack2.json"
+    result = runner.invoke(
+        app, ["scene", "make", str(path), "--stack", "2", "--size-mm", "30", "80", "60"]
+    )
+    assert result.exit_code == 0, result.output
+    spec = SceneSpec.load(path)
+    assert spec.n == 2
+    assert spec.sizes_m.ravel().tolist() == pytest.approx([0.06, 0.08, 0.03] * 2)
+    assert spec.poses[:, 2] == pytest.approx([0.015, 0.045], abs=1e-3)
+    assert spec.poses[:, 0] == pytest.approx(spec.shelf.depth_m / 2, abs=1e-3)
+
+
+def test_make_rejects_a_stack_taller_than_the_shelf(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["scene", "make", str(tmp_path / "x.json"), "--stack", "20"])
+    assert result.exit_code == 2
+    assert result.stderr.startswith("error: ")
+    assert not (tmp_path / "x.json").exists()
+
+
+def test_physics_config_from_params_yaml(tmp_path: Path) -> None:
+    assert _physics_config() == PhysicsConfig()
+    (tmp_path / "params.yaml").write_text("base: {scale: tiny}\nphysics:\n  timestep_s: 0.002\n")
+    assert _physics_config().timestep_s == 0.002

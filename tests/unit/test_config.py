@@ -1,0 +1,66 @@
+"""params.yaml parsing: scale resolution and one-line errors naming the key."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from clutterbench.config import load_params, load_section, parse, resolve_scale
+from clutterbench.data.generate import DatasetConfig, GenerateConfig, SimConfig
+from clutterbench.data.split import Fractions, SplitConfig
+from clutterbench.errors import ClutterbenchError
+from clutterbench.report.config import ReportConfig
+
+
+def test_resolve_scale_picks_entry_and_leaves_other_mappings():
+    value = {"n": {"tiny": 1, "default": 2, "paper": 3}, "families": {"random": 1}}
+    assert resolve_scale(value, "paper", "x") == {"n": 3, "families": {"random": 1}}
+    assert resolve_scale(value, "tiny", "x")["n"] == 1
+
+
+def test_repo_params_parse_at_every_scale(root):
+    params = load_params(root / "params.yaml")
+    for scale in ("tiny", "default", "paper"):
+        p = {**params, "base": {**params["base"], "scale": scale}}
+        gen = load_section(GenerateConfig, "generate", p)
+        load_section(SimConfig, "sim", p)
+        split = load_section(SplitConfig, "split", p)
+        load_section(ReportConfig, "report", p)
+        assert set(split.datasets) == set(gen.datasets)
+    tiny = {**params, "base": {**params["base"], "scale": "tiny"}}
+    assert load_section(SimConfig, "sim", tiny).camera.image_size == 64
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"n_scenes": 3, "families": {"random": 1}, "colour": 1}, "ds.colour: unknown key"),
+        ({"n_scenes": "many", "families": {"random": 1}}, "ds.n_scenes: expected an integer"),
+        ({"n_scenes": 0, "families": {"random": 1}}, "ds.n_scenes: 0 is out of range"),
+        ({"n_scenes": 3, "families": {"bogus": 1}}, "families.bogus: unknown family"),
+        ({"n_scenes": 3, "families": {"random": 1}, "n_objects": [9, 5]}, "n_objects"),
+        ({"n_scenes": 3, "families": {"random": 1}, "catalogue": "huge"}, "ds.catalogue"),
+        ({"families": {"random": 1}}, "ds.n_scenes: missing required key"),
+    ],
+)
+def test_bad_dataset_params_name_the_key(data, message):
+    with pytest.raises(ClutterbenchError, match=message.replace(".", r"\.")) as info:
+        parse(DatasetConfig, data, "ds")
+    assert "\n" not in str(info.value)
+
+
+def test_fractions_must_sum_to_one():
+    with pytest.raises(ClutterbenchError, match="sum to 1"):
+        parse(Fractions, {"train": 0.5, "val": 0.1, "test": 0.1}, "split.datasets.x")
+
+
+def test_unknown_scale_is_rejected():
+    with pytest.raises(ClutterbenchError, match="base.scale"):
+        load_section(ReportConfig, "report", {"base": {"scale": "huge"}, "report": {}})
+
+
+def test_configs_are_frozen():
+    cfg = parse(Fractions, {}, "f")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        cfg.train = 0.3  # type: ignore[misc]
