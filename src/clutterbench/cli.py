@@ -73,16 +73,14 @@ def main() -> None:
 
 # -- shared helpers ---------------------------------------------------------------------------
 def _physics_config() -> PhysicsConfig:
-    """Physics parameters: params.yaml's `physics` section if there is one, else defaults.
-
-    The params.yaml layout for simulation is not final; change only this helper.
-    """
+    """Physics parameters: `sim.physics` of ./params.yaml if there is one, else defaults."""
     from clutterbench.config import load_params, load_section
+    from clutterbench.data.generate import SimConfig
     from clutterbench.sim.physics import PhysicsConfig
 
     path = Path("params.yaml")
-    if path.exists() and "physics" in load_params(path):
-        return load_section(PhysicsConfig, "physics", path=path)
+    if path.exists() and "sim" in load_params(path):
+        return load_section(SimConfig, "sim", path=path).physics
     return PhysicsConfig()
 
 

@@ -138,5 +138,7 @@ def test_make_rejects_a_stack_taller_than_the_shelf(tmp_path: Path) -> None:
 
 def test_physics_config_from_params_yaml(tmp_path: Path) -> None:
     assert _physics_config() == PhysicsConfig()
-    (tmp_path / "params.yaml").write_text("base: {scale: tiny}\nphysics:\n  timestep_s: 0.002\n")
+    (tmp_path / "params.yaml").write_text(
+        "base: {scale: tiny}\nsim:\n  physics:\n    timestep_s: 0.002\n"
+    )
     assert _physics_config().timestep_s == 0.002
