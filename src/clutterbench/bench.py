@@ -15,14 +15,15 @@ from pathlib import Path
 import numpy as np
 
 from clutterbench.config import load_params, load_section
-from clutterbench.data.generate import GenerateConfig, SimConfig
+from clutterbench.data.generate import GenerateConfig, SimConfig, label_scene
 from clutterbench.io import write_json, write_text
 from clutterbench.progress import progress_bar
-from clutterbench.sim.labelling import build_world, generate_labelled_scene
+from clutterbench.sim.labelling import build_world
 from clutterbench.sim.render import ensure_renderer, render_depth_instance
 
 BENCH_DATASET = "ch6"  # 5-10 boxes, shelved : stacked : random = 1 : 1 : 3
 N_SCENES = 60
+MAX_ATTEMPTS = 30
 
 
 def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -> dict:
@@ -32,35 +33,11 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
     ds = load_section(GenerateConfig, "generate", params).datasets[BENCH_DATASET]
     ensure_renderer()
     # Warm-up: the first picture of a process compiles shaders (~3 s), paid once per worker.
-    warm = generate_labelled_scene(
-        seed=99,
-        dataset="warmup",
-        index=0,
-        family_weights=dict(ds.families),
-        catalogue=ds.catalogue,
-        n_objects=ds.n_objects,
-        pulls=False,
-        physics=sim.physics,
-        camera=sim.camera,
-        max_attempts=30,
-    )
+    warm = label_scene("warmup", ds, sim, 99, 0, MAX_ATTEMPTS)
     scenes, t0 = [], time.perf_counter()
     with progress_bar("bench: labelled scenes", total=n_scenes) as advance:
         for i in range(n_scenes):
-            scenes.append(
-                generate_labelled_scene(
-                    seed=0,
-                    dataset="bench",
-                    index=i,
-                    family_weights=dict(ds.families),
-                    catalogue=ds.catalogue,
-                    n_objects=ds.n_objects,
-                    pulls=False,
-                    physics=sim.physics,
-                    camera=sim.camera,
-                    max_attempts=30,
-                )
-            )
+            scenes.append(label_scene("bench", ds, sim, 0, i, MAX_ATTEMPTS))
             advance(1)
     pipeline_s = time.perf_counter() - t0
     steps = [s.steps for s in scenes]

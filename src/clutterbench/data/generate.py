@@ -24,7 +24,7 @@ from clutterbench.io import load_npz, save_npz, write_json
 from clutterbench.progress import progress_bar
 from clutterbench.sim.catalog import CATALOGUES
 from clutterbench.sim.families import FAMILIES
-from clutterbench.sim.labelling import REJECT_REASONS, generate_labelled_scene
+from clutterbench.sim.labelling import REJECT_REASONS, LabelledScene, generate_labelled_scene
 from clutterbench.sim.physics import PhysicsConfig
 from clutterbench.sim.render import CameraConfig, ensure_renderer
 
@@ -105,24 +105,31 @@ def _shard_is_done(path: Path, digest: str) -> bool:
         return False  # corrupt (e.g. a crash of an older writer): regenerate it
 
 
+def label_scene(
+    dataset: str, ds: DatasetConfig, sim: SimConfig, seed: int, index: int, max_attempts: int
+) -> LabelledScene:
+    """Scene `index` of a dataset configured by `ds` (regenerable alone)."""
+    return generate_labelled_scene(
+        seed=seed,
+        dataset=dataset,
+        index=index,
+        family_weights=dict(ds.families),
+        catalogue=ds.catalogue,
+        n_objects=ds.n_objects,
+        pulls=ds.pulls,
+        physics=sim.physics,
+        camera=sim.camera,
+        max_attempts=max_attempts,
+    )
+
+
 def make_shard(job: dict[str, Any]) -> dict[str, Any]:
     """Generate and write one shard; runs in a worker process."""
     ds: DatasetConfig = job["ds"]
     sim: SimConfig = job["sim"]
     ensure_renderer()
     scenes = [
-        generate_labelled_scene(
-            seed=job["seed"],
-            dataset=job["dataset"],
-            index=i,
-            family_weights=dict(ds.families),
-            catalogue=ds.catalogue,
-            n_objects=ds.n_objects,
-            pulls=ds.pulls,
-            physics=sim.physics,
-            camera=sim.camera,
-            max_attempts=job["max_attempts"],
-        )
+        label_scene(job["dataset"], ds, sim, job["seed"], i, job["max_attempts"])
         for i in job["indices"]
     ]
     n_max = ds.n_objects[1]

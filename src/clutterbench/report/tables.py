@@ -63,7 +63,8 @@ def comparison_frame(
     columns: Sequence[Column],
     row_header: str,
 ) -> pd.DataFrame:
-    """rows: (label, ours, thesis). Each column appears as 'header' and 'header (thesis)'."""
+    """rows: (label, ours, thesis). Each column appears as 'header' and, where the thesis
+    reports that figure for some row, 'header (thesis)' beside it."""
     records = []
     for label, ours, thesis in rows:
         rec: dict[str, Any] = {row_header: label}
@@ -71,7 +72,9 @@ def comparison_frame(
             rec[c.header] = ours.get(c.key)
             rec[f"{c.header} (thesis)"] = thesis.get(c.key)
         records.append(rec)
-    return pd.DataFrame.from_records(records)
+    frame = pd.DataFrame.from_records(records)
+    empty = [f"{c.header} (thesis)" for c in columns if frame[f"{c.header} (thesis)"].isna().all()]
+    return frame.drop(columns=empty)
 
 
 def write_table(

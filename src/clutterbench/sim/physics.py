@@ -174,6 +174,17 @@ class BoxWorld:
         body.set_kinematic_target(pose)
         self.entities[i].set_pose(pose)
 
+    def _park_and_measure(self, target: int, before: np.ndarray) -> np.ndarray:
+        """Take `target` out of the scene, let the rest settle, return displacements (m)."""
+        self._hold(target, _PARK_POSE)
+        for body in self.bodies:
+            if not body.kinematic:
+                body.wake_up()
+        self.settle(self.cfg.action_settle_max_s)
+        disp = displacement_m(before, self.positions())
+        disp[target] = np.nan
+        return disp
+
     def remove(self, target: int, support: int | None = None) -> np.ndarray:
         """Lift `target` out of the scene at once, settle, return each box's displacement (m).
 
@@ -183,14 +194,7 @@ class BoxWorld:
         before = self.positions()
         if support is not None:
             self._hold(support, self.entities[support].pose)
-        self._hold(target, _PARK_POSE)
-        for body in self.bodies:
-            if not body.kinematic:
-                body.wake_up()
-        self.settle(self.cfg.action_settle_max_s)
-        disp = displacement_m(before, self.positions())
-        disp[target] = np.nan
-        return disp
+        return self._park_and_measure(target, before)
 
     def pull(self, target: int, support: int | None = None) -> np.ndarray:
         """Pull `target` horizontally toward the camera (-x) until it has left the shelf,
@@ -208,11 +212,4 @@ class BoxWorld:
             p = np.array(start.p) - np.array([min(k * dx, travel), 0.0, 0.0])
             self.bodies[target].set_kinematic_target(sapien.Pose(p, start.q))
             self.step()
-        self._hold(target, _PARK_POSE)
-        for body in self.bodies:
-            if not body.kinematic:
-                body.wake_up()
-        self.settle(self.cfg.action_settle_max_s)
-        disp = displacement_m(before, self.positions())
-        disp[target] = np.nan
-        return disp
+        return self._park_and_measure(target, before)
