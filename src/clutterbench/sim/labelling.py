@@ -13,6 +13,7 @@ import zlib
 
 import numpy as np
 
+from clutterbench.errors import ClutterbenchError
 from clutterbench.sim.catalog import box_extents_m
 from clutterbench.sim.families import get_family
 from clutterbench.sim.physics import BoxWorld, PhysicsConfig
@@ -151,7 +152,7 @@ def generate_labelled_scene(
         steps += world.steps_taken
         sapien_s += world.sapien_s
         return LabelledScene(spec, depth_m, instance, removal, pull, rejected, steps, 1, sapien_s)
-    raise RuntimeError(
+    raise ClutterbenchError(
         f"{dataset} scene {index}: rejected {max_attempts} times ({rejected}); "
         "the family cannot fit these boxes"
     )

@@ -13,6 +13,7 @@ import numpy as np
 import sapien
 
 from clutterbench.config import bounded
+from clutterbench.errors import ClutterbenchError
 from clutterbench.sim.physics import BoxWorld
 
 _RENDERER: sapien.render.SapienRenderer | None = None
@@ -25,7 +26,7 @@ def ensure_renderer() -> sapien.render.SapienRenderer:
         try:
             _RENDERER = sapien.render.SapienRenderer()
         except RuntimeError as exc:
-            raise RuntimeError(
+            raise ClutterbenchError(
                 f"SAPIEN found no Vulkan device ({exc}); install Mesa from bookworm-backports "
                 "(scripts/setup_system.sh)"
             ) from None
