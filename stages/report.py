@@ -5,6 +5,7 @@ from pathlib import Path
 from clutterbench.config import BaseConfig, load_section
 from clutterbench.data.generate import GenerateConfig
 from clutterbench.io import write_json
+from clutterbench.report.collapse import collapse_table
 from clutterbench.report.config import ReportConfig
 from clutterbench.report.datasets import dataset_stats, datasets_table
 from clutterbench.report.tables import load_thesis_figures
@@ -23,6 +24,31 @@ def report(params: dict, base: BaseConfig) -> None:
     }
     write_json(Path("reports/metrics/datasets.json"), {"scale": base.scale, "datasets": stats})
     datasets_table(stats, figures, Path("reports/tables"))
+    evaluated = Path("reports/evaluate")
+    collapse_table(
+        "table_5_1",
+        cfg.table_5_1,
+        figures,
+        evaluated,
+        Path("reports/tables"),
+        notes=[
+            f"{base.scale} scale; ch. 5 test split (thesis: 1,000 simulated images).",
+            "pixel counted as collapse when its probability > 0.5; counts summed over all "
+            "test pixels.",
+            "figures: reports/evaluate/<run>/figure.png; sweep: reports/evaluate/<run>/sweep.csv.",
+        ],
+    )
+    collapse_table(
+        "table_6_1",
+        cfg.table_6_1,
+        figures,
+        evaluated,
+        Path("reports/tables"),
+        notes=[
+            f"{base.scale} scale; ch6_test: separate random-scene test set (thesis: 1,000).",
+            "previous work = the ch. 5 network (BCE, trained on ch. 5 scenes) on this test set.",
+        ],
+    )
 
 
 if __name__ == "__main__":

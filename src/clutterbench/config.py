@@ -118,6 +118,8 @@ def _check_range(f: dataclasses.Field, value: Any, key: str) -> None:
 
 def _coerce(tp: Any, value: Any, key: str) -> Any:
     origin, args = get_origin(tp), get_args(tp)
+    if tp is Any:  # parsed later by whoever knows its type (e.g. a network's own config)
+        return value
     if dataclasses.is_dataclass(tp):
         return parse(tp, value, key)
     if origin is Literal:

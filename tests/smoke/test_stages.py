@@ -9,12 +9,18 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pandas as pd
 import pytest
 import yaml
 
+from clutterbench.collapse.config import TrainConfig
 from clutterbench.config import load_params, load_section
 from clutterbench.data.dataset import CollapseDataset
 from clutterbench.data.generate import GenerateConfig, SimConfig, generate_dataset
+from clutterbench.logs.mcap_episode import read_episode
+from clutterbench.models.checkpoint import load_checkpoint, save_checkpoint
+from clutterbench.models.collapse_map import CollapseMapConfig, CollapseMapNet
+from clutterbench.models.vgg import VGGConfig
 
 pytestmark = pytest.mark.slow
 COPY = ["dvc.yaml", "params.yaml", "stages", "src", "reports/thesis_figures.yaml"]
@@ -74,14 +80,26 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
         assert len(list((a / "data/generate" / name).glob("shard-*.npz"))) >= 1
         assert (a / "data/split" / f"{name}.json").exists()
     assert "ch6" in (a / "reports/tables/datasets.md").read_text()
+    for name in load_section(TrainConfig, "train", params).models:
+        assert load_checkpoint(a / "models" / name / "best.pt").meta["name"] == name
+        episode = read_episode(a / "models" / name / "train.mcap")
+        assert episode["topics"]["/train/epoch"] >= 1 and "outcome" in episode["metadata"]
+    for table in ("table_5_1", "table_6_1"):
+        frame = pd.read_csv(a / "reports/tables" / f"{table}.csv")
+        assert "IoU (thesis)" in frame.columns
+        ours = frame["IoU"].dropna()
+        assert len(ours) >= 2 and ours.between(0, 1).all()
+    for run_dir in (a / "reports/evaluate").iterdir():
+        assert (run_dir / "figure.png").stat().st_size > 1000
+        assert len((run_dir / "sweep.csv").read_text().splitlines()) == 101
     status = run(["dvc", "status"], a).stdout
     assert "changed" not in status
 
 
 def test_same_params_give_byte_identical_data_and_tables(repro_twice):
     a, b = repro_twice
-    assert digest_tree(a / "data") == digest_tree(b / "data")
-    assert digest_tree(a / "reports/tables") == digest_tree(b / "reports/tables")
+    for tree in ("data", "models", "reports/tables", "reports/evaluate"):
+        assert digest_tree(a / tree) == digest_tree(b / tree), tree
 
 
 def test_dataset_yields_masks(repro_twice):
@@ -122,6 +140,23 @@ def test_bad_params_stop_the_stage_with_one_line(root, tmp_path):
     assert out.stderr.strip().count("\n") == 0
     assert "generate.datasets.ch6.n_objects[1]" in out.stderr
     assert not (repo / "data/generate/ch6").exists()
+
+
+def test_checkpoint_from_another_config_is_refused(repro_twice, tmp_path):
+    a, _ = repro_twice
+    repo = tmp_path / "repo"
+    shutil.copytree(a, repo)
+    ckpt = repo / "models/cmn_bs32/best.pt"
+    model = CollapseMapNet(CollapseMapConfig(input_size=128, encoder=VGGConfig(width=0.125)))
+    save_checkpoint(ckpt, "collapse_map", model, {})
+    out = run([sys.executable, "stages/evaluate.py", "cmn_bs32_ch5"], repo, check=False)
+    assert out.returncode == 2 and out.stderr.strip().count("\n") == 0
+    assert "takes 128x128 images but the data are 64x64" in out.stderr
+    ckpt.write_bytes(b"truncated")
+    out = run([sys.executable, "stages/evaluate.py", "cmn_bs32_ch5"], repo, check=False)
+    assert out.returncode == 2 and "unreadable" in out.stderr
+    assert out.stderr.strip().count("\n") == 0
+    assert not list(repo.glob("reports/evaluate/cmn_bs32_ch5/.*tmp*"))
 
 
 def test_missing_data_is_one_line(root, tmp_path):

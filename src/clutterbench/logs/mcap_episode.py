@@ -208,17 +208,25 @@ class EpisodeWriter:
         """Per-pixel instance ids (0 = background), same camera as the depth image."""
         if not isinstance(instance, np.ndarray) or instance.ndim != 2 or instance.dtype != np.uint8:
             raise ValueError("instance must be uint8 ids, HxW")
-        height, width = instance.shape
-        image = RawImage(
+        self.write_mono8(t_s, INSTANCE_TOPIC, instance, frame_id)
+
+    def write_mono8(
+        self, t_s: float, topic: str, image: np.ndarray, frame_id: str = "camera"
+    ) -> None:
+        """A uint8 HxW image (masks, heatmaps scaled to 0-255) on `topic`."""
+        if not isinstance(image, np.ndarray) or image.ndim != 2 or image.dtype != np.uint8:
+            raise ValueError(f"{topic}: image must be uint8, HxW")
+        height, width = image.shape
+        message = RawImage(
             timestamp=_stamp(_to_ns(t_s)),
             frame_id=frame_id,
             width=width,
             height=height,
             encoding="mono8",
             step=width,
-            data=np.ascontiguousarray(instance).tobytes(),
+            data=np.ascontiguousarray(image).tobytes(),
         )
-        self._write_proto(INSTANCE_TOPIC, t_s, image)
+        self._write_proto(topic, t_s, message)
 
     def write_poses(self, t_s: float, names: list[str], poses: np.ndarray) -> None:
         """Object poses as rows [x, y, z, qw, qx, qy, qz]: SAPIEN order, world frame, metres."""

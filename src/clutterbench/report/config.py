@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 
 
 @dataclasses.dataclass(frozen=True)
 class ReportConfig:
     thesis_figures: str = "reports/thesis_figures.yaml"
     """The one data file of thesis figures; they appear only as "(thesis)" columns."""
+    table_5_1: Mapping[str, str | None] = dataclasses.field(default_factory=dict)
+    """Thesis Table 5.1 row -> our evaluate run filling it (null: not run, said in the table)."""
+    table_6_1: Mapping[str, str | None] = dataclasses.field(default_factory=dict)
+    """Thesis Table 6.1 row -> our evaluate run."""

@@ -54,6 +54,8 @@ def _fmt(value: Any, fmt: str) -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "—"
     if isinstance(value, int | float) and not isinstance(value, bool):
+        if fmt.endswith("d}"):  # counts turn float in a column that has gaps
+            value = int(value)
         return fmt.format(value)
     return str(value)
 

@@ -1,0 +1,80 @@
+"""Params of the train and evaluate stages."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any, Literal
+
+from clutterbench.collapse.losses import FocalConfig
+from clutterbench.config import bounded
+from clutterbench.models import parse_net_config
+from clutterbench.sim.noise import DepthNoiseConfig
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainModelConfig:
+    arch: Literal["collapse_map", "fcn8s"]
+    """Network (clutterbench.models.ARCHS)."""
+    dataset: str
+    """Generated + split dataset to train on (its train / val splits)."""
+    net: Any = dataclasses.field(default_factory=dict)
+    """The arch's config (CollapseMapConfig / FCN8sConfig fields)."""
+    loss: Literal["bce", "focal"] = "bce"
+    """bce (thesis ch. 5) or focal, eq. (6.1) (thesis ch. 6)."""
+    batch_size: int = bounded(32, ge=1)
+    """Thesis: 32 (ch. 5), 24 (ch. 6)."""
+    lr: float = bounded(1e-4, gt=0.0)
+    """Adam learning rate (thesis: 1e-4 ch. 5, 1e-3 ch. 6)."""
+    epochs: int = bounded(50, ge=1)
+    """Maximum epochs (thesis: 50 ch. 5, 100 ch. 6)."""
+    patience: int = bounded(5, ge=1)
+    """Early stopping: stop after this many epochs without a lower validation loss."""
+    noise: bool = True
+    """Add simulated sensor noise to training depth (thesis 5.2.2)."""
+    flip: bool = True
+    """Random left-right flips (gravity is symmetric about the shelf's vertical plane)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    models: Mapping[str, TrainModelConfig] = dataclasses.field(default_factory=dict)
+    """Model name -> its training run; each becomes stage train@<name>, output models/<name>/."""
+    focal: FocalConfig = FocalConfig()
+    """Focal loss parameters (thesis 6.2.1: alpha_1 0.25, alpha_0 0.75, gamma 2)."""
+    noise: DepthNoiseConfig = DepthNoiseConfig()
+    """Depth noise augmentation."""
+    channels_last: bool = True
+    """NHWC memory format (measured ~2x faster on this CPU; reports/bench/models.md)."""
+    bf16: bool = True
+    """bfloat16 autocast for convolutions (AVX512-BF16 CPUs; measured in reports/bench)."""
+    val_threshold: float = bounded(0.5, gt=0.0, le=1.0)
+    """Probability above which a pixel counts as collapse in validation metrics."""
+
+    def __post_init__(self) -> None:
+        for name, m in self.models.items():
+            if isinstance(m.net, Mapping):
+                net = parse_net_config(m.arch, m.net, f"train.models.{name}.net")
+                object.__setattr__(m, "net", net)
+
+
+@dataclasses.dataclass(frozen=True)
+class EvalRunConfig:
+    model: str
+    """Model name (a key of train.models); its checkpoint is models/<model>/best.pt."""
+    dataset: str
+    """Dataset whose split is evaluated."""
+    split: Literal["train", "val", "test"] = "test"
+    """Which split of it."""
+
+
+@dataclasses.dataclass(frozen=True)
+class EvaluateConfig:
+    runs: Mapping[str, EvalRunConfig] = dataclasses.field(default_factory=dict)
+    """Run name -> (model, dataset); each becomes stage evaluate@<run>."""
+    threshold: float = bounded(0.5, gt=0.0, le=1.0)
+    """Thesis 5.3.1: a pixel is collapse when its probability is higher than 0.5."""
+    batch_size: int = bounded(32, ge=1)
+    """Targets per forward pass."""
+    figure_samples: int = bounded(8, ge=1)
+    """Test pairs drawn in the figure (thesis Fig. 5.8 / 6.5)."""

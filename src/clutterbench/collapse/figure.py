@@ -1,0 +1,46 @@
+"""Figure like thesis Fig. 5.8 / 6.5: depth, target mask, predicted heatmap, ground truth."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from clutterbench.io import atomic_path  # noqa: E402
+
+
+def ground_truth_rgb(target: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Thesis Fig. 5.8 (d): collapse regions red, target green, on black."""
+    rgb = np.zeros((*target.shape, 3), dtype=np.float32)
+    rgb[truth > 0.5, 0] = 1.0
+    rgb[target > 0.5, 1] = 1.0
+    return rgb
+
+
+def collapse_figure(samples: dict[str, np.ndarray], title: str, path: Path) -> None:
+    """One column per sample; rows: depth, target, heatmap in [0, 1], ground truth."""
+    n = len(samples["depth_m"])
+    fig, axes = plt.subplots(4, n, figsize=(1.6 * n + 0.8, 7.0), squeeze=False)
+    rows = ("depth (m)", "target mask", "collapse map", "ground truth")
+    for j in range(n):
+        depth = samples["depth_m"][j]
+        valid = depth[depth > 0]
+        lo, hi = (float(valid.min()), float(valid.max())) if valid.size else (0.0, 1.0)
+        axes[0, j].imshow(depth, cmap="gray_r", vmin=lo, vmax=hi)
+        axes[1, j].imshow(samples["target"][j], cmap="gray", vmin=0, vmax=1)
+        heat = axes[2, j].imshow(samples["prob"][j], cmap="jet", vmin=0, vmax=1)
+        axes[3, j].imshow(ground_truth_rgb(samples["target"][j], samples["truth"][j]))
+    for ax in axes.flat:
+        ax.set_xticks([])
+        ax.set_yticks([])
+    for i, label in enumerate(rows):
+        axes[i, 0].set_ylabel(label)
+    fig.colorbar(heat, ax=axes[2, :].tolist(), fraction=0.02, pad=0.01)
+    fig.suptitle(title)
+    with atomic_path(Path(path)) as tmp:
+        fig.savefig(tmp, format="png", dpi=80, metadata={"Software": None})
+    plt.close(fig)

@@ -1,0 +1,61 @@
+"""Pixel metrics of the collapse class (thesis eq. 5.10, 5.11), summed over a whole set."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+SWEEP_BINS = 100
+"""Threshold sweep resolution: thresholds 0.00, 0.01, ..., 0.99."""
+
+
+class PixelCounts:
+    """Accumulates TP / FP / FN / TN at one threshold and a histogram for the sweep.
+
+    A pixel counts as collapse when its probability is higher than the threshold (5.3.1).
+    """
+
+    def __init__(self, threshold: float = 0.5):
+        self.threshold = threshold
+        self.tp = self.fp = self.fn = self.tn = 0
+        self.hist_pos = np.zeros(SWEEP_BINS, dtype=np.int64)
+        self.hist_neg = np.zeros(SWEEP_BINS, dtype=np.int64)
+
+    def update(self, prob: torch.Tensor, truth: torch.Tensor) -> None:
+        pred = prob > self.threshold
+        pos = truth > 0.5
+        self.tp += int((pred & pos).sum())
+        self.fp += int((pred & ~pos).sum())
+        self.fn += int((~pred & pos).sum())
+        self.tn += int((~pred & ~pos).sum())
+        bins = (prob.float() * SWEEP_BINS).long().clamp(0, SWEEP_BINS - 1)
+        self.hist_pos += torch.bincount(bins[pos], minlength=SWEEP_BINS).numpy()
+        self.hist_neg += torch.bincount(bins[~pos], minlength=SWEEP_BINS).numpy()
+
+    def summary(self) -> dict[str, float]:
+        return scores(self.tp, self.fp, self.fn, self.tn)
+
+    def sweep(self) -> list[dict[str, float]]:
+        """Scores at thresholds k / 100, counting a pixel positive when in a bin >= k."""
+        pos_above = np.cumsum(self.hist_pos[::-1])[::-1]
+        neg_above = np.cumsum(self.hist_neg[::-1])[::-1]
+        n_pos, n_neg = int(self.hist_pos.sum()), int(self.hist_neg.sum())
+        rows = []
+        for k in range(SWEEP_BINS):
+            tp, fp = int(pos_above[k]), int(neg_above[k])
+            rows.append({"threshold": k / SWEEP_BINS, **scores(tp, fp, n_pos - tp, n_neg - fp)})
+        return rows
+
+
+def scores(tp: int, fp: int, fn: int, tn: int) -> dict[str, float]:
+    """Pixel accuracy (5.10), IoU (5.11), precision and recall; NaN where undefined."""
+
+    def ratio(a: int, b: int) -> float:
+        return a / b if b else float("nan")
+
+    return {
+        "pixel_accuracy": ratio(tp + tn, tp + tn + fp + fn),
+        "iou": ratio(tp, tp + fp + fn),
+        "precision": ratio(tp, tp + fp),
+        "recall": ratio(tp, tp + fn),
+    }

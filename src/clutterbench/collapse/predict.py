@@ -1,0 +1,91 @@
+"""Inference: depth + target masks -> collapse heatmaps, batched over targets.
+
+The support-graph step (thesis 6.2.2) calls `predict_collapse` once per scene with the masks
+of every object, so all targets of a scene go through the network in one or a few batches.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from clutterbench.models.checkpoint import check_compatible, load_checkpoint
+
+
+def forward_probs(
+    model: nn.Module,
+    depth_m: torch.Tensor,
+    target: torch.Tensor,
+    bf16: bool = True,
+    channels_last: bool = True,
+) -> torch.Tensor:
+    """(B, 1, H, W) depth (m) and target masks -> (B, 1, H, W) float32 probabilities."""
+    if channels_last:
+        depth_m = depth_m.contiguous(memory_format=torch.channels_last)
+        target = target.contiguous(memory_format=torch.channels_last)
+    with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+        logits = model(depth_m, target)
+    return torch.sigmoid(logits.float())
+
+
+class CollapsePredictor:
+    """A trained collapse network ready for inference (eval mode, no grad)."""
+
+    def __init__(
+        self,
+        model: nn.Module,
+        batch_size: int = 16,
+        bf16: bool = True,
+        channels_last: bool = True,
+    ):
+        self.model = model.eval()
+        if channels_last:
+            self.model = self.model.to(memory_format=torch.channels_last)
+        self.batch_size, self.bf16, self.channels_last = batch_size, bf16, channels_last
+
+    @classmethod
+    def from_checkpoint(
+        cls, path: Path, image_size: int | None = None, **kwargs: object
+    ) -> CollapsePredictor:
+        """Rebuild the network from the checkpoint alone; refuse it for other image sizes."""
+        ckpt = load_checkpoint(Path(path))
+        if image_size is not None:
+            check_compatible(ckpt, Path(path), image_size)
+        return cls(ckpt.model(), **kwargs)  # type: ignore[arg-type]
+
+    @property
+    def input_size(self) -> int:
+        return int(self.model.cfg.input_size)
+
+    @torch.no_grad()
+    def __call__(self, depth_m: np.ndarray, target_masks: np.ndarray) -> np.ndarray:
+        return predict_collapse(self, depth_m, target_masks)
+
+
+@torch.no_grad()
+def predict_collapse(
+    predictor: CollapsePredictor, depth_m: np.ndarray, target_masks: np.ndarray
+) -> np.ndarray:
+    """Heatmaps (K, H, W) float32 in [0, 1] for one depth image (H, W) float32 metres and
+    K binary target masks (K, H, W): the collapse probability when each target is removed."""
+    assert depth_m.dtype == np.float32 and depth_m.ndim == 2, "depth must be float32 metres, HxW"
+    masks = np.asarray(target_masks)
+    if masks.ndim != 3 or masks.shape[1:] != depth_m.shape:
+        raise ValueError(f"target_masks must be (K, {depth_m.shape[0]}, {depth_m.shape[1]})")
+    depth = torch.from_numpy(np.ascontiguousarray(depth_m))[None, None]
+    out = np.empty(masks.shape, dtype=np.float32)
+    for start in range(0, len(masks), predictor.batch_size):
+        chunk = torch.from_numpy(masks[start : start + predictor.batch_size].astype(np.float32))
+        chunk = chunk[:, None]
+        probs = forward_probs(
+            predictor.model,
+            depth.expand(len(chunk), -1, -1, -1),
+            chunk,
+            predictor.bf16,
+            predictor.channels_last,
+        )
+        out[start : start + len(chunk)] = probs[:, 0].numpy()
+    return out

@@ -1,0 +1,207 @@
+"""One training code path for every collapse network (thesis 5.2.2, 6.2.1).
+
+Adam, per-pixel BCE or focal loss, early stopping on validation loss; the best epoch's
+weights are saved as models/<name>/best.pt. Each epoch appends a row to the CSV log (dvc
+plots) and a record plus a validation heatmap to the run's MCAP file (Foxglove).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+import zlib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+from torch.utils.data import DataLoader
+
+from clutterbench.collapse.config import TrainConfig, TrainModelConfig
+from clutterbench.collapse.losses import bce_loss, focal_loss
+from clutterbench.collapse.metrics import PixelCounts
+from clutterbench.collapse.predict import forward_probs
+from clutterbench.config import as_dict
+from clutterbench.data.dataset import CollapseDataset
+from clutterbench.errors import ClutterbenchError
+from clutterbench.io import write_json
+from clutterbench.logs.csv_log import CsvLog
+from clutterbench.logs.mcap_episode import EpisodeWriter
+from clutterbench.models import build_model
+from clutterbench.models.checkpoint import save_checkpoint
+from clutterbench.progress import progress_bar
+
+LOG_COLUMNS = (
+    "epoch",
+    "train_loss",
+    "val_loss",
+    "val_pixel_accuracy",
+    "val_iou",
+    "val_precision",
+    "val_recall",
+    "seconds",
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainPaths:
+    gen_dir: Path
+    split_file: Path
+    model_dir: Path
+    """models/<name>/: best.pt and train.mcap."""
+    report_dir: Path
+    """reports/train/<name>/: log.csv and summary.json."""
+
+
+def model_seed(base_seed: int, name: str) -> int:
+    """Each model's own seed, stable across Python runs (no hash randomisation)."""
+    return (base_seed * 1_000_003 + zlib.crc32(name.encode())) % 2**31
+
+
+def loss_fn(cfg: TrainConfig, mcfg: TrainModelConfig):
+    if mcfg.loss == "focal":
+        return lambda logits, y: focal_loss(logits, y, cfg.focal)
+    return bce_loss
+
+
+def image_size(ds: CollapseDataset) -> int:
+    h, w = ds.scenes["depth_m"].shape[-2:]
+    if h != w:
+        raise ClutterbenchError(f"images are {h}x{w}; the networks take square images")
+    return int(h)
+
+
+def evaluate_loss(
+    model: nn.Module, loader: DataLoader, loss, cfg: TrainConfig, threshold: float
+) -> tuple[float, dict[str, float]]:
+    """Mean loss and pixel scores over `loader` (eval mode, no grad)."""
+    model.eval()
+    counts, total, n = PixelCounts(threshold), 0.0, 0
+    with torch.no_grad():
+        for batch in loader:
+            d, t, y = batch["depth_m"], batch["target"], batch["collapse"]
+            if cfg.channels_last:
+                d, t = (x.contiguous(memory_format=torch.channels_last) for x in (d, t))
+            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.bf16):
+                logits = model(d, t)
+            total += float(loss(logits, y)) * len(d)
+            n += len(d)
+            counts.update(torch.sigmoid(logits.float()), y)
+    return total / max(n, 1), counts.summary()
+
+
+def train_model(
+    name: str, cfg: TrainConfig, threshold_m: float, base_seed: int, paths: TrainPaths
+) -> dict[str, Any]:
+    """Train train.models[name]; returns the summary also written to summary.json."""
+    mcfg = cfg.models[name]
+    seed = model_seed(base_seed, name)
+    torch.manual_seed(seed)
+    noise = cfg.noise if mcfg.noise else None
+    train_ds = CollapseDataset(
+        paths.gen_dir, paths.split_file, "train", threshold_m, noise, mcfg.flip, seed
+    )
+    val_ds = CollapseDataset(paths.gen_dir, paths.split_file, "val", threshold_m)
+    for split, ds in (("train", train_ds), ("val", val_ds)):
+        if len(ds) == 0:
+            raise ClutterbenchError(f"train@{name}: dataset '{mcfg.dataset}' has no {split} pairs")
+    size = image_size(train_ds)
+    if size != mcfg.net.input_size:
+        raise ClutterbenchError(
+            f"train.models.{name}.net.input_size is {mcfg.net.input_size} but dataset "
+            f"'{mcfg.dataset}' has {size}x{size} images (sim.camera.image_size)"
+        )
+    model = build_model(mcfg.arch, mcfg.net)
+    if cfg.channels_last:
+        model = model.to(memory_format=torch.channels_last)
+    params = [p for p in model.parameters() if p.requires_grad]
+    opt = torch.optim.Adam(params, lr=mcfg.lr)
+    loss = loss_fn(cfg, mcfg)
+    gen = torch.Generator().manual_seed(seed)
+    train_loader = DataLoader(train_ds, batch_size=mcfg.batch_size, shuffle=True, generator=gen)
+    val_loader = DataLoader(val_ds, batch_size=max(mcfg.batch_size, 32))
+    log = CsvLog(paths.report_dir / "log.csv", LOG_COLUMNS)
+    sample = val_ds[len(val_ds) // 2]  # the heatmap followed epoch by epoch in the MCAP
+    best = {"epoch": 0, "val_loss": float("inf")}
+    stale, started = 0, time.perf_counter()
+    meta = {
+        "name": name,
+        "dataset": mcfg.dataset,
+        "moved_threshold_m": threshold_m,
+        "image_size": size,
+        "train": as_dict(dataclasses.replace(mcfg, net={})),
+        "seed": seed,
+    }
+    with EpisodeWriter(paths.model_dir / "train.mcap", {"model": name, **meta}) as mcap:
+        mcap.write_depth(0.0, sample["depth_m"][0].numpy())
+        mcap.write_mono8(0.0, "/val/target", _to_mono8(sample["target"][0]))
+        mcap.write_mono8(0.0, "/val/truth", _to_mono8(sample["collapse"][0]))
+        for epoch in range(1, mcfg.epochs + 1):
+            t0 = time.perf_counter()
+            train_loss = _train_epoch(model, train_loader, opt, loss, cfg, f"{name} {epoch}")
+            val_loss, scores = evaluate_loss(model, val_loader, loss, cfg, cfg.val_threshold)
+            row = {"epoch": epoch, "train_loss": train_loss, "val_loss": val_loss}
+            row |= {f"val_{k}": v for k, v in scores.items()}
+            log.append(row | {"seconds": round(time.perf_counter() - t0, 1)})
+            mcap.write_json(float(epoch), "/train/epoch", row)
+            heat = forward_probs(model, sample["depth_m"][None], sample["target"][None], cfg.bf16)
+            mcap.write_mono8(float(epoch), "/val/heatmap", _to_mono8(heat[0, 0]))
+            print(
+                f"{name} epoch {epoch}: train {train_loss:.4f} val {val_loss:.4f} "
+                f"IoU {scores['iou']:.3f}",
+                flush=True,
+            )
+            if val_loss < best["val_loss"]:
+                best = {
+                    "epoch": epoch,
+                    "val_loss": val_loss,
+                    **{f"val_{k}": v for k, v in scores.items()},
+                }
+                save_checkpoint(
+                    paths.model_dir / "best.pt", mcfg.arch, model, meta | {"epoch": epoch}
+                )
+                stale = 0
+            else:
+                stale += 1
+                if stale >= mcfg.patience:
+                    break
+        summary = {
+            "model": name,
+            "epochs_run": epoch,
+            "stopped_early": epoch < mcfg.epochs,
+            "best": best,
+            "train_pairs": len(train_ds),
+            "val_pairs": len(val_ds),
+            "parameters": sum(p.numel() for p in model.parameters()),
+        }
+        mcap.set_outcome({"best_epoch": best["epoch"], "best_val_loss": best["val_loss"]})
+    write_json(paths.report_dir / "summary.json", summary)
+    write_json(paths.report_dir / "timing.json", {"seconds": time.perf_counter() - started})
+    return summary
+
+
+def _train_epoch(
+    model: nn.Module, loader: DataLoader, opt: torch.optim.Optimizer, loss, cfg, desc: str
+) -> float:
+    model.train()
+    total, n = 0.0, 0
+    with progress_bar(desc, len(loader.dataset)) as advance:
+        for batch in loader:
+            d, t, y = batch["depth_m"], batch["target"], batch["collapse"]
+            if cfg.channels_last:
+                d, t = (x.contiguous(memory_format=torch.channels_last) for x in (d, t))
+            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.bf16):
+                logits = model(d, t)
+            value = loss(logits, y)
+            opt.zero_grad(set_to_none=True)
+            value.backward()
+            opt.step()
+            total += float(value.detach()) * len(d)
+            n += len(d)
+            advance(len(d))
+    return total / max(n, 1)
+
+
+def _to_mono8(image: torch.Tensor) -> np.ndarray:
+    return (image.detach().float().clamp(0, 1) * 255).round().to(torch.uint8).numpy()

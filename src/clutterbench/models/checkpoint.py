@@ -1,0 +1,75 @@
+"""Checkpoints that describe themselves: arch, net config, data contract and weights.
+
+Evaluation rebuilds the network from the checkpoint alone and refuses one whose data
+contract (image size, dataset labels) does not match what it is asked to evaluate.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+
+from clutterbench.config import as_dict
+from clutterbench.errors import ClutterbenchError
+from clutterbench.io import atomic_path
+from clutterbench.models import build_model, parse_net_config
+
+FORMAT = "clutterbench.collapse/1"
+
+
+@dataclasses.dataclass(frozen=True)
+class Checkpoint:
+    arch: str
+    net: Any
+    """The arch's config dataclass."""
+    state_dict: dict[str, torch.Tensor]
+    meta: dict[str, Any]
+    """Training facts: dataset, moved threshold, epoch, val loss, ..."""
+
+    def model(self) -> nn.Module:
+        model = build_model(self.arch, self.net)
+        model.load_state_dict(self.state_dict)
+        return model.eval()
+
+
+def save_checkpoint(path: Path, arch: str, model: nn.Module, meta: dict[str, Any]) -> None:
+    """Write atomically; the bytes depend only on the weights and the config."""
+    payload = {
+        "format": FORMAT,
+        "arch": arch,
+        "net": as_dict(model.cfg),
+        "meta": meta,
+        "state_dict": {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()},
+    }
+    buf = io.BytesIO()
+    torch.save(payload, buf)
+    with atomic_path(Path(path)) as tmp:
+        tmp.write_bytes(buf.getvalue())
+
+
+def load_checkpoint(path: Path) -> Checkpoint:
+    path = Path(path)
+    if not path.exists():
+        raise ClutterbenchError(f"checkpoint not found: {path}; run its train stage first")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # a truncated or foreign file raises many types
+        raise ClutterbenchError(f"checkpoint {path} is unreadable: {exc}") from None
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+        raise ClutterbenchError(f"checkpoint {path} is not a clutterbench collapse checkpoint")
+    net = parse_net_config(payload["arch"], payload["net"], f"checkpoint {path}: net")
+    return Checkpoint(payload["arch"], net, payload["state_dict"], payload["meta"])
+
+
+def check_compatible(ckpt: Checkpoint, path: Path, image_size: int) -> None:
+    """One clear error when a checkpoint cannot run on these images."""
+    if ckpt.net.input_size != image_size:
+        raise ClutterbenchError(
+            f"checkpoint {path} takes {ckpt.net.input_size}x{ckpt.net.input_size} images but the "
+            f"data are {image_size}x{image_size}; retrain it at this scale"
+        )

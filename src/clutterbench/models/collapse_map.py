@@ -1,0 +1,70 @@
+"""Collapse map network / collapse predictor (thesis Fig. 5.4, Fig. 6.3).
+
+Depth -> VGG-16 encoder; target mask -> 5 conv layers (16-32-32-32-64, BN + ReLU, each
+halving the size); both meet at 1/32 of the input and a decoder of five conv layers (each
+after a 2x upsampling, fed the VGG feature map of that size: the skip connections) and one
+1x1 conv gives a per-pixel collapse logit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+from torch import nn
+
+from clutterbench.config import bounded
+from clutterbench.models.common import check_input, conv_bn_relu, normalise_depth, upsample_to
+from clutterbench.models.vgg import VGG16Encoder, VGGConfig
+
+
+@dataclasses.dataclass(frozen=True)
+class CollapseMapConfig:
+    input_size: int = bounded(128, ge=32)
+    """Square input (and output) size in pixels; must be a multiple of 32."""
+    encoder: VGGConfig = VGGConfig()
+    """Depth encoder."""
+    mask_channels: tuple[int, int, int, int, int] = (16, 32, 32, 32, 64)
+    """Target-mask encoder conv widths (thesis 6.2.1)."""
+    decoder_channels: tuple[int, int, int, int, int] = (128, 64, 32, 16, 16)
+    """Decoder conv widths, from 1/16 up to full size."""
+    depth_range_m: tuple[float, float] = (0.3, 1.0)
+    """Depth mapped to [-1, 1] over this range (camera 0.5 m before a 0.28 m deep shelf)."""
+
+    def __post_init__(self) -> None:
+        if self.input_size % 32:
+            raise ValueError(f"input_size: {self.input_size} is not a multiple of 32")
+        if not 0 < self.depth_range_m[0] < self.depth_range_m[1]:
+            raise ValueError("depth_range_m: need 0 < near < far")
+
+
+class CollapseMapNet(nn.Module):
+    def __init__(self, cfg: CollapseMapConfig):
+        super().__init__()
+        self.cfg = cfg
+        self.depth_encoder = VGG16Encoder(cfg.encoder, in_channels=1)
+        c = 1
+        layers = []
+        for c_out in cfg.mask_channels:
+            layers.append(conv_bn_relu(c, c_out, stride=2))
+            c = c_out
+        self.mask_encoder = nn.Sequential(*layers)
+        skips = cfg.encoder.skip_channels()  # strides 2, 4, 8, 16, 32
+        c = skips[-1] + cfg.mask_channels[-1]
+        self.decoder = nn.ModuleList()
+        # Upsample to strides 16, 8, 4, 2 (concatenating that VGG map), then to full size.
+        for c_out, c_skip in zip(cfg.decoder_channels, [*skips[3::-1], 0]):
+            self.decoder.append(conv_bn_relu(c + c_skip, c_out))
+            c = c_out
+        self.head = nn.Conv2d(c, 1, 1)
+
+    def forward(self, depth_m: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """(B, 1, H, W) depth in metres and target mask -> (B, 1, H, W) collapse logits."""
+        check_input(depth_m, target, self.cfg.input_size)
+        feats = self.depth_encoder(normalise_depth(depth_m, *self.cfg.depth_range_m))
+        x = torch.cat([feats[-1], self.mask_encoder(target)], dim=1)
+        for i, conv in enumerate(self.decoder):
+            skip = feats[3 - i] if i < 4 else depth_m
+            x = upsample_to(x, skip)
+            x = conv(torch.cat([x, skip], dim=1) if i < 4 else x)
+        return self.head(x)

@@ -1,0 +1,70 @@
+"""FCN-8s-style baseline (Long et al.; thesis Table 5.1, first row).
+
+Same inputs as the collapse map network, stacked as two channels into one VGG-16; fc6/fc7
+as convolutions; class scores from pool5, pool4 and pool3 fused by 2x, 2x, 8x upsampling.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+from torch import nn
+
+from clutterbench.config import bounded
+from clutterbench.models.common import check_input, normalise_depth, upsample_to
+from clutterbench.models.vgg import VGG16Encoder, VGGConfig
+
+
+@dataclasses.dataclass(frozen=True)
+class FCN8sConfig:
+    input_size: int = bounded(128, ge=32)
+    """Square input (and output) size in pixels; must be a multiple of 32."""
+    encoder: VGGConfig = VGGConfig()
+    """Backbone over the stacked (depth, target mask) input."""
+    fc_channels: int = bounded(1024, ge=1)
+    """Width of fc6 / fc7 (4096 in FCN-8s)."""
+    fc_kernel: int = bounded(3, ge=1)
+    """fc6 kernel size (7 in FCN-8s, where pool5 is 7x7; our pool5 is input_size / 32)."""
+    dropout: float = bounded(0.5, ge=0.0, le=1.0)
+    """Dropout after fc6 and fc7, as in FCN."""
+    depth_range_m: tuple[float, float] = (0.3, 1.0)
+    """Depth mapped to [-1, 1] over this range."""
+
+    def __post_init__(self) -> None:
+        if self.input_size % 32:
+            raise ValueError(f"input_size: {self.input_size} is not a multiple of 32")
+        if self.fc_kernel % 2 == 0:
+            raise ValueError("fc_kernel: must be odd")
+        if not 0 < self.depth_range_m[0] < self.depth_range_m[1]:
+            raise ValueError("depth_range_m: need 0 < near < far")
+
+
+class FCN8s(nn.Module):
+    def __init__(self, cfg: FCN8sConfig):
+        super().__init__()
+        self.cfg = cfg
+        self.backbone = VGG16Encoder(cfg.encoder, in_channels=2)
+        skips = cfg.encoder.skip_channels()
+        k = cfg.fc_kernel
+        self.fc = nn.Sequential(
+            nn.Conv2d(skips[4], cfg.fc_channels, k, padding=k // 2),
+            nn.ReLU(inplace=True),
+            nn.Dropout2d(cfg.dropout),
+            nn.Conv2d(cfg.fc_channels, cfg.fc_channels, 1),
+            nn.ReLU(inplace=True),
+            nn.Dropout2d(cfg.dropout),
+            nn.Conv2d(cfg.fc_channels, 1, 1),
+        )
+        self.score_pool4 = nn.Conv2d(skips[3], 1, 1)
+        self.score_pool3 = nn.Conv2d(skips[2], 1, 1)
+
+    def forward(self, depth_m: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """(B, 1, H, W) depth in metres and target mask -> (B, 1, H, W) collapse logits."""
+        check_input(depth_m, target, self.cfg.input_size)
+        x = torch.cat([normalise_depth(depth_m, *self.cfg.depth_range_m), target], dim=1)
+        feats = self.backbone(x)
+        score = self.fc(feats[4])
+        score = upsample_to(score, feats[3]) + self.score_pool4(feats[3])
+        score = upsample_to(score, feats[2]) + self.score_pool3(feats[2])
+        return upsample_to(score, depth_m)
