@@ -30,6 +30,8 @@ def evaluate(params: dict, base: BaseConfig) -> None:
         gen.datasets[run.dataset].moved_threshold_m,
         cfg,
     )
+    best = max(sweep, key=lambda r: -1.0 if r["iou"] != r["iou"] else r["iou"])
+    metrics |= {"sweep_best_iou": best["iou"], "sweep_best_threshold": best["threshold"]}
     out = Path(f"reports/evaluate/{name}")
     write_json(out / "metrics.json", {"model": run.model, "dataset": run.dataset, **metrics})
     header = list(sweep[0])

@@ -36,6 +36,8 @@ def report(params: dict, base: BaseConfig) -> None:
             "pixel counted as collapse when its probability > 0.5; counts summed over all "
             "test pixels.",
             "figures: reports/evaluate/<run>/figure.png; sweep: reports/evaluate/<run>/sweep.csv.",
+            "best IoU in sweep: the highest IoU over thresholds 0.00-0.99 on the test set itself "
+            "(optimistic; shows how calibrated each loss leaves the probabilities).",
         ],
     )
     collapse_table(
@@ -47,6 +49,7 @@ def report(params: dict, base: BaseConfig) -> None:
         notes=[
             f"{base.scale} scale; ch6_test: separate random-scene test set (thesis: 1,000).",
             "previous work = the ch. 5 network (BCE, trained on ch. 5 scenes) on this test set.",
+            "threshold 0.5 as in Table 5.1 (the thesis does not state one for Table 6.1).",
         ],
     )
 

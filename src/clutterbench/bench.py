@@ -101,6 +101,9 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
 
 
 if __name__ == "__main__":
+    from clutterbench.collapse.bench import bench_models
+
     res = bench_sim()
     for k, v in res.items():
         print(f"{k}: {v}")
+    bench_models()

@@ -28,6 +28,8 @@ class TrainModelConfig:
     """Adam learning rate (thesis: 1e-4 ch. 5, 1e-3 ch. 6)."""
     epochs: int = bounded(50, ge=1)
     """Maximum epochs (thesis: 50 ch. 5, 100 ch. 6)."""
+    lr_schedule: Literal["constant", "cosine"] = "constant"
+    """constant (thesis) or cosine decay to lr / 100 over `epochs` (short CPU runs)."""
     patience: int = bounded(5, ge=1)
     """Early stopping: stop after this many epochs without a lower validation loss."""
     noise: bool = True

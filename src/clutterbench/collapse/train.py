@@ -118,6 +118,11 @@ def train_model(
     params = [p for p in model.parameters() if p.requires_grad]
     opt = torch.optim.Adam(params, lr=mcfg.lr)
     loss = loss_fn(cfg, mcfg)
+    schedule = (
+        torch.optim.lr_scheduler.CosineAnnealingLR(opt, mcfg.epochs, eta_min=mcfg.lr / 100)
+        if mcfg.lr_schedule == "cosine"
+        else None
+    )
     gen = torch.Generator().manual_seed(seed)
     train_loader = DataLoader(train_ds, batch_size=mcfg.batch_size, shuffle=True, generator=gen)
     val_loader = DataLoader(val_ds, batch_size=max(mcfg.batch_size, 32))
@@ -140,6 +145,8 @@ def train_model(
         for epoch in range(1, mcfg.epochs + 1):
             t0 = time.perf_counter()
             train_loss = _train_epoch(model, train_loader, opt, loss, cfg, f"{name} {epoch}")
+            if schedule is not None:
+                schedule.step()
             val_loss, scores = evaluate_loss(model, val_loader, loss, cfg, cfg.val_threshold)
             row = {"epoch": epoch, "train_loss": train_loss, "val_loss": val_loss}
             row |= {f"val_{k}": v for k, v in scores.items()}

@@ -16,6 +16,8 @@ COLUMNS = [
     Column("precision", "precision"),
     Column("recall", "recall"),
     Column("pairs", "test pairs", "{:d}"),
+    Column("sweep_best_iou", "best IoU in sweep"),
+    Column("sweep_best_threshold", "at threshold", "{:.2f}"),
 ]
 
 LABELS = {

@@ -1,0 +1,188 @@
+"""`make bench`, networks part: training / inference speed on this CPU -> reports/bench/.
+
+Measures a train step and a forward pass per image for every network of `train.models`
+under the four combinations of channels-last and bf16 autocast and at 1 and 2 threads, then
+the inference API: ms per collapse map at default and paper sizes, and ms for all targets of
+a 10-object scene in one batched call. When a trained checkpoint exists, also how far bf16
+inference moves its probabilities from float32 on real validation images.
+"""
+
+from __future__ import annotations
+
+import itertools
+import platform
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from clutterbench.collapse.config import TrainConfig
+from clutterbench.collapse.losses import bce_loss
+from clutterbench.collapse.predict import CollapsePredictor, predict_collapse
+from clutterbench.config import load_params, load_section
+from clutterbench.data.dataset import CollapseDataset
+from clutterbench.io import write_json, write_text
+from clutterbench.models import build_model
+
+BATCH = 16
+STEPS = 3
+SCENE_OBJECTS = 10
+
+
+def _inputs(n: int, size: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    g = torch.Generator().manual_seed(0)
+    depth = 0.5 + 0.3 * torch.rand(n, 1, size, size, generator=g)
+    target = (torch.rand(n, 1, size, size, generator=g) > 0.95).float()
+    return depth, target, (torch.rand(n, 1, size, size, generator=g) > 0.9).float()
+
+
+def time_train_step(arch: str, net: Any, channels_last: bool, bf16: bool) -> float:
+    """ms per image of one Adam step (forward, BCE, backward, update), batch of BATCH."""
+    torch.manual_seed(0)
+    model = build_model(arch, net).train()
+    depth, target, truth = _inputs(BATCH, net.input_size)
+    if channels_last:
+        model = model.to(memory_format=torch.channels_last)
+        depth, target = (x.contiguous(memory_format=torch.channels_last) for x in (depth, target))
+    opt = torch.optim.Adam(model.parameters(), lr=1e-4)
+    times = []
+    for _ in range(STEPS + 1):  # the first step warms up oneDNN kernels
+        t0 = time.perf_counter()
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+            logits = model(depth, target)
+        loss = bce_loss(logits, truth)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        times.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(times[1:])) / BATCH
+
+
+def time_predict(predictor: CollapsePredictor, n_targets: int, repeats: int = 5) -> float:
+    """ms for one predict_collapse call over `n_targets` masks of one depth image."""
+    size = predictor.input_size
+    depth, target, _ = _inputs(n_targets, size)
+    depth_np, masks = depth[0, 0].numpy(), target[:, 0].numpy()
+    predict_collapse(predictor, depth_np, masks)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        predict_collapse(predictor, depth_np, masks)
+        times.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(times))
+
+
+def bf16_agreement(ckpt: Path, gen_dir: Path, split_file: Path, threshold_m: float) -> dict:
+    """Max |p_bf16 - p_fp32| and the fraction of pixels whose 0.5 decision flips."""
+    fp32 = CollapsePredictor.from_checkpoint(ckpt, bf16=False)
+    bf16 = CollapsePredictor.from_checkpoint(ckpt, bf16=True)
+    ds = CollapseDataset(gen_dir, split_file, "val", threshold_m)
+    worst, flips, pixels = 0.0, 0, 0
+    for i in range(0, len(ds), max(1, len(ds) // 64)):
+        item = ds[i]
+        d, t = item["depth_m"][0].numpy(), item["target"].numpy()
+        a, b = predict_collapse(fp32, d, t), predict_collapse(bf16, d, t)
+        worst = max(worst, float(np.abs(a - b).max()))
+        flips += int(((a > 0.5) != (b > 0.5)).sum())
+        pixels += a.size
+    return {"max_abs_prob_diff": worst, "decision_flip_fraction": flips / max(pixels, 1)}
+
+
+def bench_models(out_dir: Path = Path("reports/bench")) -> dict:
+    params = load_params("params.yaml")
+    by_scale = {
+        scale: load_section(TrainConfig, "train", {**params, "base": {"scale": scale}})
+        for scale in ("default", "paper")
+    }
+    default = by_scale["default"]
+    rows = []
+    seen = set()
+    for name, m in default.models.items():
+        key = (m.arch, m.net)
+        if key in seen:
+            continue
+        seen.add(key)
+        for threads, cl, bf in itertools.product((1, 2), (False, True), (False, True)):
+            torch.set_num_threads(threads)
+            ms = time_train_step(m.arch, m.net, cl, bf)
+            rows.append(
+                {
+                    "model": name,
+                    "threads": threads,
+                    "channels_last": cl,
+                    "bf16": bf,
+                    "train_ms_per_image": ms,
+                }
+            )
+            print(rows[-1], flush=True)
+    torch.set_num_threads(2)
+    cp = "cp_focal" if "cp_focal" in default.models else next(iter(default.models))
+    inference = {}
+    for scale, cfg in by_scale.items():
+        m = cfg.models[cp]
+        model = build_model(m.arch, m.net)
+        for bf in (False, True):
+            predictor = CollapsePredictor(model, batch_size=SCENE_OBJECTS, bf16=bf)
+            tag = f"{scale}_{m.net.input_size}px_{'bf16' if bf else 'fp32'}"
+            inference[f"ms_per_map_{tag}"] = time_predict(predictor, 1)
+            inference[f"ms_scene_{SCENE_OBJECTS}_targets_{tag}"] = time_predict(
+                predictor, SCENE_OBJECTS, repeats=3 if scale == "paper" else 5
+            )
+            print(tag, inference[f"ms_per_map_{tag}"], flush=True)
+    result: dict[str, Any] = {
+        "train_step": rows,
+        "inference_model": cp,
+        "inference": inference,
+        "threads": 2,
+        "machine": f"{platform.processor() or platform.machine()}, torch {torch.__version__}",
+    }
+    gen = params["generate"]["datasets"]
+    m = default.models[cp]
+    ckpt = Path(f"models/{cp}/best.pt")
+    if ckpt.exists():
+        result["bf16_vs_fp32_on_val"] = bf16_agreement(
+            ckpt,
+            Path("data/generate"),
+            Path(f"data/split/{m.dataset}.json"),
+            float(gen[m.dataset]["moved_threshold_m"]),
+        )
+    write_json(out_dir / "models.json", result)
+    write_text(out_dir / "models.md", _markdown(result))
+    return result
+
+
+def _markdown(result: dict) -> str:
+    lines = [
+        "# Network benchmark (CPU)",
+        "",
+        f"Machine: {result['machine']}. Train step: Adam, batch {BATCH}, per image (median of "
+        f"{STEPS}).",
+        "",
+        "| model | threads | channels-last | bf16 | train ms / image |",
+        "|---|---|---|---|---|",
+    ]
+    for r in result["train_step"]:
+        lines.append(
+            f"| {r['model']} | {r['threads']} | {r['channels_last']} | {r['bf16']} | "
+            f"{r['train_ms_per_image']:.1f} |"
+        )
+    lines += [
+        "",
+        f"Inference ({result['inference_model']}, 2 threads):",
+        "",
+        "| measure | ms |",
+        "|---|---|",
+    ]
+    lines += [f"| {k} | {v:.1f} |" for k, v in result["inference"].items()]
+    if "bf16_vs_fp32_on_val" in result:
+        agree = result["bf16_vs_fp32_on_val"]
+        lines += [
+            "",
+            f"bf16 vs float32 inference of the trained checkpoint on validation images: max "
+            f"|dp| = {agree['max_abs_prob_diff']:.4f}, decisions flipped at 0.5: "
+            f"{100 * agree['decision_flip_fraction']:.4f} % of pixels.",
+        ]
+    lines += ["", "Target: <= 20 ms per collapse map at default size on 2 cores."]
+    return "\n".join(lines) + "\n"
