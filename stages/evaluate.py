@@ -6,6 +6,7 @@ from pathlib import Path
 from clutterbench.collapse.config import EvaluateConfig
 from clutterbench.collapse.evaluate import evaluate_checkpoint
 from clutterbench.collapse.figure import collapse_figure
+from clutterbench.collapse.metrics import best_iou_row
 from clutterbench.config import BaseConfig, load_section
 from clutterbench.data.generate import GenerateConfig
 from clutterbench.errors import ClutterbenchError
@@ -30,7 +31,7 @@ def evaluate(params: dict, base: BaseConfig) -> None:
         gen.datasets[run.dataset].moved_threshold_m,
         cfg,
     )
-    best = max(sweep, key=lambda r: -1.0 if r["iou"] != r["iou"] else r["iou"])
+    best = best_iou_row(sweep)
     metrics |= {"sweep_best_iou": best["iou"], "sweep_best_threshold": best["threshold"]}
     out = Path(f"reports/evaluate/{name}")
     write_json(out / "metrics.json", {"model": run.model, "dataset": run.dataset, **metrics})

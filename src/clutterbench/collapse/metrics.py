@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch
 
@@ -59,3 +61,8 @@ def scores(tp: int, fp: int, fn: int, tn: int) -> dict[str, float]:
         "precision": ratio(tp, tp + fp),
         "recall": ratio(tp, tp + fn),
     }
+
+
+def best_iou_row(sweep: list[dict[str, float]]) -> dict[str, float]:
+    """The sweep row with the highest IoU (NaN rows, where IoU is undefined, never win)."""
+    return max(sweep, key=lambda r: -1.0 if math.isnan(r["iou"]) else r["iou"])

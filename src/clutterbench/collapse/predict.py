@@ -15,6 +15,22 @@ from torch import nn
 from clutterbench.models.checkpoint import check_compatible, load_checkpoint
 
 
+def forward_logits(
+    model: nn.Module,
+    depth_m: torch.Tensor,
+    target: torch.Tensor,
+    bf16: bool = True,
+    channels_last: bool = True,
+) -> torch.Tensor:
+    """(B, 1, H, W) depth (m) and target masks -> logits, in the measured-fastest CPU setup
+    (channels-last memory, bf16 autocast; reports/bench/models.md)."""
+    if channels_last:
+        depth_m = depth_m.contiguous(memory_format=torch.channels_last)
+        target = target.contiguous(memory_format=torch.channels_last)
+    with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+        return model(depth_m, target)
+
+
 def forward_probs(
     model: nn.Module,
     depth_m: torch.Tensor,
@@ -23,12 +39,7 @@ def forward_probs(
     channels_last: bool = True,
 ) -> torch.Tensor:
     """(B, 1, H, W) depth (m) and target masks -> (B, 1, H, W) float32 probabilities."""
-    if channels_last:
-        depth_m = depth_m.contiguous(memory_format=torch.channels_last)
-        target = target.contiguous(memory_format=torch.channels_last)
-    with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
-        logits = model(depth_m, target)
-    return torch.sigmoid(logits.float())
+    return torch.sigmoid(forward_logits(model, depth_m, target, bf16, channels_last).float())
 
 
 class CollapsePredictor:

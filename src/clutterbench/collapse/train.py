@@ -21,7 +21,7 @@ from torch.utils.data import DataLoader
 from clutterbench.collapse.config import TrainConfig, TrainModelConfig
 from clutterbench.collapse.losses import bce_loss, focal_loss
 from clutterbench.collapse.metrics import PixelCounts
-from clutterbench.collapse.predict import forward_probs
+from clutterbench.collapse.predict import forward_logits, forward_probs
 from clutterbench.config import as_dict
 from clutterbench.data.dataset import CollapseDataset
 from clutterbench.errors import ClutterbenchError
@@ -80,11 +80,8 @@ def evaluate_loss(
     counts, total, n = PixelCounts(threshold), 0.0, 0
     with torch.no_grad():
         for batch in loader:
-            d, t, y = batch["depth_m"], batch["target"], batch["collapse"]
-            if cfg.channels_last:
-                d, t = (x.contiguous(memory_format=torch.channels_last) for x in (d, t))
-            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.bf16):
-                logits = model(d, t)
+            d, y = batch["depth_m"], batch["collapse"]
+            logits = forward_logits(model, d, batch["target"], cfg.bf16, cfg.channels_last)
             total += float(loss(logits, y)) * len(d)
             n += len(d)
             counts.update(torch.sigmoid(logits.float()), y)
@@ -195,11 +192,8 @@ def _train_epoch(
     total, n = 0.0, 0
     with progress_bar(desc, len(loader.dataset)) as advance:
         for batch in loader:
-            d, t, y = batch["depth_m"], batch["target"], batch["collapse"]
-            if cfg.channels_last:
-                d, t = (x.contiguous(memory_format=torch.channels_last) for x in (d, t))
-            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.bf16):
-                logits = model(d, t)
+            d, y = batch["depth_m"], batch["collapse"]
+            logits = forward_logits(model, d, batch["target"], cfg.bf16, cfg.channels_last)
             value = loss(logits, y)
             opt.zero_grad(set_to_none=True)
             value.backward()

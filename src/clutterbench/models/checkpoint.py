@@ -18,6 +18,7 @@ from clutterbench.config import as_dict
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import atomic_path
 from clutterbench.models import build_model, parse_net_config
+from clutterbench.models.common import load_torch_file
 
 FORMAT = "clutterbench.collapse/1"
 
@@ -54,12 +55,7 @@ def save_checkpoint(path: Path, arch: str, model: nn.Module, meta: dict[str, Any
 
 def load_checkpoint(path: Path) -> Checkpoint:
     path = Path(path)
-    if not path.exists():
-        raise ClutterbenchError(f"checkpoint not found: {path}; run its train stage first")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # a truncated or foreign file raises many types
-        raise ClutterbenchError(f"checkpoint {path} is unreadable: {exc}") from None
+    payload = load_torch_file(path, "checkpoint", "; run its train stage first")
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise ClutterbenchError(f"checkpoint {path} is not a clutterbench collapse checkpoint")
     net = parse_net_config(payload["arch"], payload["net"], f"checkpoint {path}: net")

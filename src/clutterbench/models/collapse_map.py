@@ -14,7 +14,13 @@ import torch
 from torch import nn
 
 from clutterbench.config import bounded
-from clutterbench.models.common import check_input, conv_bn_relu, normalise_depth, upsample_to
+from clutterbench.models.common import (
+    check_input,
+    check_size_and_depth_range,
+    conv_bn_relu,
+    normalise_depth,
+    upsample_to,
+)
 from clutterbench.models.vgg import VGG16Encoder, VGGConfig
 
 
@@ -32,10 +38,7 @@ class CollapseMapConfig:
     """Depth mapped to [-1, 1] over this range (camera 0.5 m before a 0.28 m deep shelf)."""
 
     def __post_init__(self) -> None:
-        if self.input_size % 32:
-            raise ValueError(f"input_size: {self.input_size} is not a multiple of 32")
-        if not 0 < self.depth_range_m[0] < self.depth_range_m[1]:
-            raise ValueError("depth_range_m: need 0 < near < far")
+        check_size_and_depth_range(self.input_size, self.depth_range_m)
 
 
 class CollapseMapNet(nn.Module):

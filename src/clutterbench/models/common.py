@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Any
+
 import torch
 import torch.nn.functional as F
 from torch import nn
+
+from clutterbench.errors import ClutterbenchError
 
 
 def normalise_depth(depth_m: torch.Tensor, near_m: float, far_m: float) -> torch.Tensor:
@@ -36,3 +41,22 @@ def check_input(depth_m: torch.Tensor, target: torch.Tensor, input_size: int) ->
 
 def upsample_to(x: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
     return F.interpolate(x, size=like.shape[-2:], mode="bilinear", align_corners=False)
+
+
+def load_torch_file(path: Path, what: str, missing_hint: str = "") -> Any:
+    """torch.load (tensors only) with one-line errors for a missing or unreadable file."""
+    if not path.exists():
+        raise ClutterbenchError(f"{what} not found: {path}{missing_hint}")
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # a truncated or foreign file raises many types, multi-line
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ClutterbenchError(f"{what} {path} is unreadable: {first}") from None
+
+
+def check_size_and_depth_range(input_size: int, depth_range_m: tuple[float, float]) -> None:
+    """Shared config checks of the networks (raise ValueError -> one-line params error)."""
+    if input_size % 32:
+        raise ValueError(f"input_size: {input_size} is not a multiple of 32")
+    if not 0 < depth_range_m[0] < depth_range_m[1]:
+        raise ValueError("depth_range_m: need 0 < near < far")

@@ -12,7 +12,12 @@ import torch
 from torch import nn
 
 from clutterbench.config import bounded
-from clutterbench.models.common import check_input, normalise_depth, upsample_to
+from clutterbench.models.common import (
+    check_input,
+    check_size_and_depth_range,
+    normalise_depth,
+    upsample_to,
+)
 from clutterbench.models.vgg import VGG16Encoder, VGGConfig
 
 
@@ -32,12 +37,9 @@ class FCN8sConfig:
     """Depth mapped to [-1, 1] over this range."""
 
     def __post_init__(self) -> None:
-        if self.input_size % 32:
-            raise ValueError(f"input_size: {self.input_size} is not a multiple of 32")
+        check_size_and_depth_range(self.input_size, self.depth_range_m)
         if self.fc_kernel % 2 == 0:
             raise ValueError("fc_kernel: must be odd")
-        if not 0 < self.depth_range_m[0] < self.depth_range_m[1]:
-            raise ValueError("depth_range_m: need 0 < near < far")
 
 
 class FCN8s(nn.Module):

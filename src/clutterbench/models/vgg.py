@@ -15,6 +15,7 @@ from torch import nn
 
 from clutterbench.config import bounded
 from clutterbench.errors import ClutterbenchError
+from clutterbench.models.common import load_torch_file
 
 # Configuration "D": 13 conv layers in 5 blocks, each block ends in a 2x2 max-pool.
 VGG16_BLOCKS: tuple[tuple[int, ...], ...] = (
@@ -93,12 +94,7 @@ def load_vgg16_weights(encoder: VGG16Encoder, path: Path) -> None:
     grey image x replicated to RGB gives the same response). The first ten convs are then
     frozen, as in thesis 6.2.1.
     """
-    if not path.exists():
-        raise ClutterbenchError(f"pretrained VGG-16 weights not found: {path}")
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises many types for a corrupt file
-        raise ClutterbenchError(f"cannot read VGG-16 weights {path}: {exc}") from None
+    state = load_torch_file(path, "pretrained VGG-16 weights")
     # Conv kernels are the 4-D "features.N.weight" tensors (vgg16_bn also has 1-D BN ones).
     weights = sorted(
         (
