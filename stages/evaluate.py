@@ -1,16 +1,15 @@
-"""Stage evaluate@<run>: pixel metrics, threshold sweep and figure of one model on one set."""
+"""Stage evaluate@<run>: pixel metrics, threshold sweeps and figure of one model on one set."""
 
 import sys
 from pathlib import Path
 
 from clutterbench.collapse.config import EvaluateConfig
-from clutterbench.collapse.evaluate import evaluate_checkpoint
+from clutterbench.collapse.evaluate import SplitRef, evaluate_checkpoint, write_sweep_csv
 from clutterbench.collapse.figure import collapse_figure
-from clutterbench.collapse.metrics import best_iou_row
 from clutterbench.config import BaseConfig, load_section
-from clutterbench.data.generate import GenerateConfig
+from clutterbench.data.config import GenerateConfig
 from clutterbench.errors import ClutterbenchError
-from clutterbench.io import write_json, write_text
+from clutterbench.io import write_json
 from clutterbench.stage import run_stage
 
 
@@ -21,31 +20,33 @@ def evaluate(params: dict, base: BaseConfig) -> None:
         raise ClutterbenchError(f"evaluate.runs.{name}: no such run (known: {', '.join(cfg.runs)})")
     run = cfg.runs[name]
     gen = load_section(GenerateConfig, "generate", params)
-    if run.dataset not in gen.datasets:
-        raise ClutterbenchError(f"evaluate.runs.{name}.dataset: unknown dataset '{run.dataset}'")
-    metrics, sweep, samples = evaluate_checkpoint(
+    for key, dataset in (("dataset", run.dataset), ("val_dataset", run.val_dataset)):
+        if dataset not in gen.datasets:
+            raise ClutterbenchError(f"evaluate.runs.{name}.{key}: unknown dataset '{dataset}'")
+
+    def split(dataset: str, which: str) -> SplitRef:
+        path = Path(f"data/split/{dataset}.json")
+        return SplitRef(dataset, path, which, gen.datasets[dataset].moved_threshold_m)
+
+    result = evaluate_checkpoint(
         Path(f"models/{run.model}/best.pt"),
         Path("data/generate"),
-        Path(f"data/split/{run.dataset}.json"),
-        run.split,
-        gen.datasets[run.dataset].moved_threshold_m,
+        split(run.dataset, run.split),
+        split(run.val_dataset, "val"),
         cfg,
+        f"evaluate.runs.{name}.val_dataset",
     )
-    best = best_iou_row(sweep)
-    metrics |= {"sweep_best_iou": best["iou"], "sweep_best_threshold": best["threshold"]}
+    metrics = result.metrics
     out = Path(f"reports/evaluate/{name}")
-    write_json(out / "metrics.json", {"model": run.model, "dataset": run.dataset, **metrics})
-    header = list(sweep[0])
-    lines = [",".join(header)] + [",".join(f"{r[h]:.6g}" for h in header) for r in sweep]
-    write_text(out / "sweep.csv", "\n".join(lines) + "\n")
+    about = {"model": run.model, "dataset": run.dataset, "split": run.split}
+    write_json(out / "metrics.json", about | {"val_dataset": run.val_dataset, **metrics})
+    write_sweep_csv(out / "sweep.csv", result.sweep)
+    write_sweep_csv(out / "val_sweep.csv", result.val_sweep)
     title = f"{run.model} on {run.dataset} ({run.split}): IoU {metrics['iou']:.3f}"
-    collapse_figure(samples, title, out / "figure.png")
-    print(
-        f"{name}: "
-        + ", ".join(
-            f"{k} {metrics[k]:.3f}" for k in ("pixel_accuracy", "iou", "precision", "recall")
-        )
-    )
+    collapse_figure(result.samples, title, out / "figure.png")
+    scores = ", ".join(f"{k} {metrics[k]:.3f}" for k in ("pixel_accuracy", "iou", "precision"))
+    chosen = metrics["val_chosen_threshold"]
+    print(f"{name}: {scores}; at val-chosen {chosen:.2f}: IoU {metrics['iou_at_val_chosen']:.3f}")
 
 
 if __name__ == "__main__":

@@ -4,7 +4,9 @@ import sys
 from pathlib import Path
 
 from clutterbench.config import BaseConfig, load_section
-from clutterbench.data.generate import GenerateConfig, SimConfig, generate_dataset
+from clutterbench.data.config import GenerateConfig
+from clutterbench.data.generate import generate_dataset
+from clutterbench.sim.config import SimConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.stage import run_stage
 

@@ -2,10 +2,11 @@
 
 from pathlib import Path
 
+from clutterbench.collapse.config import EvaluateConfig
 from clutterbench.config import BaseConfig, load_section
-from clutterbench.data.generate import GenerateConfig
+from clutterbench.data.config import GenerateConfig
 from clutterbench.io import write_json
-from clutterbench.report.collapse import collapse_table
+from clutterbench.report.collapse import RunSources, collapse_table
 from clutterbench.report.config import ReportConfig
 from clutterbench.report.datasets import dataset_stats, datasets_table
 from clutterbench.report.tables import load_thesis_figures
@@ -15,6 +16,7 @@ from clutterbench.stage import run_stage
 def report(params: dict, base: BaseConfig) -> None:
     cfg = load_section(ReportConfig, "report", params)
     gen = load_section(GenerateConfig, "generate", params)
+    evaluate = load_section(EvaluateConfig, "evaluate", params)
     figures = load_thesis_figures(Path(cfg.thesis_figures))
     stats = {
         name: dataset_stats(
@@ -24,34 +26,19 @@ def report(params: dict, base: BaseConfig) -> None:
     }
     write_json(Path("reports/metrics/datasets.json"), {"scale": base.scale, "datasets": stats})
     datasets_table(stats, figures, Path("reports/tables"))
-    evaluated = Path("reports/evaluate")
-    collapse_table(
-        "table_5_1",
-        cfg.table_5_1,
-        figures,
-        evaluated,
-        Path("reports/tables"),
-        notes=[
-            f"{base.scale} scale; ch. 5 test split (thesis: 1,000 simulated images).",
-            "pixel counted as collapse when its probability > 0.5; counts summed over all "
-            "test pixels.",
-            "figures: reports/evaluate/<run>/figure.png; sweep: reports/evaluate/<run>/sweep.csv.",
-            "best IoU in sweep: the highest IoU over thresholds 0.00-0.99 on the test set itself "
-            "(optimistic; shows how calibrated each loss leaves the probabilities).",
-        ],
-    )
-    collapse_table(
-        "table_6_1",
-        cfg.table_6_1,
-        figures,
-        evaluated,
-        Path("reports/tables"),
-        notes=[
-            f"{base.scale} scale; ch6_test: separate random-scene test set (thesis: 1,000).",
-            "previous work = the ch. 5 network (BCE, trained on ch. 5 scenes) on this test set.",
-            "threshold 0.5 as in Table 5.1 (the thesis does not state one for Table 6.1).",
-        ],
-    )
+    sources = RunSources(Path("reports/evaluate"), Path("models"), Path("reports/train"))
+    run_models = {name: run.model for name, run in evaluate.runs.items()}
+    for table, rows in (("table_5_1", cfg.table_5_1), ("table_6_1", cfg.table_6_1)):
+        collapse_table(
+            table,
+            rows,
+            run_models,
+            evaluate.threshold,
+            figures,
+            sources,
+            Path("reports/tables"),
+            base.scale,
+        )
 
 
 if __name__ == "__main__":

@@ -6,7 +6,7 @@ from pathlib import Path
 from clutterbench.collapse.config import TrainConfig
 from clutterbench.collapse.train import TrainPaths, train_model
 from clutterbench.config import BaseConfig, load_section
-from clutterbench.data.generate import GenerateConfig
+from clutterbench.data.config import GenerateConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.stage import run_stage
 
@@ -27,6 +27,7 @@ def train(params: dict, base: BaseConfig) -> None:
         split_file=Path(f"data/split/{dataset}.json"),
         model_dir=Path(f"models/{name}"),
         report_dir=Path(f"reports/train/{name}"),
+        timing_file=Path(f"reports/timing/train_{name}.json"),
     )
     summary = train_model(name, cfg, gen.datasets[dataset].moved_threshold_m, base.seed, paths)
     print(f"{name}: best epoch {summary['best']['epoch']} of {summary['epochs_run']}")

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from clutterbench.sim.physics import PhysicsConfig
-from clutterbench.sim.render import CameraConfig
+from clutterbench.sim.config import PhysicsConfig
+from clutterbench.sim.config import CameraConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -15,9 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from clutterbench.config import load_params, load_section
-from clutterbench.data.generate import GenerateConfig, SimConfig, label_scene
+from clutterbench.data.config import GenerateConfig
+from clutterbench.data.generate import label_scene
 from clutterbench.io import write_json, write_text
 from clutterbench.progress import progress_bar
+from clutterbench.sim.config import SimConfig
 from clutterbench.sim.labelling import build_world
 from clutterbench.sim.render import ensure_renderer, render_depth_instance
 

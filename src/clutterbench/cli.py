@@ -28,7 +28,7 @@ from clutterbench.errors import ClutterbenchError
 if TYPE_CHECKING:
     import numpy as np
 
-    from clutterbench.sim.physics import PhysicsConfig
+    from clutterbench.sim.config import PhysicsConfig
 
 EXIT_USER_ERROR = 2
 STACK_GAP_M = 0.0005
@@ -75,8 +75,7 @@ def main() -> None:
 def _physics_config() -> PhysicsConfig:
     """Physics parameters: `sim.physics` of ./params.yaml if there is one, else defaults."""
     from clutterbench.config import load_params, load_section
-    from clutterbench.data.generate import SimConfig
-    from clutterbench.sim.physics import PhysicsConfig
+    from clutterbench.sim.config import PhysicsConfig, SimConfig
 
     path = Path("params.yaml")
     if path.exists() and "sim" in load_params(path):

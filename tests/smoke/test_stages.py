@@ -16,7 +16,9 @@ import yaml
 from clutterbench.collapse.config import TrainConfig
 from clutterbench.config import load_params, load_section
 from clutterbench.data.dataset import CollapseDataset
-from clutterbench.data.generate import GenerateConfig, SimConfig, generate_dataset
+from clutterbench.data.config import GenerateConfig
+from clutterbench.data.generate import generate_dataset
+from clutterbench.sim.config import SimConfig
 from clutterbench.logs.mcap_episode import read_episode
 from clutterbench.models.checkpoint import load_checkpoint, save_checkpoint
 from clutterbench.models.collapse_map import CollapseMapConfig, CollapseMapNet

@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from clutterbench.cli import _physics_config, app
 from clutterbench.logs.mcap_episode import read_episode
-from clutterbench.sim.physics import PhysicsConfig
+from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.spec import SceneSpec
 
 STACK3 = Path(__file__).resolve().parents[1] / "data" / "stack3.json"

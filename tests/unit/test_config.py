@@ -7,7 +7,8 @@ import dataclasses
 import pytest
 
 from clutterbench.config import load_params, load_section, parse, resolve_scale
-from clutterbench.data.generate import DatasetConfig, GenerateConfig, SimConfig
+from clutterbench.data.config import DatasetConfig, GenerateConfig
+from clutterbench.sim.config import SimConfig
 from clutterbench.data.split import Fractions, SplitConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.report.config import ReportConfig

@@ -8,76 +8,24 @@ regenerated. Same params and seed -> byte-identical shards.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import multiprocessing as mp
-from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
-from clutterbench.config import as_dict, bounded
+from clutterbench.config import as_dict
+from clutterbench.data.config import DatasetConfig, GenerateConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import load_npz, save_npz, write_json
 from clutterbench.progress import progress_bar
-from clutterbench.sim.catalog import CATALOGUES
-from clutterbench.sim.families import FAMILIES
+from clutterbench.sim.config import SimConfig
 from clutterbench.sim.labelling import REJECT_REASONS, LabelledScene, generate_labelled_scene
-from clutterbench.sim.physics import PhysicsConfig
-from clutterbench.sim.render import CameraConfig, ensure_renderer
+from clutterbench.sim.render import ensure_renderer
 
-FORMAT_VERSION = 1
-
-
-@dataclasses.dataclass(frozen=True)
-class DatasetConfig:
-    n_scenes: int = bounded(ge=1)
-    """Number of accepted scenes."""
-    families: Mapping[str, float] = dataclasses.field(default_factory=dict)
-    """Scene family -> relative weight (thesis ch. 6: shelved : stacked : random = 1 : 1 : 3)."""
-    catalogue: Literal["same", "various", "new"] = "various"
-    """Box catalogue the sizes are drawn from."""
-    n_objects: tuple[int, int] = bounded((5, 10), ge=1, le=30)
-    """Inclusive range of the number of boxes per scene."""
-    pulls: bool = False
-    """Also simulate pulling each box out with each other box held (thesis ch. 4 pairs)."""
-    moved_threshold_m: float = bounded(0.005, gt=0.0)
-    """A box 'moved' when its centre moved more than this (thesis: 6.4 mm ch. 5, 5.0 mm
-    ch. 6). Applied when labels are derived, so changing it regenerates nothing."""
-
-    def __post_init__(self) -> None:
-        if not self.families:
-            raise ValueError("families: give at least one scene family")
-        for name, w in self.families.items():
-            if name not in FAMILIES:
-                raise ValueError(f"families.{name}: unknown family (known: {', '.join(FAMILIES)})")
-            if w <= 0:
-                raise ValueError(f"families.{name}: weight must be > 0")
-        if self.n_objects[0] > self.n_objects[1]:
-            raise ValueError("n_objects: the range must be [low, high] with low <= high")
-        assert self.catalogue in CATALOGUES
-
-
-@dataclasses.dataclass(frozen=True)
-class GenerateConfig:
-    shard_size: int = bounded(50, ge=1)
-    """Scenes per shard file (the unit of resuming and of parallel work)."""
-    workers: int = bounded(2, ge=1)
-    """Worker processes, each with its own renderer."""
-    max_attempts: int = bounded(30, ge=1)
-    """A scene is redrawn (counted as rejected) at most this often before the stage fails."""
-    datasets: Mapping[str, DatasetConfig] = dataclasses.field(default_factory=dict)
-    """Dataset name -> what to generate."""
-
-
-@dataclasses.dataclass(frozen=True)
-class SimConfig:
-    physics: PhysicsConfig = PhysicsConfig()
-    """PhysX settings shared by data generation and the simulated trials."""
-    camera: CameraConfig = CameraConfig()
-    """The depth camera in front of the shelf."""
+FORMAT_VERSION = 2  # 2: canonical-start labels, clusters, contacts, float64 labels
 
 
 def config_hash(dataset: str, ds: DatasetConfig, sim: SimConfig, seed: int) -> str:
@@ -143,7 +91,14 @@ def make_shard(job: dict[str, Any]) -> dict[str, Any]:
         "instance": np.stack([sc.instance for sc in scenes]).astype(np.uint8),
         "sizes_m": np.zeros((s, n_max, 3), np.float32),
         "poses": np.zeros((s, n_max, 7), np.float64),
-        "removal_m": np.full((s, n_max, n_max), np.nan, np.float32),
+        "type_id": np.full((s, n_max), -1, np.int8),
+        # float64: the displacements exactly as simulated, so a replay can be compared bit
+        # for bit (tests/contract/test_replay.py).
+        "removal_m": np.full((s, n_max, n_max), np.nan, np.float64),
+        "contact": np.zeros((s, n_max, n_max), bool),
+        "cluster_of": np.full((s, n_max), -1, np.int16),
+        "cluster_class": np.full((s, n_max), -1, np.int8),
+        "cluster_bbox_px": np.zeros((s, n_max, 4), np.float32),
         "spec_json": np.array([sc.spec.to_json() for sc in scenes]),
         "rejected": np.array(
             [[sc.rejected[r] for r in REJECT_REASONS] for sc in scenes], dtype=np.int32
@@ -151,12 +106,19 @@ def make_shard(job: dict[str, Any]) -> dict[str, Any]:
         "steps": np.array([sc.steps for sc in scenes], dtype=np.int64),
     }
     if ds.pulls:
-        arrays["pull_m"] = np.full((s, n_max, n_max + 1, n_max), np.nan, np.float32)
+        arrays["pull_m"] = np.full((s, n_max, n_max + 1, n_max), np.nan, np.float64)
     for k, sc in enumerate(scenes):
-        n = sc.spec.n
+        n, c = sc.spec.n, len(sc.cluster_class)
         arrays["sizes_m"][k, :n] = sc.spec.sizes_m
         arrays["poses"][k, :n] = sc.spec.poses
+        if sc.spec.type_ids is not None:
+            arrays["type_id"][k, :n] = sc.spec.type_ids
         arrays["removal_m"][k, :n, :n] = sc.removal_m
+        for a, b in sc.contacts:
+            arrays["contact"][k, a, b] = arrays["contact"][k, b, a] = True
+        arrays["cluster_of"][k, :n] = sc.cluster_of
+        arrays["cluster_class"][k, :c] = sc.cluster_class
+        arrays["cluster_bbox_px"][k, :c] = sc.cluster_bbox_px
         if ds.pulls:
             # support slot n (no support) is stored in the last slot, n_max
             arrays["pull_m"][k, :n, :n, :n] = sc.pull_m[:, :n]

@@ -1,27 +1,37 @@
 """Generate one labelled scene: place, settle, render, then simulate every action.
 
-The removal matrix D[x, y] is the displacement (m) of box y when box x is removed (SPEC.md);
-one simulation per target x from the same settled state. With pulls, P[x, s, y] is the
-displacement of y when x is pulled out toward the camera while box s is held (s == N: no
-support), as thesis ch. 4 labels its (extract, support) pairs.
+The removal matrix D[x, y] is the displacement (m) of box y when box x is removed (SPEC.md).
+With pulls, P[x, s, y] is the displacement of y when x is pulled out toward the camera while
+box s is held (s == N: no support), as thesis ch. 4 labels its (extract, support) pairs.
+
+Every label starts from the canonical state: a fresh world built from the settled spec
+(`BoxWorld.from_spec`), so each is a function of the spec alone, whatever was simulated
+before it, and `act_on_spec` (the CLI's replay) reproduces it bit for bit.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import zlib
+from collections.abc import Mapping, Sequence
+from typing import Literal
 
 import numpy as np
 
 from clutterbench.errors import ClutterbenchError
 from clutterbench.sim.catalog import box_extents_m
+from clutterbench.sim.clusters import scene_clusters
+from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.families import get_family
-from clutterbench.sim.physics import BoxWorld, PhysicsConfig
-from clutterbench.sim.render import CameraConfig, render_depth_instance
+from clutterbench.sim.physics import BoxWorld
+from clutterbench.sim.render import render_depth_instance
 from clutterbench.sim.shelf import Shelf
-from clutterbench.sim.spec import SceneSpec
+from clutterbench.sim.spec import SceneSpec, deepest_overlap
 
-REJECT_REASONS = ("moving", "fell", "no_room")
+REJECT_REASONS = ("moving", "fell", "no_room", "overlap")
+"""Why a placement attempt is redrawn: still moving after sim.physics.settle_max_s, a box
+off the shelf, no room for every box, or boxes jammed into each other (> 1 mm, e.g. a
+stack pressed against the top board), which no spec may hold (sim/spec.py)."""
 
 
 @dataclasses.dataclass
@@ -33,6 +43,14 @@ class LabelledScene:
     """(N, N) D[x, y]; NaN on the diagonal."""
     pull_m: np.ndarray | None
     """(N, N + 1, N) P[x, s, y] or None; NaN where x == y or s == x or s == y."""
+    cluster_of: np.ndarray
+    """(N,) arrangement cluster of each box (thesis 5.2.1)."""
+    cluster_class: np.ndarray
+    """(C,) class of each cluster, an index into sim.clusters.CLASSES."""
+    cluster_bbox_px: np.ndarray
+    """(C, 4) (x, y, w, h) image box of each cluster (thesis eq. 5.1)."""
+    contacts: list[tuple[int, int]]
+    """Pairs of boxes touching in the settled scene (PhysX contacts)."""
     rejected: dict[str, int]
     steps: int
     pictures: int
@@ -41,15 +59,28 @@ class LabelledScene:
 
 
 def scene_rng(seed: int, dataset: str, index: int, attempt: int) -> np.random.Generator:
-    """Each scene's own stream: (base seed, dataset, scene index, attempt) -> generator."""
+    """Each attempt's placement stream: (base seed, dataset, scene index, attempt)."""
     return np.random.default_rng([seed, zlib.crc32(dataset.encode()), index, attempt])
 
 
+def draw_scene_setup(
+    seed: int,
+    dataset: str,
+    index: int,
+    family_weights: Mapping[str, float],
+    n_objects: Sequence[int],
+) -> tuple[str, int]:
+    """(family, number of boxes) of scene `index`, drawn once from its own stream: a rejected
+    attempt redraws only the placement, so hard families are not under-represented."""
+    rng = np.random.default_rng([seed, zlib.crc32(f"{dataset}/setup".encode()), index])
+    names = sorted(family_weights)
+    weights = np.array([family_weights[k] for k in names], dtype=np.float64)
+    family = names[int(rng.choice(len(names), p=weights / weights.sum()))]
+    return family, int(rng.integers(n_objects[0], n_objects[1] + 1))
+
+
 def build_world(spec: SceneSpec, physics: PhysicsConfig, render: bool) -> BoxWorld:
-    world = BoxWorld(spec.shelf, physics, render=render)
-    for size, pose in zip(spec.sizes_m, spec.poses):
-        world.add_box(size, pose)
-    return world
+    return BoxWorld.from_spec(spec, physics, render=render)
 
 
 def place_and_settle(
@@ -59,45 +90,98 @@ def place_and_settle(
     rng: np.random.Generator,
     physics: PhysicsConfig,
     shelf: Shelf,
-    render: bool,
-) -> tuple[BoxWorld, list[dict], str | None]:
-    """Arrange a scene and let it come to rest; returns (world, clusters, reject reason)."""
+) -> tuple[BoxWorld, list[list[int]], str | None]:
+    """Arrange a scene and let it come to rest (physics only); returns (world, the groups the
+    family arranged, reject reason)."""
     types = box_extents_m(catalogue)
     sizes = types[rng.integers(0, len(types), size=n_objects)]
-    world = BoxWorld(shelf, physics, render=render)
+    world = BoxWorld(shelf, physics, render=False)
     placement = get_family(family).place(world, sizes, rng)
+    groups = [list(g) for g in placement.groups]
     if world.n < n_objects:
-        return world, placement.clusters, "no_room"
+        return world, groups, "no_room"
     if not world.settle().at_rest:
-        return world, placement.clusters, "moving"
+        return world, groups, "moving"
     if not np.all(shelf.contains(world.positions())):
-        return world, placement.clusters, "fell"
-    return world, placement.clusters, None
+        return world, groups, "fell"
+    if deepest_overlap(np.array(world.sizes_m), world.poses()) is not None:
+        return world, groups, "overlap"
+    return world, groups, None
 
 
-def removal_matrix(world: BoxWorld) -> np.ndarray:
-    state = world.save()
-    out = np.full((world.n, world.n), np.nan)
-    for x in range(world.n):
-        world.restore(state)
-        out[x] = world.remove(x)
-    world.restore(state)
+def catalogue_type_ids(sizes_m: np.ndarray, catalogue: str) -> np.ndarray:
+    """(N,) index of each box's size in the catalogue (-1 if it is none of them)."""
+    types = box_extents_m(catalogue)
+    match = np.all(sizes_m[:, None, :] == types[None], axis=-1)
+    return np.where(match.any(axis=1), match.argmax(axis=1), -1)
+
+
+Action = Literal["remove", "pull"]
+
+
+def act_on_spec(
+    spec: SceneSpec,
+    physics: PhysicsConfig,
+    action: Action,
+    target: int,
+    support: int | None = None,
+    world: BoxWorld | None = None,
+) -> np.ndarray:
+    """Displacement (m) of every box when `target` is removed or pulled out (with `support`
+    held), simulated from the canonical start. The one code path of labels and replays."""
+    world = world or BoxWorld.from_spec(spec, physics)
+    assert world.steps_taken == 0, "actions start from a freshly built world"
+    return world.pull(target, support) if action == "pull" else world.remove(target, support)
+
+
+class _Tally:
+    """Physics steps and SAPIEN time over every world a scene used (for the benchmark)."""
+
+    def __init__(self) -> None:
+        self.steps, self.sapien_s = 0, 0.0
+
+    def add(self, world: BoxWorld) -> BoxWorld:
+        self.steps += world.steps_taken
+        self.sapien_s += world.sapien_s
+        return world
+
+
+def removal_matrix(
+    spec: SceneSpec, physics: PhysicsConfig, tally: _Tally | None = None
+) -> np.ndarray:
+    out = np.full((spec.n, spec.n), np.nan)
+    for x in range(spec.n):
+        world = BoxWorld.from_spec(spec, physics)
+        out[x] = act_on_spec(spec, physics, "remove", x, world=world)
+        if tally is not None:
+            tally.add(world)
     return out
 
 
-def pull_tensor(world: BoxWorld) -> np.ndarray:
-    n = world.n
-    state = world.save()
+def pull_tensor(spec: SceneSpec, physics: PhysicsConfig, tally: _Tally | None = None) -> np.ndarray:
+    n = spec.n
     out = np.full((n, n + 1, n), np.nan)
     for x in range(n):
         for s in [n, *[j for j in range(n) if j != x]]:
-            world.restore(state)
-            disp = world.pull(x, None if s == n else s)
+            world = BoxWorld.from_spec(spec, physics)
+            disp = act_on_spec(spec, physics, "pull", x, None if s == n else s, world=world)
+            if tally is not None:
+                tally.add(world)
             if s != n:
                 disp[s] = np.nan
             out[x, s] = disp
-    world.restore(state)
     return out
+
+
+def settled_contacts(
+    spec: SceneSpec, physics: PhysicsConfig, tally: _Tally | None = None
+) -> list[tuple[int, int]]:
+    """Pairs of boxes touching in the settled scene: the canonical start, one step."""
+    world = BoxWorld.from_spec(spec, physics)
+    world.step(1)
+    if tally is not None:
+        tally.add(world)
+    return world.contact_pairs()
 
 
 def generate_labelled_scene(
@@ -117,42 +201,48 @@ def generate_labelled_scene(
     """Scene `index` of `dataset`, regenerable alone from (seed, dataset, index)."""
     shelf = shelf or Shelf()
     rejected = dict.fromkeys(REJECT_REASONS, 0)
-    names = sorted(family_weights)
-    weights = np.array([family_weights[k] for k in names], dtype=np.float64)
-    steps, sapien_s = 0, 0.0
+    family, n = draw_scene_setup(seed, dataset, index, family_weights, n_objects)
+    tally = _Tally()
     for attempt in range(max_attempts):
         rng = scene_rng(seed, dataset, index, attempt)
-        family = names[int(rng.choice(len(names), p=weights / weights.sum()))]
-        n = int(rng.integers(n_objects[0], n_objects[1] + 1))
-        world, clusters, reason = place_and_settle(
-            family, catalogue, n, rng, physics, shelf, render=True
-        )
+        world, groups, reason = place_and_settle(family, catalogue, n, rng, physics, shelf)
+        tally.add(world)
         if reason is not None:
             rejected[reason] += 1
-            steps += world.steps_taken
-            sapien_s += world.sapien_s
             continue
-        depth_m, instance = render_depth_instance(world, camera)
+        sizes = np.array(world.sizes_m)
         spec = SceneSpec(
-            sizes_m=np.array(world.sizes_m),
+            sizes_m=sizes,
             poses=world.poses(),
             shelf=shelf,
             camera=camera,
             family=family,
-            meta={
-                "dataset": dataset,
-                "index": index,
-                "seed": seed,
-                "attempt": attempt,
-                "clusters": clusters,
-            },
+            meta={"dataset": dataset, "index": index, "seed": seed, "attempt": attempt},
+            type_ids=catalogue_type_ids(sizes, catalogue),
         )
-        removal = removal_matrix(world)
-        pull = pull_tensor(world) if pulls else None
-        steps += world.steps_taken
-        sapien_s += world.sapien_s
-        return LabelledScene(spec, depth_m, instance, removal, pull, rejected, steps, 1, sapien_s)
+        view = BoxWorld.from_spec(spec, physics, render=True)
+        depth_m, instance = render_depth_instance(view, camera)
+        tally.add(view)
+        contacts = settled_contacts(spec, physics, tally)
+        cluster_of, classes, boxes = scene_clusters(sizes, spec.poses, groups, contacts, instance)
+        removal = removal_matrix(spec, physics, tally)
+        pull = pull_tensor(spec, physics, tally) if pulls else None
+        return LabelledScene(
+            spec,
+            depth_m,
+            instance,
+            removal,
+            pull,
+            cluster_of,
+            classes,
+            boxes,
+            contacts,
+            rejected,
+            tally.steps,
+            1,
+            tally.sapien_s,
+        )
     raise ClutterbenchError(
         f"{dataset} scene {index}: rejected {max_attempts} times ({rejected}); "
-        "the family cannot fit these boxes"
+        f"the {family} family cannot fit {n} boxes"
     )

@@ -1,56 +1,58 @@
-"""A SAPIEN 3 (PhysX CPU) shelf scene with boxes: settling, removal and pull actions."""
+"""A SAPIEN 3 (PhysX CPU) shelf scene with boxes, and the actions planners and trials use.
+
+Every action is measured against one reference: the box positions the world was built with
+(`BoxWorld.from_spec`: the settled spec, fresh). Labels, CLI replays and trial judges all
+start from that canonical state, so the same action on the same scene gives the same bits
+everywhere (a world reused through `system.unpack` would keep PhysX's contact cache and
+drift by a few millimetres; shared/ARCHITECTURE.md "one canonical start").
+"""
 
 from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
 import sapien
 from sapien import physx
 
-from clutterbench.config import bounded
+from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.geometry import box_aabb_half_extents, displacement_m
 from clutterbench.sim.shelf import Shelf
+
+if TYPE_CHECKING:
+    from clutterbench.sim.spec import SceneSpec
 
 sapien.set_log_level("error")
 
 ROOM_FLOOR_BELOW_SHELF_M = 0.4
 # Where a removed box is parked: far below the floor, kinematic, so it touches nothing.
 _PARK_POSE = sapien.Pose([0.0, 0.0, -50.0])
-
-
-@dataclasses.dataclass(frozen=True)
-class PhysicsConfig:
-    timestep_s: float = bounded(1 / 240, gt=0.0, le=0.02)
-    """Physics step (s). 240 Hz keeps 20 mm boxes from tunnelling."""
-    density_kg_m3: float = bounded(300.0, gt=0.0)
-    """Box density. The thesis' 1.0 kg/m^3 gives 2 g boxes the solver handles badly;
-    300 kg/m^3 (a filled carton) gives 60-800 g boxes."""
-    static_friction: float = bounded(0.9, ge=0.0)
-    """Static friction of boxes and shelf (thesis 4.2.1)."""
-    dynamic_friction: float = bounded(0.8, ge=0.0)
-    """Dynamic friction (thesis 4.2.1)."""
-    restitution: float = bounded(0.1, ge=0.0, le=1.0)
-    """Coefficient of restitution (thesis 4.2.1)."""
-    settle_max_s: float = bounded(4.0, gt=0.0)
-    """Longest a scene may take to come to rest after generation; longer -> rejected."""
-    action_settle_max_s: float = bounded(3.0, gt=0.0)
-    """Longest to simulate after an action before displacements are measured."""
-    check_every_steps: int = bounded(8, ge=1)
-    """Rest is checked every this many steps."""
-    rest_linear_m_s: float = bounded(0.004, gt=0.0)
-    """A body is at rest when its linear speed is below this (m/s) ..."""
-    rest_angular_rad_s: float = bounded(0.04, gt=0.0)
-    """... and its angular speed below this (rad/s)."""
-    pull_speed_m_s: float = bounded(0.2, gt=0.0)
-    """Speed of a horizontal pull toward the camera (thesis ch. 4 extraction)."""
+PULL_CLEARANCE_M = 0.01
+"""A pulled box counts as out once its back face is this far in front of the opening."""
+CONTACT_SEPARATION_M = 0.001
+"""Two boxes touch when PhysX reports a contact point closer than this."""
 
 
 @dataclasses.dataclass(frozen=True)
 class SettleResult:
     steps: int
     at_rest: bool
+
+
+@dataclasses.dataclass(frozen=True)
+class ActionResult:
+    """What an action did, measured against the world's reference (its canonical start)."""
+
+    displacement_m: np.ndarray
+    """(N,) centre displacement of every box from its reference position; NaN for boxes
+    taken out of the scene."""
+    at_rest: bool
+    """Whether every dynamic box came to rest before the time limit."""
+    steps: int
+    """Physics steps the action took (including the settling after it)."""
 
 
 class BoxWorld:
@@ -68,9 +70,15 @@ class BoxWorld:
             cfg.static_friction, cfg.dynamic_friction, cfg.restitution
         )
         self.render = render
+        self.camera = None  # created once, on the first picture (sim/render.py)
         self.sizes_m: list[np.ndarray] = []
         self.bodies: list[physx.PhysxRigidDynamicComponent] = []
         self.entities: list[sapien.Entity] = []
+        self.reference: list[np.ndarray] = []
+        """Each box's position when it entered the world: what displacements are measured
+        against."""
+        self.removed: set[int] = set()
+        self._pulls: dict[int, tuple[sapien.Pose, int]] = {}  # target -> (start pose, steps)
         self.steps_taken = 0
         self.sapien_s = 0.0  # wall time inside SAPIEN step/render calls (for the benchmark)
         # The room floor under the shelf, so a box that falls out comes to rest (not rendered).
@@ -83,14 +91,27 @@ class BoxWorld:
             b.set_initial_pose(sapien.Pose(centre))
             b.build_static(name=f"shelf_{name}")
 
+    @classmethod
+    def from_spec(cls, spec: SceneSpec, cfg: PhysicsConfig, render: bool = False) -> BoxWorld:
+        """The canonical start: a fresh world holding the spec's boxes at their settled poses,
+        at rest. Every label, replay and trial begins here."""
+        world = cls(spec.shelf, cfg, render=render)
+        for k in range(spec.n):
+            world.add_box(spec.sizes_m[k], spec.poses[k], spec.density(k, cfg.density_kg_m3))
+        return world
+
     # -- building ---------------------------------------------------------------------------
-    def add_box(self, size_m: np.ndarray, pose: np.ndarray) -> int:
+    def add_box(
+        self, size_m: np.ndarray, pose: np.ndarray, density_kg_m3: float | None = None
+    ) -> int:
         """Add a dynamic box of full extents `size_m` at pose [x, y, z, qw, qx, qy, qz]."""
         size_m = np.asarray(size_m, dtype=np.float64)
         assert size_m.shape == (3,) and np.all(size_m > 0), "size_m must be 3 positive metres"
         b = self.scene.create_actor_builder()
         b.add_box_collision(
-            half_size=size_m / 2, material=self.material, density=self.cfg.density_kg_m3
+            half_size=size_m / 2,
+            material=self.material,
+            density=density_kg_m3 or self.cfg.density_kg_m3,
         )
         if self.render:
             b.add_box_visual(half_size=size_m / 2)
@@ -99,6 +120,7 @@ class BoxWorld:
         self.entities.append(entity)
         self.bodies.append(entity.find_component_by_type(physx.PhysxRigidDynamicComponent))
         self.sizes_m.append(size_m)
+        self.reference.append(np.array(entity.pose.p, dtype=np.float64))
         return len(self.bodies) - 1
 
     @property
@@ -124,16 +146,24 @@ class BoxWorld:
         half = half.reshape(-1, 3)
         return poses[:, :3] - half, poses[:, :3] + half
 
-    def save(self) -> bytes:
-        return self.system.pack()
+    def displacements(self) -> np.ndarray:
+        """(N,) distance of each box's centre from its reference; NaN for removed boxes."""
+        disp = displacement_m(np.array(self.reference).reshape(-1, 3), self.positions())
+        disp[sorted(self.removed)] = np.nan
+        return disp
 
-    def restore(self, state: bytes) -> None:
-        for body in self.bodies:
-            if body.kinematic:
-                body.set_kinematic(False)
-        self.system.unpack(state)
-        for body in self.bodies:
-            body.wake_up()
+    def contact_pairs(self) -> list[tuple[int, int]]:
+        """Pairs (i < j) of boxes touching after the last step (PhysX contacts); empty before
+        the first step."""
+        index = {e.per_scene_id: k for k, e in enumerate(self.entities)}
+        pairs = set()
+        for c in self.system.get_contacts():
+            a, b = (index.get(body.entity.per_scene_id) for body in c.bodies)
+            if a is None or b is None or a == b:
+                continue
+            if any(pt.separation < CONTACT_SEPARATION_M for pt in c.points):
+                pairs.add((min(a, b), max(a, b)))
+        return sorted(pairs)
 
     # -- stepping ---------------------------------------------------------------------------
     def step(self, n: int = 1) -> None:
@@ -143,73 +173,175 @@ class BoxWorld:
         self.sapien_s += time.perf_counter() - t0
         self.steps_taken += n
 
-    def at_rest(self) -> bool:
-        lin, ang = self.cfg.rest_linear_m_s, self.cfg.rest_angular_rad_s
-        for body in self.bodies:
-            if body.kinematic:
-                continue
-            if (
-                np.abs(body.linear_velocity).max() > lin
-                or np.abs(body.angular_velocity).max() > ang
-            ):
-                return False
-        return True
+    def _still(self, before: np.ndarray, after: np.ndarray, steps: int) -> bool:
+        """Whether no dynamic box moved faster, on average over `steps`, than the rest speeds.
+
+        Judged from poses, not from PhysX's reported velocities: a resting box whose settled
+        pose overlaps a neighbour by a fraction of a millimetre reports a residual solver
+        velocity (~20 mm/s measured) while it does not move at all.
+        """
+        dt = steps * self.cfg.timestep_s
+        dynamic = np.array([not b.kinematic for b in self.bodies], dtype=bool)
+        dynamic[sorted(self.removed)] = False
+        if not dynamic.any():
+            return True
+        move = np.linalg.norm(after[dynamic, :3] - before[dynamic, :3], axis=1)
+        dots = np.abs(np.sum(after[dynamic, 3:] * before[dynamic, 3:], axis=1))
+        turn = 2.0 * np.arccos(np.clip(dots, 0.0, 1.0))
+        return bool(
+            np.all(move <= self.cfg.rest_linear_m_s * dt)
+            and np.all(turn <= self.cfg.rest_angular_rad_s * dt)
+        )
 
     def settle(self, max_s: float | None = None) -> SettleResult:
-        """Step until every box is at rest (checked every few steps) or `max_s` passes."""
+        """Step until every box is at rest or `max_s` passes. At rest: two check windows in a
+        row (sim.physics.check_every_steps each) in which no box moved faster than the rest
+        speeds."""
         max_steps = int(round((max_s or self.cfg.settle_max_s) / self.cfg.timestep_s))
         every = self.cfg.check_every_steps
-        steps = 0
+        steps, still, prev = 0, 0, self.poses()
         while steps < max_steps:
             self.step(every)
             steps += every
-            if self.at_rest():
+            now = self.poses()
+            still = still + 1 if self._still(prev, now, every) else 0
+            if still >= 2:
                 return SettleResult(steps, True)
+            prev = now
         return SettleResult(steps, False)
 
     # -- actions ----------------------------------------------------------------------------
-    def _hold(self, i: int, pose: sapien.Pose) -> None:
-        body = self.bodies[i]
-        body.set_kinematic(True)
-        body.set_kinematic_target(pose)
-        self.entities[i].set_pose(pose)
+    def _result(self, steps_before: int, at_rest: bool) -> ActionResult:
+        return ActionResult(self.displacements(), at_rest, self.steps_taken - steps_before)
 
-    def _park_and_measure(self, target: int, before: np.ndarray) -> np.ndarray:
-        """Take `target` out of the scene, let the rest settle, return displacements (m)."""
-        self._hold(target, _PARK_POSE)
+    def _settle_action(self, steps_before: int) -> ActionResult:
         for body in self.bodies:
             if not body.kinematic:
                 body.wake_up()
-        self.settle(self.cfg.action_settle_max_s)
-        disp = displacement_m(before, self.positions())
-        disp[target] = np.nan
-        return disp
+        settled = self.settle(self.cfg.action_settle_max_s)
+        return self._result(steps_before, settled.at_rest)
 
+    def _check(self, *boxes: int) -> None:
+        for i in boxes:
+            if not 0 <= i < self.n:
+                raise IndexError(f"no box {i} (the world holds boxes 0..{self.n - 1})")
+            if i in self.removed:
+                raise ValueError(f"box {i} was taken out of the scene")
+
+    def hold(self, boxes: Iterable[int]) -> None:
+        """Hold boxes fixed where they are (kinematic), as a robot's second arm does."""
+        for i in boxes:
+            self._check(i)
+            self.bodies[i].set_kinematic(True)
+            self.bodies[i].set_kinematic_target(self.entities[i].pose)
+
+    def release(self, boxes: Iterable[int]) -> None:
+        """Let held boxes go (dynamic again) where they are; nothing is stepped."""
+        for i in boxes:
+            self._check(i)
+            self.bodies[i].set_kinematic(False)
+            self._pulls.pop(i, None)
+        for body in self.bodies:
+            if not body.kinematic:
+                body.wake_up()
+
+    def held(self) -> list[int]:
+        return [i for i, b in enumerate(self.bodies) if b.kinematic and i not in self.removed]
+
+    def settle_action(self) -> ActionResult:
+        """Let the scene come to rest (at most sim.physics.action_settle_max_s)."""
+        return self._settle_action(self.steps_taken)
+
+    def lift_out(self, target: int) -> ActionResult:
+        """Take `target` out of the scene at once (a straight lift), then let the rest settle."""
+        self._check(target)
+        before = self.steps_taken
+        body = self.bodies[target]
+        body.set_kinematic(True)
+        body.set_kinematic_target(_PARK_POSE)
+        self.entities[target].set_pose(_PARK_POSE)
+        self.removed.add(target)
+        self._pulls.pop(target, None)
+        return self._settle_action(before)
+
+    def pull_travel_m(self, target: int) -> float:
+        """How far `target` must be pulled toward the camera (-x) from where it is now to be
+        out of the shelf (back face past the opening plus a clearance)."""
+        _, hi = self.aabbs()
+        return float(hi[target, 0] + PULL_CLEARANCE_M)
+
+    def pull_step(self, target: int, distance_m: float) -> ActionResult:
+        """Pull `target` toward the camera (-x) by `distance_m` at sim.physics.pull_speed_m_s,
+        gripped (kinematic); the other boxes react but are not settled afterwards, so a
+        planner can observe mid-pull and stop. Increments compose exactly: pulling 0.1 m once
+        steps the same poses as ten pulls of 0.01 m."""
+        self._check(target)
+        before = self.steps_taken
+        dx = self.cfg.pull_speed_m_s * self.cfg.timestep_s
+        if target not in self._pulls:
+            self.hold([target])
+            self._pulls[target] = (self.entities[target].pose, 0)
+        start, done = self._pulls[target]
+        n_steps = int(np.ceil(distance_m / dx - 1e-9))
+        prev = self.poses()
+        for k in range(done + 1, done + n_steps + 1):
+            p = np.array(start.p) - np.array([k * dx, 0.0, 0.0])
+            self.bodies[target].set_kinematic_target(sapien.Pose(p, start.q))
+            if k == done + n_steps:
+                prev = self.poses()
+            self.step()
+        self._pulls[target] = (start, done + n_steps)
+        # at_rest here: nothing but the gripped box moved during the last step.
+        return self._result(before, self._still(prev, self.poses(), 1))
+
+    def carry(self, target: int, pose: np.ndarray, speed_m_s: float | None = None) -> ActionResult:
+        """Carry `target` in a straight line to `pose` [x, y, z, qw, qx, qy, qz] (orientation
+        interpolated), release it there and let the scene settle (ch. 5 moves/placements)."""
+        self._check(target)
+        before = self.steps_taken
+        self.hold([target])
+        start = self.entities[target].pose
+        goal = sapien.Pose(
+            np.asarray(pose[:3], dtype=np.float64), np.asarray(pose[3:], dtype=np.float64)
+        )
+        speed = speed_m_s or self.cfg.pull_speed_m_s
+        dist = float(np.linalg.norm(np.array(goal.p) - np.array(start.p)))
+        n_steps = max(1, int(np.ceil(dist / (speed * self.cfg.timestep_s))))
+        q0, q1 = np.array(start.q), np.array(goal.q)
+        if np.dot(q0, q1) < 0:  # the short way round
+            q1 = -q1
+        for k in range(1, n_steps + 1):
+            t = k / n_steps
+            q = (1 - t) * q0 + t * q1  # nlerp: enough for a straight carry
+            p = (1 - t) * np.array(start.p) + t * np.array(goal.p)
+            self.bodies[target].set_kinematic_target(sapien.Pose(p, q / np.linalg.norm(q)))
+            self.step()
+        self.release([target])
+        return self._settle_action(before)
+
+    def insert(
+        self, size_m: np.ndarray, pose: np.ndarray, density_kg_m3: float | None = None
+    ) -> tuple[int, ActionResult]:
+        """Put a new box at `pose` and let the scene settle; its reference is that pose."""
+        before = self.steps_taken
+        idx = self.add_box(size_m, pose, density_kg_m3)
+        return idx, self._settle_action(before)
+
+    # -- the labelled actions (thesis ch. 4-6) ----------------------------------------------
     def remove(self, target: int, support: int | None = None) -> np.ndarray:
-        """Lift `target` out of the scene at once, settle, return each box's displacement (m).
+        """Lift `target` out, settle, return each box's displacement (m); NaN for the target.
 
-        The target's entry is NaN. With `support`, that box is held fixed (kinematic)
-        throughout, as the thesis' second arm does (ch. 6 bimanual).
+        With `support`, that box is held fixed (kinematic) throughout, as the thesis' second
+        arm does (ch. 6 bimanual).
         """
-        before = self.positions()
         if support is not None:
-            self._hold(support, self.entities[support].pose)
-        return self._park_and_measure(target, before)
+            self.hold([support])
+        return self.lift_out(target).displacement_m
 
     def pull(self, target: int, support: int | None = None) -> np.ndarray:
         """Pull `target` horizontally toward the camera (-x) until it has left the shelf,
         then settle; returns displacements (m) as `remove` does (thesis 4.2.1)."""
-        before = self.positions()
         if support is not None:
-            self._hold(support, self.entities[support].pose)
-        start = self.entities[target].pose
-        lo, hi = self.aabbs()
-        travel = hi[target, 0] + 0.01  # until its back face passes the opening, plus 1 cm
-        self.bodies[target].set_kinematic(True)
-        dx = self.cfg.pull_speed_m_s * self.cfg.timestep_s
-        n_steps = int(np.ceil(travel / dx))
-        for k in range(1, n_steps + 1):
-            p = np.array(start.p) - np.array([min(k * dx, travel), 0.0, 0.0])
-            self.bodies[target].set_kinematic_target(sapien.Pose(p, start.q))
-            self.step()
-        return self._park_and_measure(target, before)
+            self.hold([support])
+        self.pull_step(target, self.pull_travel_m(target))
+        return self.lift_out(target).displacement_m

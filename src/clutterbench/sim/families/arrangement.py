@@ -1,5 +1,6 @@
 """Thesis ch. 5 arrangements (Fig. 5.3, 5.5): clusters stacked (C^h) or shelved (C^v);
-`disorganized` then gives half of the boxes random poses (C^r / C^l lean right / left)."""
+`disorganized` then gives half of the boxes random poses (thesis 5.2.2). Rows may start
+tilted and fall onto a neighbour (C^r / C^l once settled)."""
 
 from __future__ import annotations
 
@@ -23,10 +24,10 @@ class Organized(SceneFamily):
         random_idx = set(rng.choice(n, size=int(round(self.disorder * n)), replace=False).tolist())
         ordered = [i for i in range(n) if i not in random_idx]
         k = int(rng.integers(1, self.max_clusters + 1))
-        groups = np.array_split(np.array(ordered, dtype=int), k)
+        slots = np.array_split(np.array(ordered, dtype=int), k)
         edges = np.linspace(s.width_m / 2, -s.width_m / 2, k + 1)
-        clusters: list[dict] = []
-        for g, (y0, y1) in zip(groups, zip(edges[:-1], edges[1:])):
+        groups: list[list[int]] = []
+        for g, (y0, y1) in zip(slots, zip(edges[:-1], edges[1:])):
             if len(g) == 0:
                 continue
             if rng.random() < 0.5:  # C^h: one stack in the middle of its slot
@@ -42,7 +43,7 @@ class Organized(SceneFamily):
                         )
                     if idx is not None:
                         members.append(idx)
-                clusters.append({"label": "C^h", "boxes": members})
+                groups.append(members)
             else:  # C^v: a row of standing boxes; disorganized rows lean one way
                 lean = 0.0
                 if self.disorder > 0 and rng.random() < 0.5:
@@ -57,9 +58,7 @@ class Organized(SceneFamily):
                     )
                     if idx is not None:
                         placed.append(idx)
-                # Leaning toward +y (camera's left) shows as leaning left in the image.
-                label = "C^v" if lean == 0 else ("C^l" if lean > 0 else "C^r")
-                clusters.append({"label": label, "boxes": placed})
+                groups.append(placed)
         for i in sorted(random_idx):
             drop_on_top(
                 world,
@@ -68,7 +67,7 @@ class Organized(SceneFamily):
                 random_xy(world, rng, 4, (0.3, 1.0)),
                 lift_m=rng.uniform(0, 0.03),
             )
-        return Placement(clusters)
+        return Placement(groups)
 
 
 class Disorganized(Organized):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
@@ -16,9 +16,11 @@ WALL_MARGIN_M = 0.002
 
 @dataclasses.dataclass
 class Placement:
-    """What a family reports besides the boxes: arrangement clusters (ch. 5 detector)."""
+    """What a family reports besides the boxes: the groups it arranged together (a stack, a
+    row). They seed the arrangement clusters, which are classified from the settled scene
+    (sim/clusters.py), not from what the family intended."""
 
-    clusters: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    groups: list[list[int]] = dataclasses.field(default_factory=list)
 
 
 class SceneFamily:

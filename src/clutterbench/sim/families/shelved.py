@@ -79,4 +79,4 @@ class Shelved(SceneFamily):
             )
             if idx is not None:
                 placed.append(idx)
-        return Placement([{"label": "C^v", "boxes": placed}])
+        return Placement([placed])

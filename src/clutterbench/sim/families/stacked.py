@@ -41,7 +41,7 @@ class Stacked(SceneFamily):
                 if idx is not None:
                     members[j].append(idx)
                     break
-        return Placement([{"label": "C^h", "boxes": m} for m in members if m])
+        return Placement([m for m in members if m])
 
 
 class Pile(Stacked):

@@ -1,0 +1,68 @@
+"""Simulation params (`sim` section): physics and camera. Imports no SAPIEN, so that stages
+that only read configs (train, evaluate, report) do not load the simulator."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from clutterbench.config import bounded
+
+FAMILY_NAMES = ("shelved", "stacked", "random", "organized", "disorganized", "pile")
+"""Names of the scene families in sim/families (checked equal to its registry by a test)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class PhysicsConfig:
+    timestep_s: float = bounded(1 / 240, gt=0.0, le=0.02)
+    """Physics step (s). 240 Hz keeps 20 mm boxes from tunnelling."""
+    density_kg_m3: float = bounded(300.0, gt=0.0)
+    """Box density. The thesis' 1.0 kg/m^3 gives 2 g boxes the solver handles badly;
+    300 kg/m^3 (a filled carton) gives 60-800 g boxes."""
+    static_friction: float = bounded(0.9, ge=0.0)
+    """Static friction of boxes and shelf (thesis 4.2.1)."""
+    dynamic_friction: float = bounded(0.8, ge=0.0)
+    """Dynamic friction (thesis 4.2.1)."""
+    restitution: float = bounded(0.1, ge=0.0, le=1.0)
+    """Coefficient of restitution (thesis 4.2.1)."""
+    settle_max_s: float = bounded(4.0, gt=0.0)
+    """Longest a scene may take to come to rest after generation; longer -> rejected."""
+    action_settle_max_s: float = bounded(3.0, gt=0.0)
+    """Longest to simulate after an action before displacements are measured."""
+    check_every_steps: int = bounded(8, ge=1)
+    """Rest is checked every this many steps."""
+    rest_linear_m_s: float = bounded(0.004, gt=0.0)
+    """A box is at rest when its centre moved slower than this (m/s) over a check window,
+    from its poses (PhysX's reported velocity of a resting box can be ~20 mm/s) ..."""
+    rest_angular_rad_s: float = bounded(0.04, gt=0.0)
+    """... and it turned slower than this (rad/s); two windows in a row."""
+    pull_speed_m_s: float = bounded(0.2, gt=0.0)
+    """Speed of a horizontal pull toward the camera (thesis ch. 4 extraction)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class CameraConfig:
+    image_size: int = bounded(128, ge=16, le=1024)
+    """Square image side in pixels (256 at paper scale, as in the thesis)."""
+    fovy_deg: float = bounded(42.0, gt=1.0, le=150.0)
+    """Vertical field of view; 42 deg frames the 330 mm opening from 0.5 m."""
+    distance_m: float = bounded(0.5, gt=0.05)
+    """Distance of the camera in front of the shelf opening, on the shelf's centre line."""
+    near_m: float = bounded(0.05, gt=0.0)
+    """Near clipping plane."""
+    far_m: float = bounded(2.0, gt=0.0)
+    """Far clipping plane; pixels that see nothing get depth 0."""
+
+    def position_m(self, shelf_height_m: float) -> np.ndarray:
+        # Camera at the shelf opening's centre, looking +x (into the shelf): SAPIEN cameras
+        # look along their local +x with +z up, so gravity is down in the image.
+        return np.array([-self.distance_m, 0.0, shelf_height_m / 2])
+
+
+@dataclasses.dataclass(frozen=True)
+class SimConfig:
+    physics: PhysicsConfig = PhysicsConfig()
+    """PhysX settings shared by data generation and the simulated trials."""
+    camera: CameraConfig = CameraConfig()
+    """The depth camera in front of the shelf."""
