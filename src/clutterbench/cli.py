@@ -127,7 +127,7 @@ def _write_scene_png(path: Path, depth_m: np.ndarray, instance: np.ndarray, titl
     fig.colorbar(im, ax=ax_d, label="depth (m)", shrink=0.9)
 
     ax_i.imshow(_instance_rgb(instance), interpolation="nearest")
-    ax_i.set_title("instance ids (k + 1 = box k, 0 = background)")
+    ax_i.set_title("boxes (the index --remove takes)")
     for k in np.unique(instance):
         if k == 0:
             continue
@@ -135,7 +135,7 @@ def _write_scene_png(path: Path, depth_m: np.ndarray, instance: np.ndarray, titl
         ax_i.text(
             float(cols.mean()),
             float(rows.mean()),
-            str(int(k)),
+            str(int(k) - 1),
             color="white",
             ha="center",
             va="center",
@@ -158,12 +158,12 @@ def scene_show(
 ) -> None:
     """Render a spec's depth and instance images (no physics step) into one PNG."""
     with _user_errors():
-        from clutterbench.sim.labelling import build_world
+        from clutterbench.sim.physics import BoxWorld
         from clutterbench.sim.render import render_depth_instance
         from clutterbench.sim.spec import SceneSpec
 
         spec = SceneSpec.load(spec_path)
-        world = build_world(spec, _physics_config(), render=True)
+        world = BoxWorld.from_spec(spec, _physics_config(), render=True)
         depth_m, instance = render_depth_instance(world, spec.camera)
         _write_scene_png(
             out, depth_m, instance, f"{spec_path.name}: {spec.n} boxes ({spec.family})"
@@ -192,8 +192,7 @@ def _outcome_objects(
         if i == target:
             objects.append({"index": i, "displacement_m": None, "moved": None})
             continue
-        d = 0.0 if i == support else float(d)
-        objects.append({"index": i, "displacement_m": d, "moved": bool(d > threshold_m)})
+        objects.append({"index": i, "displacement_m": float(d), "moved": bool(d > threshold_m)})
     return objects
 
 
@@ -222,7 +221,8 @@ def scene_act(
 ) -> None:
     """Remove (or pull) one box, let the scene settle, print each box's displacement as JSON."""
     with _user_errors():
-        from clutterbench.sim.labelling import build_world
+        from clutterbench.sim.labelling import act_on_spec
+        from clutterbench.sim.physics import BoxWorld
         from clutterbench.sim.spec import SceneSpec
 
         if not (math.isfinite(threshold_m) and threshold_m >= 0):
@@ -230,7 +230,17 @@ def scene_act(
         spec = SceneSpec.load(spec_path)
         _check_indices(spec.n, remove, support)
         cfg = _physics_config()
-        world = build_world(spec, cfg, render=mcap is not None)
+        # A loaded spec should be at rest already; this is checked on a world of its own, so
+        # that the action starts from the canonical state, as every label does.
+        if not BoxWorld.from_spec(spec, cfg).settle().at_rest:
+            Console(stderr=True).print(
+                Text(
+                    f"warning: {spec_path} is not at rest after {cfg.settle_max_s} s",
+                    style="yellow",
+                ),
+                soft_wrap=True,
+            )
+        world = BoxWorld.from_spec(spec, cfg, render=mcap is not None)
         action = "pull" if pull else "remove"
         decision = {"action": action, "target": remove, "support": support}
 
@@ -251,19 +261,8 @@ def scene_act(
         with episode as ep:
             if ep is not None:
                 _log_snapshot(ep, world, spec, 0.0)
-            # A loaded spec is at rest already: this only confirms it.
-            if not world.settle().at_rest:
-                Console(stderr=True).print(
-                    Text(
-                        f"warning: {spec_path} is not at rest after {cfg.settle_max_s} s",
-                        style="yellow",
-                    ),
-                    soft_wrap=True,
-                )
-            if ep is not None:
-                ep.write_json(world.steps_taken * cfg.timestep_s, DECISION_TOPIC, decision)
-            act = world.pull if pull else world.remove
-            disp = act(remove, support=support)
+                ep.write_json(0.0, DECISION_TOPIC, decision)
+            disp = act_on_spec(spec, cfg, action, remove, support, world=world)
             objects = _outcome_objects(disp, remove, support, threshold_m)
             moved = [o["index"] for o in objects if o["moved"]]
             if ep is not None:

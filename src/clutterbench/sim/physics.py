@@ -236,10 +236,14 @@ class BoxWorld:
             self.bodies[i].set_kinematic_target(self.entities[i].pose)
 
     def release(self, boxes: Iterable[int]) -> None:
-        """Let held boxes go (dynamic again) where they are; nothing is stepped."""
+        """Let held boxes go (dynamic again), at rest where they are; nothing is stepped."""
         for i in boxes:
             self._check(i)
             self.bodies[i].set_kinematic(False)
+            # An opening gripper does not throw the box: the kinematic motion's speed is not
+            # carried over.
+            self.bodies[i].set_linear_velocity(np.zeros(3))
+            self.bodies[i].set_angular_velocity(np.zeros(3))
             self._pulls.pop(i, None)
         for body in self.bodies:
             if not body.kinematic:
