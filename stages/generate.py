@@ -6,8 +6,8 @@ from pathlib import Path
 from clutterbench.config import BaseConfig, load_section
 from clutterbench.data.config import GenerateConfig
 from clutterbench.data.generate import generate_dataset
-from clutterbench.sim.config import SimConfig
 from clutterbench.errors import ClutterbenchError
+from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
 
 

@@ -6,8 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from clutterbench.sim.config import PhysicsConfig
-from clutterbench.sim.config import CameraConfig
+from clutterbench.sim.config import CameraConfig, PhysicsConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -6,7 +6,7 @@ import io
 import json
 import os
 import zipfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -65,13 +65,29 @@ def save_npz(path: Path, arrays: Mapping[str, np.ndarray]) -> None:
                 zf.writestr(info, buf.getvalue(), compresslevel=6)
 
 
-def load_npz(path: Path) -> dict[str, np.ndarray]:
-    """Load every array of an .npz into memory; corrupt or missing files raise one line."""
+def load_npz(path: Path, keys: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+    """Load the arrays `keys` (all if None) of an .npz into memory; the others stay
+    compressed on disk. Corrupt or missing files and missing keys raise one line."""
     path = Path(path)
     if not path.exists():
         raise ClutterbenchError(f"missing data file {path}")
     try:
         with np.load(path, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files}
+            missing = [k for k in keys or () if k not in z.files]
+            if missing:
+                raise ClutterbenchError(f"data file {path} holds no array '{missing[0]}'")
+            return {k: z[k] for k in (z.files if keys is None else keys)}
     except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+        raise ClutterbenchError(f"corrupt data file {path}: {exc}") from None
+
+
+def npz_names(path: Path) -> list[str]:
+    """Names of the arrays in an .npz, without decompressing any."""
+    path = Path(path)
+    if not path.exists():
+        raise ClutterbenchError(f"missing data file {path}")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            return [n.removesuffix(".npy") for n in zf.namelist() if n.endswith(".npy")]
+    except (zipfile.BadZipFile, OSError) as exc:
         raise ClutterbenchError(f"corrupt data file {path}: {exc}") from None

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from clutterbench.sim.config import FAMILY_NAMES
 from clutterbench.sim.families import FAMILIES
 from clutterbench.sim.labelling import build_world, generate_labelled_scene
 from clutterbench.sim.spec import SceneSpec
@@ -74,3 +75,8 @@ def test_settled_spec_passes_validation_and_pulls_have_their_shape(family_scene)
     again = SceneSpec.from_json(sc.spec.to_json())
     assert np.array_equal(again.poses, sc.spec.poses)
     assert np.array_equal(again.sizes_m, sc.spec.sizes_m)
+
+
+def test_family_names_match_the_registry():
+    """Configs validate family names without importing SAPIEN: the list must stay in step."""
+    assert set(FAMILY_NAMES) == set(FAMILIES)

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from clutterbench.collapse.losses import FocalConfig, bce_loss, focal_loss
-from clutterbench.collapse.metrics import PixelCounts, scores
+from clutterbench.collapse.metrics import PixelCounts, best_iou_row, scores, sweep_row
 
 
 def test_focal_loss_matches_hand_computed_values():
@@ -47,3 +47,44 @@ def test_pixel_counts_threshold_is_strictly_greater_and_sweep_agrees():
     assert at_06["threshold"] == pytest.approx(0.6)
     assert at_06["precision"] == pytest.approx(1 / 2)  # 0.9 and 0.7 are >= 0.6
     assert at_06["recall"] == pytest.approx(1 / 3)
+
+
+def test_prob_exactly_at_the_threshold_is_negative_in_summary_and_sweep():
+    # 0.5 and 0.25 are exact in float32: a pixel at the threshold is not "higher than" it.
+    prob = torch.tensor([0.5, 0.5, 0.25, 0.75])
+    truth = torch.tensor([1.0, 0.0, 1.0, 0.0])
+    counts = PixelCounts(0.5)
+    counts.update(prob, truth)
+    assert (counts.tp, counts.fp, counts.fn, counts.tn) == (0, 1, 2, 1)
+    at_05 = sweep_row(counts.sweep(), 0.5)
+    assert at_05["precision"] == 0.0 and at_05["recall"] == 0.0
+    at_025 = sweep_row(counts.sweep(), 0.25)
+    assert at_025["recall"] == pytest.approx(1 / 2)  # 0.5 counts, 0.25 does not
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_every_sweep_row_equals_the_summary_at_its_threshold(dtype):
+    # Half the probabilities sit exactly on sweep thresholds (as rounded to `dtype`), where
+    # "> t" and ">= t" disagree; the rest are random.
+    gen = torch.Generator().manual_seed(0)
+    on_grid = torch.tensor([k / 100 for k in range(101)], dtype=dtype).repeat(20)
+    prob = torch.cat([on_grid, torch.rand(2020, generator=gen, dtype=dtype)])
+    truth = (torch.rand(len(prob), generator=gen) < 0.4).float()
+    counts = PixelCounts()
+    counts.update(prob, truth)
+    sweep = counts.sweep()
+    for row in sweep:
+        single = PixelCounts(row["threshold"])
+        single.update(prob, truth)
+        assert {k: v for k, v in row.items() if k != "threshold"} == single.summary(), row
+
+
+def test_best_iou_row_skips_undefined_and_prefers_the_lowest_threshold():
+    nan = float("nan")
+    rows = [
+        {"threshold": 0.1, "iou": nan},
+        {"threshold": 0.2, "iou": 0.5},
+        {"threshold": 0.3, "iou": 0.5},
+        {"threshold": 0.4, "iou": 0.25},
+    ]
+    assert best_iou_row(rows)["threshold"] == 0.2

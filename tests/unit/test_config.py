@@ -8,10 +8,10 @@ import pytest
 
 from clutterbench.config import load_params, load_section, parse, resolve_scale
 from clutterbench.data.config import DatasetConfig, GenerateConfig
-from clutterbench.sim.config import SimConfig
 from clutterbench.data.split import Fractions, SplitConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.report.config import ReportConfig
+from clutterbench.sim.config import SimConfig
 
 
 def test_resolve_scale_picks_entry_and_leaves_other_mappings():

@@ -1,7 +1,14 @@
-"""Offline evaluation of a checkpoint on a test split (thesis 5.3.1, Table 5.1 / 6.1)."""
+"""Offline evaluation of a checkpoint on a test split (thesis 5.3.1, Table 5.1 / 6.1).
+
+Metrics are reported at the fixed params threshold (the thesis' rule) and at the threshold
+with the best IoU on a validation split, chosen without looking at the test set.
+"""
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Callable
+from collections.abc import Set as AbstractSet
 from pathlib import Path
 from typing import Any
 
@@ -10,55 +17,170 @@ import torch
 from torch.utils.data import DataLoader
 
 from clutterbench.collapse.config import EvaluateConfig
-from clutterbench.collapse.metrics import PixelCounts
+from clutterbench.collapse.metrics import PixelCounts, best_iou_row, sweep_row
 from clutterbench.collapse.predict import CollapsePredictor, forward_probs
 from clutterbench.data.dataset import CollapseDataset
 from clutterbench.data.labels import moved_matrix
 from clutterbench.errors import ClutterbenchError
+from clutterbench.io import write_text
+from clutterbench.models.checkpoint import check_compatible, load_checkpoint
 from clutterbench.progress import progress_bar
+
+ProbSource = Callable[[dict[str, torch.Tensor]], torch.Tensor]
+"""A batch of dataset items (depth_m, target, collapse; each (B, 1, H, W)) -> collapse
+probabilities (B, 1, H, W). The network in the stage; tests inject others (e.g. the truth)."""
+
+SCORES = ("pixel_accuracy", "iou", "precision", "recall")
+
+
+@dataclasses.dataclass(frozen=True)
+class SplitRef:
+    """One split of one generated dataset, with the label threshold of that dataset."""
+
+    dataset: str
+    split_file: Path
+    split: str
+    threshold_m: float
+    """A box counts as moved above this displacement (generate.datasets.<d>)."""
+
+    def load(self, gen_dir: Path) -> CollapseDataset:
+        ds = CollapseDataset(gen_dir, self.split_file, self.split, self.threshold_m)
+        if len(ds) == 0:
+            raise ClutterbenchError(
+                f"{self.split_file}: the '{self.split}' split holds no (scene, target) pairs"
+            )
+        return ds
+
+
+@dataclasses.dataclass(frozen=True)
+class EvalResult:
+    metrics: dict[str, Any]
+    """Test scores at the params threshold and at the val-chosen one, set sizes, choice."""
+    sweep: list[dict[str, float]]
+    """Test scores at every sweep threshold."""
+    val_sweep: list[dict[str, float]]
+    """Validation scores at every sweep threshold (the threshold is chosen from these)."""
+    samples: dict[str, np.ndarray]
+    """Test pairs for the figure: depth_m, target, truth, prob."""
+
+
+def check_val_split(test: SplitRef, val: SplitRef, trained_on: str | None, key: str) -> None:
+    """The threshold is chosen on a val split of the evaluated dataset or, where it has none
+    (ch6_test), of the dataset the model was trained on; never on the evaluated split."""
+    if (val.dataset, val.split) == (test.dataset, test.split):
+        raise ClutterbenchError(f"{key}: would choose the threshold on the evaluated split itself")
+    if val.dataset not in (test.dataset, trained_on):
+        raise ClutterbenchError(
+            f"{key}: '{val.dataset}' is neither the evaluated dataset '{test.dataset}' nor "
+            f"the model's training dataset '{trained_on}'"
+        )
+
+
+def network_probs(predictor: CollapsePredictor) -> ProbSource:
+    def probs(batch: dict[str, torch.Tensor]) -> torch.Tensor:
+        return forward_probs(
+            predictor.model,
+            batch["depth_m"],
+            batch["target"],
+            predictor.bf16,
+            predictor.channels_last,
+        )
+
+    return probs
+
+
+def accumulate(
+    ds: CollapseDataset,
+    probs: ProbSource,
+    threshold: float,
+    batch_size: int,
+    picks: AbstractSet[int] = frozenset(),
+    desc: str = "evaluate",
+) -> tuple[PixelCounts, dict[str, list[np.ndarray]]]:
+    """Pixel counts of the whole set at `threshold` (plus the sweep histogram), and the
+    arrays of the pairs in `picks` for the figure."""
+    counts = PixelCounts(threshold)
+    samples: dict[str, list[np.ndarray]] = {k: [] for k in ("depth_m", "target", "truth", "prob")}
+    loader = DataLoader(ds, batch_size=batch_size)
+    with torch.no_grad(), progress_bar(desc, len(ds)) as advance:
+        start = 0
+        for batch in loader:
+            prob = probs(batch)
+            counts.update(prob, batch["collapse"])
+            for j in range(len(prob)):
+                if start + j in picks:
+                    samples["depth_m"].append(batch["depth_m"][j, 0].numpy())
+                    samples["target"].append(batch["target"][j, 0].numpy())
+                    samples["truth"].append(batch["collapse"][j, 0].numpy())
+                    samples["prob"].append(prob[j, 0].numpy())
+            start += len(prob)
+            advance(len(prob))
+    return counts, samples
+
+
+def evaluate_sets(
+    test_ds: CollapseDataset,
+    val_ds: CollapseDataset,
+    probs: ProbSource,
+    cfg: EvaluateConfig,
+    desc: str = "evaluate",
+) -> EvalResult:
+    """Choose the threshold on `val_ds`, then score `test_ds` at the params threshold and
+    at the chosen one (sweep rows count prob > t like the summary, so reading the test sweep
+    at the chosen threshold is exact)."""
+    val_counts, _ = accumulate(val_ds, probs, cfg.threshold, cfg.batch_size, desc=f"{desc} val")
+    if val_counts.tp + val_counts.fn == 0:
+        raise ClutterbenchError(
+            f"{desc}: the validation split holds no collapse pixels; no threshold can be chosen"
+        )
+    val_sweep = val_counts.sweep()
+    chosen = best_iou_row(val_sweep)
+    picks = figure_pairs(test_ds, cfg.figure_samples)
+    counts, samples = accumulate(
+        test_ds, probs, cfg.threshold, cfg.batch_size, picks, desc=f"{desc} test"
+    )
+    sweep = counts.sweep()
+    at_chosen = sweep_row(sweep, chosen["threshold"])
+    n_pos, n_all = counts.tp + counts.fn, counts.tp + counts.fn + counts.fp + counts.tn
+    metrics = {
+        **counts.summary(),
+        "threshold": cfg.threshold,
+        "pairs": len(test_ds),
+        "scenes": int(len(test_ds.scenes["n_objects"])),
+        "positive_pixel_fraction": n_pos / max(n_all, 1),
+        "val_chosen_threshold": chosen["threshold"],
+        "val_iou_at_chosen": chosen["iou"],
+        "val_pairs": len(val_ds),
+        "val_scenes": int(len(val_ds.scenes["n_objects"])),
+        **{f"{k}_at_val_chosen": at_chosen[k] for k in SCORES},
+    }
+    stacked = {k: np.stack(v) for k, v in samples.items()}
+    return EvalResult(metrics, sweep, val_sweep, stacked)
 
 
 def evaluate_checkpoint(
     ckpt_path: Path,
     gen_dir: Path,
-    split_file: Path,
-    split: str,
-    threshold_m: float,
+    test: SplitRef,
+    val: SplitRef,
     cfg: EvaluateConfig,
-) -> tuple[dict[str, Any], list[dict[str, float]], dict[str, np.ndarray]]:
-    """Returns (metrics at cfg.threshold, threshold sweep rows, figure samples)."""
-    ds = CollapseDataset(gen_dir, split_file, split, threshold_m)
-    if len(ds) == 0:
-        raise ClutterbenchError(f"{split_file}: the '{split}' split holds no (scene, target) pairs")
-    size = int(ds.scenes["depth_m"].shape[-1])
-    predictor = CollapsePredictor.from_checkpoint(ckpt_path, image_size=size)
-    counts = PixelCounts(cfg.threshold)
-    picks = figure_pairs(ds, cfg.figure_samples)
-    samples: dict[str, list[np.ndarray]] = {k: [] for k in ("depth_m", "target", "truth", "prob")}
-    loader = DataLoader(ds, batch_size=cfg.batch_size)
-    with torch.no_grad(), progress_bar(f"evaluate {ckpt_path.parent.name}", len(ds)) as advance:
-        start = 0
-        for batch in loader:
-            d, t, y = batch["depth_m"], batch["target"], batch["collapse"]
-            prob = forward_probs(predictor.model, d, t, predictor.bf16, predictor.channels_last)
-            counts.update(prob, y)
-            for j in range(len(d)):
-                if start + j in picks:
-                    samples["depth_m"].append(d[j, 0].numpy())
-                    samples["target"].append(t[j, 0].numpy())
-                    samples["truth"].append(y[j, 0].numpy())
-                    samples["prob"].append(prob[j, 0].numpy())
-            start += len(d)
-            advance(len(d))
-    metrics = {
-        **counts.summary(),
-        "threshold": cfg.threshold,
-        "pairs": len(ds),
-        "scenes": int(len(ds.scenes["n_objects"])),
-        "positive_pixel_fraction": (counts.tp + counts.fn)
-        / max(counts.tp + counts.fn + counts.fp + counts.tn, 1),
-    }
-    return metrics, counts.sweep(), {k: np.stack(v) for k, v in samples.items()}
+    val_key: str = "val_dataset",
+) -> EvalResult:
+    """Rebuild the network from its checkpoint alone and evaluate it (see evaluate_sets)."""
+    test_ds, val_ds = test.load(gen_dir), val.load(gen_dir)
+    ckpt = load_checkpoint(ckpt_path)
+    for ds in (test_ds, val_ds):
+        check_compatible(ckpt, ckpt_path, int(ds.scenes["depth_m"].shape[-1]))
+    check_val_split(test, val, ckpt.meta.get("dataset"), val_key)
+    predictor = CollapsePredictor(ckpt.model())
+    desc = f"evaluate {ckpt_path.parent.name}"
+    return evaluate_sets(test_ds, val_ds, network_probs(predictor), cfg, desc)
+
+
+def write_sweep_csv(path: Path, sweep: list[dict[str, float]]) -> None:
+    header = list(sweep[0])
+    lines = [",".join(header)] + [",".join(f"{r[h]:.6g}" for h in header) for r in sweep]
+    write_text(path, "\n".join(lines) + "\n")
 
 
 def figure_pairs(ds: CollapseDataset, n: int) -> set[int]:

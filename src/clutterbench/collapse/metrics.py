@@ -14,14 +14,17 @@ SWEEP_BINS = 100
 class PixelCounts:
     """Accumulates TP / FP / FN / TN at one threshold and a histogram for the sweep.
 
-    A pixel counts as collapse when its probability is higher than the threshold (5.3.1).
+    A pixel counts as collapse when its probability is higher than the threshold (5.3.1),
+    in the summary and in every sweep row alike, so the sweep row at t equals the summary
+    at t exactly.
     """
 
     def __init__(self, threshold: float = 0.5):
         self.threshold = threshold
         self.tp = self.fp = self.fn = self.tn = 0
-        self.hist_pos = np.zeros(SWEEP_BINS, dtype=np.int64)
-        self.hist_neg = np.zeros(SWEEP_BINS, dtype=np.int64)
+        # Bin j holds the pixels above exactly j sweep thresholds (j = 0 ... SWEEP_BINS).
+        self.hist_pos = np.zeros(SWEEP_BINS + 1, dtype=np.int64)
+        self.hist_neg = np.zeros(SWEEP_BINS + 1, dtype=np.int64)
 
     def update(self, prob: torch.Tensor, truth: torch.Tensor) -> None:
         pred = prob > self.threshold
@@ -30,23 +33,32 @@ class PixelCounts:
         self.fp += int((pred & ~pos).sum())
         self.fn += int((~pred & pos).sum())
         self.tn += int((~pred & ~pos).sum())
-        bins = (prob.float() * SWEEP_BINS).long().clamp(0, SWEEP_BINS - 1)
-        self.hist_pos += torch.bincount(bins[pos], minlength=SWEEP_BINS).numpy()
-        self.hist_neg += torch.bincount(bins[~pos], minlength=SWEEP_BINS).numpy()
+        # The sweep thresholds in prob's own dtype, as `prob > self.threshold` compares them:
+        # bucketize counts the thresholds strictly below each prob, so a prob exactly at a
+        # threshold is negative there, as in the summary.
+        edges = torch.tensor(sweep_thresholds(), dtype=prob.dtype)
+        bins = torch.bucketize(prob.contiguous(), edges, right=False)
+        self.hist_pos += torch.bincount(bins[pos], minlength=SWEEP_BINS + 1).numpy()
+        self.hist_neg += torch.bincount(bins[~pos], minlength=SWEEP_BINS + 1).numpy()
 
     def summary(self) -> dict[str, float]:
         return scores(self.tp, self.fp, self.fn, self.tn)
 
     def sweep(self) -> list[dict[str, float]]:
-        """Scores at thresholds k / 100, counting a pixel positive when in a bin >= k."""
+        """Scores at thresholds k / 100, counting a pixel positive when prob > k / 100."""
+        # Pixels above threshold k are those in bins k + 1 and up.
         pos_above = np.cumsum(self.hist_pos[::-1])[::-1]
         neg_above = np.cumsum(self.hist_neg[::-1])[::-1]
         n_pos, n_neg = int(self.hist_pos.sum()), int(self.hist_neg.sum())
         rows = []
-        for k in range(SWEEP_BINS):
-            tp, fp = int(pos_above[k]), int(neg_above[k])
-            rows.append({"threshold": k / SWEEP_BINS, **scores(tp, fp, n_pos - tp, n_neg - fp)})
+        for k, threshold in enumerate(sweep_thresholds()):
+            tp, fp = int(pos_above[k + 1]), int(neg_above[k + 1])
+            rows.append({"threshold": threshold, **scores(tp, fp, n_pos - tp, n_neg - fp)})
         return rows
+
+
+def sweep_thresholds() -> list[float]:
+    return [k / SWEEP_BINS for k in range(SWEEP_BINS)]
 
 
 def scores(tp: int, fp: int, fn: int, tn: int) -> dict[str, float]:
@@ -64,5 +76,14 @@ def scores(tp: int, fp: int, fn: int, tn: int) -> dict[str, float]:
 
 
 def best_iou_row(sweep: list[dict[str, float]]) -> dict[str, float]:
-    """The sweep row with the highest IoU (NaN rows, where IoU is undefined, never win)."""
+    """The sweep row with the highest IoU (NaN rows, where IoU is undefined, never win;
+    ties go to the lowest threshold)."""
     return max(sweep, key=lambda r: -1.0 if math.isnan(r["iou"]) else r["iou"])
+
+
+def sweep_row(sweep: list[dict[str, float]], threshold: float) -> dict[str, float]:
+    """The sweep row at exactly `threshold` (one of sweep_thresholds())."""
+    for row in sweep:
+        if row["threshold"] == threshold:
+            return row
+    raise ValueError(f"threshold {threshold} is not on the sweep grid")

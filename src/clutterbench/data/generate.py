@@ -21,8 +21,8 @@ from clutterbench.data.config import DatasetConfig, GenerateConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import load_npz, save_npz, write_json
 from clutterbench.progress import progress_bar
-from clutterbench.sim.config import SimConfig
-from clutterbench.sim.labelling import REJECT_REASONS, LabelledScene, generate_labelled_scene
+from clutterbench.sim.config import REJECT_REASONS, SimConfig
+from clutterbench.sim.labelling import LabelledScene, generate_labelled_scene
 from clutterbench.sim.render import ensure_renderer
 
 FORMAT_VERSION = 2  # 2: canonical-start labels, clusters, contacts, float64 labels

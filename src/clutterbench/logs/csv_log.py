@@ -1,4 +1,4 @@
-"""Per-epoch / per-trial rows as CSV (read by `dvc plots`); rewritten atomically per row."""
+"""Per-epoch / per-trial rows as CSV (read by `dvc plots`), appended one line per row."""
 
 from __future__ import annotations
 
@@ -11,19 +11,24 @@ from clutterbench.io import write_text
 
 
 class CsvLog:
-    """Rows with fixed columns; the file on disk is always complete (temp file + rename)."""
+    """Rows with fixed columns. Opening the log starts a fresh file (header only); each row
+    is then appended and flushed, so a crashed run leaves every finished row on disk and a
+    long log costs one line per row, not a rewrite of the whole file."""
 
     def __init__(self, path: Path, columns: Sequence[str]):
         self.path, self.columns = Path(path), list(columns)
-        self.rows: list[dict[str, object]] = []
+        write_text(self.path, self._line(dict(zip(self.columns, self.columns))))
 
     def append(self, row: Mapping[str, object]) -> None:
         extra = set(row) - set(self.columns)
         if extra:
             raise KeyError(f"{self.path.name}: unknown columns {sorted(extra)}")
-        self.rows.append({c: row.get(c, "") for c in self.columns})
+        line = self._line({c: row.get(c, "") for c in self.columns})
+        with self.path.open("a", newline="") as f:
+            f.write(line)
+            f.flush()
+
+    def _line(self, row: Mapping[str, object]) -> str:
         buf = io.StringIO()
-        writer = csv.DictWriter(buf, fieldnames=self.columns, lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(self.rows)
-        write_text(self.path, buf.getvalue())
+        csv.DictWriter(buf, fieldnames=self.columns, lineterminator="\n").writerow(row)
+        return buf.getvalue()

@@ -11,6 +11,10 @@ from clutterbench.config import bounded
 
 FAMILY_NAMES = ("shelved", "stacked", "random", "organized", "disorganized", "pile")
 """Names of the scene families in sim/families (checked equal to its registry by a test)."""
+REJECT_REASONS = ("moving", "fell", "no_room", "overlap")
+"""Why a placement attempt is redrawn: still moving after sim.physics.settle_max_s, a box
+off the shelf, no room for every box, or boxes jammed into each other (> 1 mm, e.g. a
+stack pressed against the top board), which no spec may hold (sim/spec.py)."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -21,17 +21,12 @@ import numpy as np
 from clutterbench.errors import ClutterbenchError
 from clutterbench.sim.catalog import box_extents_m
 from clutterbench.sim.clusters import scene_clusters
-from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.config import REJECT_REASONS, CameraConfig, PhysicsConfig
 from clutterbench.sim.families import get_family
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import render_depth_instance
 from clutterbench.sim.shelf import Shelf
 from clutterbench.sim.spec import SceneSpec, deepest_overlap
-
-REJECT_REASONS = ("moving", "fell", "no_room", "overlap")
-"""Why a placement attempt is redrawn: still moving after sim.physics.settle_max_s, a box
-off the shelf, no room for every box, or boxes jammed into each other (> 1 mm, e.g. a
-stack pressed against the top board), which no spec may hold (sim/spec.py)."""
 
 
 @dataclasses.dataclass

@@ -1,0 +1,149 @@
+"""`make bench`, memory part: peak RSS of a training epoch over sharded data.
+
+Each measurement runs in a fresh process over a synthetic dataset (clutterbench.data.
+synthetic) with the generate stage's shard layout: the data of a whole epoch (every train and
+validation batch) passes through the loaders, while Adam steps run on the first batches only
+(the network's peak is reached on the first step; the rest would only cost time). Run at the
+default ch6 size and at several times that many scenes, RSS should not grow with the dataset.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch.utils.data import DataLoader
+
+from clutterbench.collapse.config import TrainConfig, TrainModelConfig
+from clutterbench.collapse.predict import forward_logits
+from clutterbench.collapse.train import loss_fn
+from clutterbench.config import load_section
+from clutterbench.data.config import GenerateConfig
+from clutterbench.data.dataset import CollapseDataset
+from clutterbench.data.split import SplitConfig, split_dataset
+from clutterbench.io import load_npz
+from clutterbench.models import build_model
+from clutterbench.sim.config import SimConfig
+
+DATASET = "ch6"
+MODEL = "cp_focal"
+SCENE_FACTORS = (1, 4)
+"""Dataset sizes measured, in multiples of the default ch6 n_scenes."""
+TRAIN_BATCHES = 10
+"""Adam steps per measured epoch."""
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident set (VmHWM): unlike ru_maxrss it is not inherited from
+    the parent across fork + exec."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    raise RuntimeError("no VmHWM in /proc/self/status")
+
+
+def epoch_peak_rss(
+    gen_dir: Path,
+    split_file: Path,
+    cfg: TrainConfig,
+    mcfg: TrainModelConfig,
+    threshold_m: float,
+    train_batches: int,
+    threads: int = 2,
+) -> dict[str, Any]:
+    """One epoch of train.py's data path (run in a fresh process); its peak RSS."""
+    torch.set_num_threads(threads)
+    torch.manual_seed(0)
+    t0 = time.perf_counter()
+    noise = cfg.noise if mcfg.noise else None
+    train_ds = CollapseDataset(gen_dir, split_file, "train", threshold_m, noise, mcfg.flip, 0)
+    val_ds = CollapseDataset(gen_dir, split_file, "val", threshold_m)
+    index_s = time.perf_counter() - t0
+    model = build_model(mcfg.arch, mcfg.net).train()
+    if cfg.channels_last:
+        model = model.to(memory_format=torch.channels_last)
+    opt = torch.optim.Adam(model.parameters(), lr=mcfg.lr)
+    loss = loss_fn(cfg, mcfg)
+    loader = DataLoader(train_ds, batch_size=mcfg.batch_size, sampler=train_ds.shard_sampler(0))
+    for b, batch in enumerate(loader):
+        if b < train_batches:
+            d, t = batch["depth_m"], batch["target"]
+            value = loss(
+                forward_logits(model, d, t, cfg.bf16, cfg.channels_last), batch["collapse"]
+            )
+            opt.zero_grad(set_to_none=True)
+            value.backward()
+            opt.step()
+    for _ in DataLoader(val_ds, batch_size=max(mcfg.batch_size, 32)):
+        pass
+    return {
+        "train_pairs": len(train_ds),
+        "val_pairs": len(val_ds),
+        "index_seconds": round(index_s, 1),
+        "epoch_seconds": round(time.perf_counter() - t0, 1),
+        "peak_rss_mb": round(peak_rss_mb(), 1),
+    }
+
+
+def _in_fresh_process(fn, *args) -> dict[str, Any]:
+    # spawn: a new interpreter, so the peak counts only what one training run holds.
+    with ProcessPoolExecutor(1, mp_context=mp.get_context("spawn")) as pool:
+        return pool.submit(fn, *args).result()
+
+
+def bench_train_memory(params: dict[str, Any]) -> list[dict[str, Any]]:
+    """Peak RSS of a default-scale cp_focal epoch on ch6-shaped data of growing size."""
+    # Imported here: the measured process imports this module, and should hold only what
+    # training holds (synthetic data pulls in the simulator).
+    from clutterbench.data.synthetic import write_synthetic_dataset
+
+    params = {**params, "base": {**params.get("base", {}), "scale": "default"}}
+    gen = load_section(GenerateConfig, "generate", params)
+    size = load_section(SimConfig, "sim", params).camera.image_size
+    cfg = load_section(TrainConfig, "train", params)
+    fractions = load_section(SplitConfig, "split", params).datasets[DATASET]
+    ds, mcfg = gen.datasets[DATASET], cfg.models[MODEL]
+    rows = []
+    for factor in SCENE_FACTORS:
+        n_scenes = ds.n_scenes * factor
+        with tempfile.TemporaryDirectory() as tmp:
+            root = Path(tmp)
+            t0 = time.perf_counter()
+            write_synthetic_dataset(
+                root / "gen", DATASET, n_scenes, gen.shard_size, size, ds.n_objects, ds.families
+            )
+            split_dataset(DATASET, fractions, 0, root / "gen", root / "split")
+            write_s = time.perf_counter() - t0
+            first = load_npz(root / "gen" / DATASET / "shard-00000.npz")
+            per_scene = sum(a.nbytes for a in first.values()) / len(first["scene_index"])
+            run = _in_fresh_process(
+                epoch_peak_rss,
+                root / "gen",
+                root / "split" / f"{DATASET}.json",
+                cfg,
+                mcfg,
+                ds.moved_threshold_m,
+                TRAIN_BATCHES,
+            )
+        rows.append(
+            {
+                "dataset": f"{DATASET} synthetic x{factor}",
+                "scenes": n_scenes,
+                "image_size": size,
+                "shard_size": gen.shard_size,
+                "model": MODEL,
+                "batch_size": mcfg.batch_size,
+                "train_batches": TRAIN_BATCHES,
+                # What a load-everything loader held: every scene decompressed.
+                "decompressed_dataset_mb": round(per_scene * n_scenes / 2**20, 1),
+                "write_seconds": round(write_s, 1),
+                **run,
+            }
+        )
+        print(rows[-1], flush=True)
+    return rows

@@ -1,0 +1,52 @@
+"""The memory benchmark's measurement: VmHWM tracks allocations; one tiny epoch runs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from clutterbench.collapse.bench import _memory_markdown
+from clutterbench.collapse.bench_memory import epoch_peak_rss, peak_rss_mb
+from clutterbench.collapse.config import TrainConfig
+from clutterbench.config import load_params, load_section
+from clutterbench.data.split import Fractions, split_dataset
+from clutterbench.data.synthetic import write_synthetic_dataset
+
+
+def rss_mb() -> float:
+    status = Path("/proc/self/status").read_text()
+    return int(next(x for x in status.splitlines() if x.startswith("VmRSS:")).split()[1]) / 1024
+
+
+def test_peak_rss_sees_a_large_allocation():
+    before = peak_rss_mb()
+    # Rise 64 MiB above the earlier peak, whatever this test process did before.
+    block = np.ones(int((before - rss_mb() + 64) * 2**20) // 8)
+    assert peak_rss_mb() - before >= 60
+    del block
+    assert peak_rss_mb() - before >= 60  # a peak, not the current size
+
+
+def test_tiny_epoch_reports_its_peak(root, tmp_path):
+    params = load_params(root / "params.yaml")
+    params["base"]["scale"] = "tiny"
+    cfg = load_section(TrainConfig, "train", params)
+    mcfg = cfg.models["cp_focal"]
+    write_synthetic_dataset(tmp_path / "gen", "toy", 8, 4, mcfg.net.input_size, (2, 4))
+    split_dataset("toy", Fractions(0.75, 0.25, 0.0), 0, tmp_path / "gen", tmp_path / "split")
+    run = epoch_peak_rss(tmp_path / "gen", tmp_path / "split/toy.json", cfg, mcfg, 0.005, 2, 1)
+    assert run["train_pairs"] > 0 and run["val_pairs"] > 0
+    assert run["peak_rss_mb"] >= 100  # at least torch and the network
+    row = {
+        "dataset": "toy",
+        "scenes": 8,
+        "image_size": 64,
+        "shard_size": 4,
+        "model": "cp_focal",
+        "batch_size": mcfg.batch_size,
+        "train_batches": 2,
+        "decompressed_dataset_mb": 0.1,
+        **run,
+    }
+    assert f"| toy | 8 | {run['train_pairs']} |" in "\n".join(_memory_markdown([row]))
