@@ -20,7 +20,7 @@ def report(params: dict, base: BaseConfig) -> None:
     figures = load_thesis_figures(Path(cfg.thesis_figures))
     stats = {
         name: dataset_stats(
-            Path("data/generate"), Path("data/split"), name, ds.moved_threshold_m, ds.pulls
+            Path("data/generate"), Path("data/split"), name, ds.moved_threshold_m, ds.pulls, ds
         )
         for name, ds in gen.datasets.items()
     }
