@@ -184,9 +184,7 @@ def _check_indices(n: int, target: int, support: int | None) -> None:
             raise ClutterbenchError(f"--support {support}: must differ from the removed box")
 
 
-def _outcome_objects(
-    disp: np.ndarray, target: int, support: int | None, threshold_m: float
-) -> list[dict[str, Any]]:
+def _outcome_objects(disp: np.ndarray, target: int, threshold_m: float) -> list[dict[str, Any]]:
     objects = []
     for i, d in enumerate(disp):
         if i == target:
@@ -263,7 +261,7 @@ def scene_act(
                 _log_snapshot(ep, world, spec, 0.0)
                 ep.write_json(0.0, DECISION_TOPIC, decision)
             disp = act_on_spec(spec, cfg, action, remove, support, world=world)
-            objects = _outcome_objects(disp, remove, support, threshold_m)
+            objects = _outcome_objects(disp, remove, threshold_m)
             moved = [o["index"] for o in objects if o["moved"]]
             if ep is not None:
                 _log_snapshot(ep, world, spec, world.steps_taken * cfg.timestep_s)
