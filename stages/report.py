@@ -2,15 +2,21 @@
 
 from pathlib import Path
 
+import pandas as pd
+
 from clutterbench.collapse.config import EvaluateConfig
 from clutterbench.config import BaseConfig, load_section
 from clutterbench.data.config import GenerateConfig
-from clutterbench.io import write_json
+from clutterbench.errors import ClutterbenchError
+from clutterbench.io import read_json, write_json
 from clutterbench.report.collapse import RunSources, collapse_table
 from clutterbench.report.config import ReportConfig
 from clutterbench.report.datasets import dataset_stats, datasets_table
+from clutterbench.report.extraction import extraction_table
+from clutterbench.report.support import support_table
 from clutterbench.report.tables import load_thesis_figures
 from clutterbench.stage import run_stage
+from clutterbench.trials.records import read_records
 
 
 def report(params: dict, base: BaseConfig) -> None:
@@ -39,6 +45,23 @@ def report(params: dict, base: BaseConfig) -> None:
             Path("reports/tables"),
             base.scale,
         )
+
+    support = Path("reports/support")
+    if not (support / "scenes.csv").exists():
+        raise ClutterbenchError(f"{support / 'scenes.csv'} missing; run the support stage")
+    support_table(
+        pd.read_csv(support / "scenes.csv"),
+        cfg.table_6_2_methods,
+        read_json(support / "thresholds.json")["chosen"],
+        figures,
+        Path("reports/tables"),
+        base.scale,
+    )
+    records = {
+        cond: read_records(Path(f"reports/trials/{cond}/records.jsonl"))
+        for cond in cfg.table_6_3.values()
+    }
+    extraction_table(records, cfg.table_6_3, figures, Path("reports/tables"), base.scale)
 
 
 if __name__ == "__main__":

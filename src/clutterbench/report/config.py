@@ -14,3 +14,7 @@ class ReportConfig:
     """Thesis Table 5.1 row -> our evaluate run filling it (null: not run, said in the table)."""
     table_6_1: Mapping[str, str | None] = dataclasses.field(default_factory=dict)
     """Thesis Table 6.1 row -> our evaluate run."""
+    table_6_3: Mapping[str, str] = dataclasses.field(default_factory=dict)
+    """Table 6.3 row (thesis_figures.yaml `row:` label, or a row of ours) -> trials condition."""
+    table_6_2_methods: Mapping[str, str] = dataclasses.field(default_factory=dict)
+    """Table 6.2 row: support method (reports/support/scenes.csv) -> label."""

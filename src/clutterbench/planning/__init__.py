@@ -1,0 +1,1 @@
+"""Planning from what a robot sees: support relations, the collapse prediction graph (ch. 6)."""

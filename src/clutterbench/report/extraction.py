@@ -1,0 +1,232 @@
+"""Table 6.3: extraction success per step and per episode, our simulated trials beside the
+thesis' real-robot rows.
+
+Rows are labelled '<method>/<objects>' (the `row:` values of table_6_3 in
+reports/thesis_figures.yaml, or rows the thesis lacks such as the oracle and random ones);
+each maps to one trials condition. Every rate comes from trials.stats.aggregate.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from clutterbench.errors import ClutterbenchError
+from clutterbench.io import write_text
+from clutterbench.report.tables import Column, comparison_frame, write_table
+from clutterbench.trials.stats import Rate, aggregate
+
+TABLE = "table_6_3"
+
+METHODS = {
+    "single_step": "single-step extraction (target pulled at once)",
+    "multi_step": "multi-step extraction (CPG order, one arm)",
+    "bimanual": "multi-step + bimanual hold",
+    "oracle": "oracle (ceiling)",
+    "random": "random (floor)",
+}
+"""Planner (the `planner` of a trial record) -> how its row reads."""
+
+COLUMNS = [
+    Column("objects", "objects", "{}"),
+    Column("step_success", "success per step", "{}"),
+    Column("success", "success per episode", "{}"),
+    Column("strict_success", "strict success per episode", "{}"),
+    Column("mean_steps", "mean steps", "{:.3g}"),
+    Column("mean_n_disturbed", "mean disturbed boxes", "{:.2f}"),
+    Column("mean_disturbance_mm", "mean disturbance (mm)", "{:.1f}"),
+    Column("episodes", "episodes", "{:d}"),
+]
+
+
+def _parse_row(row: str) -> tuple[str, str]:
+    method, sep, objects = row.partition("/")
+    if not sep or method not in METHODS or not objects:
+        raise ClutterbenchError(
+            f"report.{TABLE}: row '{row}' must read '<method>/<objects>' with method one of "
+            f"{', '.join(METHODS)}"
+        )
+    return method, objects
+
+
+def _thesis_rate_text(row: Mapping[str, Any]) -> str | None:
+    """'52/57 = 91.2%': counts and the rate as printed in the thesis (not recomputed)."""
+    if "success" not in row or "trials" not in row:
+        return None
+    text = f"{row['success']}/{row['trials']}"
+    return f"{text} = {100 * row['success_rate']:.1f}%" if "success_rate" in row else text
+
+
+def _thesis_rows(figures: Mapping[str, Any], method: str, objects: str) -> list[dict[str, Any]]:
+    """The thesis' rows of this method and object count: its per-step rate (Table 6.3) and
+    its per-episode rate and mean steps (the single-arm text)."""
+    if TABLE not in figures:
+        raise ClutterbenchError(f"thesis figures: no table '{TABLE}'")
+    found = []
+    for r in figures[TABLE].get("rows", []):
+        if r.get("method") == method and str(r.get("n_objects")) == objects:
+            if r.get("rate_unit") not in ("per_step", "per_target"):
+                raise ClutterbenchError(
+                    f"thesis figures: {TABLE} row {r.get('row')}: rate_unit must be per_step "
+                    f"or per_target, not {r.get('rate_unit')!r}"
+                )
+            found.append(r)
+    return found
+
+
+def thesis_figures_for(figures: Mapping[str, Any], method: str, objects: str) -> dict[str, Any]:
+    """The thesis column's values for one row, keyed as COLUMNS ({} where it has none)."""
+    out: dict[str, Any] = {}
+    for r in _thesis_rows(figures, method, objects):
+        out["objects"] = str(r["n_objects"])
+        if r["rate_unit"] == "per_step":
+            out["step_success"] = _thesis_rate_text(r)
+        else:
+            out["success"] = _thesis_rate_text(r)
+            if "mean_steps" in r:
+                out["mean_steps"] = r["mean_steps"]
+    return out
+
+
+def _thesis_counts(figures: Mapping[str, Any], method: str, objects: str) -> dict[str, Any]:
+    """The thesis' raw counts for the CSV: thesis_step_success_k/n/rate, thesis_success_k/n/
+    rate (per episode) and thesis_mean_steps, where it has them."""
+    out: dict[str, Any] = {}
+    for r in _thesis_rows(figures, method, objects):
+        prefix = "thesis_step_success" if r["rate_unit"] == "per_step" else "thesis_success"
+        out |= {
+            f"{prefix}_k": r.get("success"),
+            f"{prefix}_n": r.get("trials"),
+            f"{prefix}_rate": r.get("success_rate"),
+        }
+        if "mean_steps" in r:
+            out["thesis_mean_steps"] = r["mean_steps"]
+    return out
+
+
+def _objects_text(records: Sequence[Mapping[str, Any]], row: str) -> str:
+    """'3-10': the range of object counts in the trial scenes."""
+    if any("n_objects" not in r for r in records):
+        raise ClutterbenchError(f"report.{TABLE}.{row}: trial records lack 'n_objects'")
+    counts = sorted({int(r["n_objects"]) for r in records})
+    return f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+
+
+def _rate(agg: Mapping[str, Any], prefix: str) -> str | None:
+    if f"{prefix}_k" not in agg or pd.isna(agg[f"{prefix}_k"]):
+        return None
+    return Rate(int(agg[f"{prefix}_k"]), int(agg[f"{prefix}_n"])).text()
+
+
+def _condition_records(
+    records_by_condition: Mapping[str, list[dict[str, Any]]], row: str, condition: str
+) -> list[dict[str, Any]]:
+    if condition not in records_by_condition:
+        raise ClutterbenchError(
+            f"report.{TABLE}.{row}: no trial records for condition '{condition}'; "
+            f"run trials@{condition}"
+        )
+    records = records_by_condition[condition]
+    if not records:
+        raise ClutterbenchError(f"report.{TABLE}.{row}: condition '{condition}' has no records")
+    return records
+
+
+def _check_planner(records: Sequence[Mapping[str, Any]], row: str, method: str) -> None:
+    planners = sorted({str(r.get("planner")) for r in records})
+    if planners != [method]:
+        raise ClutterbenchError(
+            f"report.{TABLE}.{row}: its trials ran planner {', '.join(planners)}, not {method}"
+        )
+
+
+def extraction_table(
+    records_by_condition: Mapping[str, list[dict[str, Any]]],
+    rows: Mapping[str, str],
+    figures: dict[str, Any],
+    out_dir: Path,
+    scale: str,
+    notes_extra: Sequence[str] = (),
+) -> pd.DataFrame:
+    """Table 6.3 as reports/tables/table_6_3.md (ours beside the thesis) and .csv (the raw
+    aggregate, with the thesis counts beside it). Returns the raw frame.
+
+    rows: '<method>/<objects>' -> trials condition."""
+    shown, raw, used = [], [], {}
+    for row, condition in rows.items():
+        method, objects = _parse_row(row)
+        records = _condition_records(records_by_condition, row, condition)
+        _check_planner(records, row, method)
+        agg = aggregate(records, "condition").to_dict("records")
+        if len(agg) != 1 or agg[0]["condition"] != condition:
+            found = ", ".join(str(a["condition"]) for a in agg)
+            raise ClutterbenchError(
+                f"report.{TABLE}.{row}: records of condition '{condition}' say condition {found}"
+            )
+        a = agg[0]
+        ours = {
+            "objects": _objects_text(records, row),
+            "step_success": _rate(a, "step_success"),
+            "success": _rate(a, "success"),
+            "strict_success": _rate(a, "strict_success"),
+            "mean_steps": a.get("mean_steps"),
+            "mean_n_disturbed": a.get("mean_n_disturbed"),
+            "mean_disturbance_mm": 1000.0 * a["mean_disturbance_m"]
+            if "mean_disturbance_m" in a
+            else None,
+            "episodes": a["episodes"],
+        }
+        thesis = thesis_figures_for(figures, method, objects)
+        shown.append((f"{METHODS[method]} [{condition}]", ours, thesis))
+        raw.append({"row": row, "method": method, **a, **_thesis_counts(figures, method, objects)})
+        used[condition] = records
+    # A column no row fills (strict success, steps of single-action trials) is left out.
+    columns = [
+        c for c in COLUMNS if any(o.get(c.key) is not None or c.key in t for _, o, t in shown)
+    ]
+    frame = comparison_frame(shown, columns, "method [our condition]")
+    caption = figures[TABLE].get("caption", TABLE)
+    notes = [*_notes(figures, used, scale), *notes_extra]
+    write_table(frame, columns, out_dir, TABLE, f"Table 6.3: {caption}", notes)
+    raw_frame = pd.DataFrame.from_records(raw)
+    counts = [c for c in raw_frame.columns if c == "episodes" or c.endswith(("_k", "_n"))]
+    raw_frame = raw_frame.astype(dict.fromkeys(counts, "Int64"))
+    write_text(out_dir / f"{TABLE}.csv", raw_frame.to_csv(index=False))
+    return raw_frame
+
+
+def _grouped(used: Mapping[str, Sequence[Mapping[str, Any]]], describe: Callable) -> str:
+    """'a (cond, cond); b (cond)': conditions sharing a description named once."""
+    groups: dict[str, list[str]] = {}
+    for condition, records in used.items():
+        groups.setdefault(describe(records), []).append(condition)
+    return "; ".join(f"{d} ({', '.join(c)})" for d, c in groups.items())
+
+
+def _values(records: Iterable[Mapping[str, Any]], key: str) -> str:
+    return ", ".join(sorted({str(r.get(key)) for r in records}))
+
+
+def _notes(
+    figures: Mapping[str, Any], used: Mapping[str, Sequence[Mapping[str, Any]]], scale: str
+) -> list[str]:
+    source = figures[TABLE].get("source", "the thesis")
+    return [
+        f"{scale} scale. ours: simulated trials in SAPIEN, one episode per scene; thesis: "
+        f"real-robot numbers ({source}), a different robot, objects and scenes.",
+        "success per step: the pulled box left the shelf and no other box moved beyond the "
+        "threshold, judged from physics after the action settled (never from a planner's "
+        "prediction). success per episode: the target left the shelf and every step kept the "
+        "others still. k/n = rate [Wilson 95% interval].",
+        "thesis per-step rates: Table 6.3; thesis per-episode rate and mean steps: the "
+        "single-arm experiments in the text, beside our row of the same method and objects.",
+        "mean disturbed boxes: boxes not extracted that moved beyond the threshold between the "
+        "start and the end of the episode; mean disturbance: the summed displacement of the "
+        "boxes not extracted (SafePicking's translation metric), per episode.",
+        f"trial scenes: {_grouped(used, lambda rs: 'stream ' + _values(rs, 'stream'))}; "
+        f"families: {_grouped(used, lambda rs: _values(rs, 'family'))}.",
+        f"perception (masks): {_grouped(used, lambda rs: _values(rs, 'perception'))}.",
+    ]

@@ -1,0 +1,1 @@
+"""Simulated robot trials: one harness for every chapter's conditions."""

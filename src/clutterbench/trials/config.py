@@ -1,0 +1,142 @@
+"""Params of the support-graph evaluation (`support`) and the simulated trials (`trials`).
+
+Imports no SAPIEN and no torch, so that the report stage can read them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Literal
+
+from clutterbench.config import bounded
+from clutterbench.sim.catalog import CATALOGUES
+from clutterbench.sim.config import FAMILY_NAMES
+
+PLANNERS = ("single_step", "multi_step", "bimanual", "oracle", "random")
+"""ch. 6 trial policies: pull the target at once; Algorithm 1 with one arm; Algorithm 1 with
+the bimanual option (Fig. 6.7); Algorithm 1 on the true support graph from physics; a
+uniformly random visible box each step."""
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneStreamConfig:
+    """Where the scenes of trials come from: a seed stream of its own, never a dataset's."""
+
+    families: Mapping[str, float] = dataclasses.field(default_factory=dict)
+    """Scene family -> relative weight."""
+    n_objects: tuple[int, int] = bounded((3, 10), ge=1, le=30)
+    """Inclusive range of the number of boxes per scene."""
+    catalogue: Literal["same", "various", "new"] = "various"
+    """Box catalogue the sizes are drawn from."""
+
+    def __post_init__(self) -> None:
+        if not self.families:
+            raise ValueError("families: give at least one scene family")
+        for name, w in self.families.items():
+            if name not in FAMILY_NAMES:
+                raise ValueError(f"families.{name}: unknown family (known: {FAMILY_NAMES})")
+            if w <= 0:
+                raise ValueError(f"families.{name}: weight must be > 0")
+        if self.n_objects[0] > self.n_objects[1]:
+            raise ValueError("n_objects: the range must be [low, high] with low <= high")
+        assert self.catalogue in CATALOGUES
+
+
+@dataclasses.dataclass(frozen=True)
+class SupportEvalConfig:
+    """Table 6.2: support relations inferred from one depth image against physics."""
+
+    model: str = "cp_focal"
+    """Collapse predictor (a key of train.models): models/<model>/best.pt."""
+    val_dataset: str = "ch6"
+    """Dataset whose val split chooses every threshold (never the test scenes)."""
+    val_scenes: int = bounded(150, ge=1)
+    """At most this many val scenes are swept (the first ones of the split)."""
+    test: SceneStreamConfig = dataclasses.field(
+        default_factory=lambda: SceneStreamConfig(families={"random": 1.0})
+    )
+    """Test scenes: their own seed stream, family mix and box counts."""
+    test_scenes: int = bounded(200, ge=1)
+    """Number of test scenes (thesis: 15 real scenes)."""
+    moved_threshold_m: float = bounded(0.005, gt=0.0)
+    """SUPP(X, Y) needs Y to move more than this when X is removed (thesis 6.2.1: 5 mm)."""
+    min_pixels: int = bounded(20, ge=1)
+    """A box is an object of the scene when at least this many pixels of it are visible."""
+    prob_thresholds: tuple[float, ...] = (0.3, 0.4, 0.5)
+    """Swept: R_C is where the heatmap exceeds this."""
+    score_thresholds: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5)
+    """Swept: an edge when the rule's score exceeds this."""
+    bbox_margins_px: tuple[int, ...] = (2, 4)
+    """Swept: each object's bounding box is grown by this many pixels (pseudo-direct contact)."""
+    adjacency_ious: tuple[float, ...] = (0.0, 0.05)
+    """Swept: grown boxes in pseudo-direct contact when their IoU exceeds this."""
+    figure_scenes: int = bounded(6, ge=1)
+    """Test scenes drawn in the figure (thesis Fig. 6.8: six)."""
+    workers: int = bounded(2, ge=1)
+    """Worker processes simulating the test scenes' truth."""
+    max_attempts: int = bounded(30, ge=1)
+    """A test scene is redrawn at most this often."""
+
+
+@dataclasses.dataclass(frozen=True)
+class ConditionConfig:
+    """One trials condition -> stage trials@<name>."""
+
+    planner: Literal["single_step", "multi_step", "bimanual", "oracle", "random"]
+    """Policy (trials.config.PLANNERS)."""
+    stream: str
+    """Scene stream (a key of trials.streams): conditions on one stream see the same scenes
+    and the same targets."""
+    episodes: int = bounded(200, ge=1)
+    """Number of episodes."""
+    rule: Literal["iou", "coverage"] = "coverage"
+    """Support rule of the CP-based planners (thresholds from the support stage)."""
+    perception: Literal["instance"] = "instance"
+    """Where object masks come from (the simulator's instance image)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Ch6TrialParams:
+    """How an extraction is executed and judged (thesis 6.2.3, Algorithm 1)."""
+
+    model: str = "cp_focal"
+    """Collapse predictor of the CP-based planners."""
+    pull_increment_m: float = bounded(0.02, gt=0.0)
+    """The pull toward the camera is cut into increments; the planner re-observes between
+    them and aborts when the collapse score exceeds cp_max (Algorithm 1, lines 7-18)."""
+    cp_max: float | None = None
+    """Abort threshold of the collapse score (eq. 6.2); null: the support rule's score
+    threshold chosen on validation scenes (the same evidence that draws an edge)."""
+    moved_threshold_m: float = bounded(0.005, gt=0.0)
+    """A box other than the pulled one moved when its centre moved more than this."""
+    min_target_pixels: int = bounded(40, ge=1)
+    """The target is drawn among boxes with at least this many visible pixels."""
+    min_pixels: int = bounded(20, ge=1)
+    """Planners see a box when at least this many pixels of it are visible."""
+    max_steps: int = bounded(14, ge=1)
+    """An episode stops (failed) after this many extraction attempts."""
+
+
+@dataclasses.dataclass(frozen=True)
+class TrialsConfig:
+    workers: int = bounded(2, ge=1)
+    """Worker processes per condition, each with its own renderer and one torch thread."""
+    streams: Mapping[str, SceneStreamConfig] = dataclasses.field(default_factory=dict)
+    """Scene stream name -> the scenes it draws (seeded from base.seed and its name)."""
+    ch6: Ch6TrialParams = Ch6TrialParams()
+    """Chapter 6 execution and judging."""
+    conditions: Mapping[str, ConditionConfig] = dataclasses.field(default_factory=dict)
+    """Condition name -> planner on a stream; each becomes stage trials@<name>."""
+    max_attempts: int = bounded(30, ge=1)
+    """A trial scene is redrawn at most this often."""
+    mcap_images: bool = True
+    """Write depth and instance images of every observation to the condition's MCAP."""
+
+    def __post_init__(self) -> None:
+        for name, cond in self.conditions.items():
+            if cond.stream not in self.streams:
+                raise ValueError(
+                    f"conditions.{name}.stream: unknown stream '{cond.stream}' "
+                    f"(known: {', '.join(self.streams)})"
+                )

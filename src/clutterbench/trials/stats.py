@@ -1,0 +1,166 @@
+"""Trial records -> rates with Wilson 95% intervals -> one table row per condition.
+
+The one aggregator of every trials table (thesis Tables 4.1, 5.2, 6.3). A record is one
+episode (a line of its condition's records.jsonl) with named booleans judged from
+physics: `success`, optionally `strict_success`, and per step in `steps`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from clutterbench.errors import ClutterbenchError
+
+Z95 = 1.959963984540054
+"""Two-sided 95% standard normal quantile."""
+
+OPTIONAL_MEANS = {"n_disturbed": "mean_n_disturbed", "disturbance_m": "mean_disturbance_m"}
+"""Episode fields averaged when records have them -> their column."""
+
+
+def wilson_interval(k: int, n: int, z: float = Z95) -> tuple[float, float]:
+    """Wilson score interval of a binomial rate k/n; (nan, nan) when n == 0."""
+    if n == 0:
+        return (math.nan, math.nan)
+    if not 0 <= k <= n:
+        raise ValueError(f"need 0 <= k <= n, got k={k}, n={n}")
+    p, z2 = k / n, z * z
+    denom = 1.0 + z2 / n
+    center = (p + z2 / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n)) / denom
+    # The bounds are exactly 0 and 1 at k == 0 and k == n; say so rather than round.
+    lo = 0.0 if k == 0 else center - half
+    hi = 1.0 if k == n else center + half
+    return (lo, hi)
+
+
+@dataclasses.dataclass(frozen=True)
+class Rate:
+    """k successes out of n trials."""
+
+    k: int
+    n: int
+
+    @property
+    def rate(self) -> float:
+        return self.k / self.n if self.n else math.nan
+
+    @property
+    def ci95(self) -> tuple[float, float]:
+        return wilson_interval(self.k, self.n)
+
+    def text(self) -> str:
+        """'52/57 = 91.2% [81.1, 96.2]': percent, Wilson 95% interval; '—' when n == 0."""
+        if self.n == 0:
+            return "—"
+        lo, hi = self.ci95
+        return f"{self.k}/{self.n} = {100 * self.rate:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}]"
+
+
+def _where(record: Mapping[str, Any]) -> str:
+    return f"trial record (condition {record.get('condition')!r}, episode {record.get('episode')})"
+
+
+def _flag(value: Any, key: str, where: str) -> bool:
+    if not isinstance(value, bool | np.bool_):
+        raise ClutterbenchError(f"{where}: '{key}' must be true or false, got {value!r}")
+    return bool(value)
+
+
+def rate(records: Sequence[Mapping[str, Any]], key: str) -> Rate:
+    """Episodes whose boolean `key` is true, out of all of them."""
+    k = sum(_flag(r.get(key), key, _where(r)) for r in records)
+    return Rate(k, len(records))
+
+
+def _steps(record: Mapping[str, Any]) -> list[Mapping[str, Any]]:
+    steps = record["steps"]
+    if not isinstance(steps, list):
+        raise ClutterbenchError(f"{_where(record)}: 'steps' must be a list")
+    return steps
+
+
+def step_rate(records: Sequence[Mapping[str, Any]], key: str = "success") -> Rate:
+    """Steps whose boolean `key` is true, pooled over every episode's steps (thesis Table
+    6.3 rates are per extraction step)."""
+    k = n = 0
+    for r in records:
+        for i, step in enumerate(_steps(r)):
+            k += _flag(step.get(key), key, f"{_where(r)}, step {i}")
+            n += 1
+    return Rate(k, n)
+
+
+def _has(records: Sequence[Mapping[str, Any]], key: str, group: Any) -> bool:
+    """Whether this group's records carry `key`: all of them or none (one harness run
+    writes one schema; a mix means records from different runs were concatenated)."""
+    have = sum(key in r for r in records)
+    if 0 < have < len(records):
+        raise ClutterbenchError(
+            f"trial records of {group!r}: {have} of {len(records)} have '{key}'; "
+            "records of one condition must share one schema"
+        )
+    return have > 0
+
+
+def _rate_columns(prefix: str, r: Rate) -> dict[str, Any]:
+    lo, hi = r.ci95
+    return {
+        f"{prefix}_k": r.k,
+        f"{prefix}_n": r.n,
+        f"{prefix}_rate": r.rate,
+        f"{prefix}_lo": lo,
+        f"{prefix}_hi": hi,
+    }
+
+
+def _mean(records: Sequence[Mapping[str, Any]], key: str) -> float:
+    try:
+        return float(np.mean([float(r[key]) for r in records]))
+    except (TypeError, ValueError):
+        raise ClutterbenchError(f"trial records: '{key}' must be a number in each") from None
+
+
+def aggregate(records: Sequence[Mapping[str, Any]], group_by: str = "condition") -> pd.DataFrame:
+    """One row per value of `group_by` (in order of first appearance): episode success
+    k/n, rate and Wilson 95% bounds; with per-episode `steps`, the pooled per-step success
+    and mean steps; the means of `n_disturbed` / `disturbance_m` and the `strict_success`
+    rate where the records have them (columns absent where no record has the field)."""
+    groups: dict[Any, list[Mapping[str, Any]]] = {}
+    for r in records:
+        if group_by not in r:
+            raise ClutterbenchError(f"{_where(r)} has no '{group_by}'")
+        groups.setdefault(r[group_by], []).append(r)
+    rows = []
+    for value, recs in groups.items():
+        row: dict[str, Any] = {group_by: value, "episodes": len(recs)}
+        row |= _rate_columns("success", rate(recs, "success"))
+        if _has(recs, "steps", value):
+            row |= _rate_columns("step_success", step_rate(recs, "success"))
+            row["mean_steps"] = float(np.mean([len(_steps(r)) for r in recs]))
+        for key, column in OPTIONAL_MEANS.items():
+            if _has(recs, key, value):
+                row[column] = _mean(recs, key)
+        if _has(recs, "strict_success", value):
+            row |= _rate_columns("strict_success", rate(recs, "strict_success"))
+        rows.append(row)
+    always = [group_by, "episodes", *_rate_columns("success", Rate(0, 0))]
+    order = [
+        *always,
+        *_rate_columns("step_success", Rate(0, 0)),
+        "mean_steps",
+        *OPTIONAL_MEANS.values(),
+        *_rate_columns("strict_success", Rate(0, 0)),
+    ]
+    present = {c for row in rows for c in row}
+    columns = [c for c in order if c in present or c in always]
+    frame = pd.DataFrame.from_records(rows, columns=columns)
+    # Counts stay integers where a group lacks a field (nullable, not float NaN).
+    counts = [c for c in columns if c == "episodes" or c.endswith(("_k", "_n"))]
+    return frame.astype(dict.fromkeys(counts, "Int64"))

@@ -1,0 +1,220 @@
+"""Table 6.2: support relations inferred from one depth image, against physics truth.
+
+Thresholds are chosen on the validation split of the CP's training data (thesis 6.2.1 mixes
+shelved, stacked and random scenes); the test scenes come from a trials seed stream of their
+own, generated (with every removal simulated from the canonical start) by the same code as
+the datasets, and their truth is stored beside them (data/support/truth.json).
+
+Truth: SUPP(X, Y) when removing X moves Y beyond the threshold AND X and Y touch in the
+settled scene (PhysX contacts). Objects are the boxes a robot sees (>= min_pixels visible);
+as the thesis, we "ignore the case where O_HYP does not correspond to O_GT", so a relation
+with a hidden box is in neither graph.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from clutterbench.data.shards import ShardStore, iter_shards, load_split
+from clutterbench.planning.support import (
+    RULES,
+    SceneEvidence,
+    SupportParams,
+    choose_support_params,
+    edge_precision_recall,
+    infer_support,
+    oracle_heatmaps,
+    pseudo_contact,
+    sweep_support,
+)
+
+SCENE_KEYS = ("scene_index", "n_objects", "family", "depth_m", "instance", "removal_m", "contact")
+PredictFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclasses.dataclass
+class Scene:
+    """One scene as the support evaluation needs it (from a dataset shard)."""
+
+    index: int
+    family: str
+    depth_m: np.ndarray
+    ids: list[int]
+    """Visible boxes (>= min_pixels)."""
+    masks: np.ndarray
+    """(K, H, W) bool."""
+    moved: np.ndarray
+    """(K, K) bool: ids[b] moved beyond the threshold when ids[a] was removed."""
+    contact: np.ndarray
+    """(K, K) bool: they touch in the settled scene."""
+    n_objects: int
+
+    @property
+    def true_edges(self) -> set[tuple[int, int]]:
+        a, b = np.nonzero(self.moved & self.contact)
+        return {(self.ids[i], self.ids[j]) for i, j in zip(a, b) if i != j}
+
+
+def scene_from_arrays(
+    arrays: dict[str, np.ndarray], row: int, threshold_m: float, min_pixels: int
+) -> Scene:
+    n = int(arrays["n_objects"][row])
+    instance = arrays["instance"][row]
+    counts = np.bincount(instance.ravel(), minlength=256)[1 : n + 1]
+    ids = [int(k) for k in np.flatnonzero(counts >= min_pixels)]
+    masks = (
+        np.stack([instance == k + 1 for k in ids]) if ids else np.zeros((0, *instance.shape), bool)
+    )
+    removal = arrays["removal_m"][row][np.ix_(ids, ids)]
+    moved = np.nan_to_num(removal, nan=0.0) > threshold_m
+    np.fill_diagonal(moved, False)
+    return Scene(
+        index=int(arrays["scene_index"][row]),
+        family=str(arrays["family"][row]),
+        depth_m=arrays["depth_m"][row].astype(np.float32),
+        ids=ids,
+        masks=masks,
+        moved=moved,
+        contact=arrays["contact"][row][np.ix_(ids, ids)],
+        n_objects=n,
+    )
+
+
+def split_scenes(
+    gen_dir: Path, split_file: Path, which: str, limit: int, threshold_m: float, min_pixels: int
+) -> list[Scene]:
+    """The first `limit` scenes of a split, in split order."""
+    record = load_split(split_file, gen_dir)
+    wanted = [int(i) for i in record[which]][:limit]
+    order = {s: i for i, s in enumerate(wanted)}
+    store = ShardStore(gen_dir, record["dataset"], cache_shards=1)
+    found: dict[int, Scene] = {}
+    for shard in range(store.n_shards):
+        arrays = store.load(shard, SCENE_KEYS)
+        for row, s in enumerate(arrays["scene_index"]):
+            if int(s) in order:
+                found[int(s)] = scene_from_arrays(arrays, row, threshold_m, min_pixels)
+    return [found[s] for s in wanted if s in found]
+
+
+def all_scenes(gen_dir: Path, dataset: str, threshold_m: float, min_pixels: int) -> Iterator[Scene]:
+    for arrays in iter_shards(gen_dir, dataset, SCENE_KEYS):
+        for row in range(len(arrays["scene_index"])):
+            yield scene_from_arrays(arrays, row, threshold_m, min_pixels)
+
+
+def evidence(scene: Scene, heatmaps: np.ndarray) -> SceneEvidence:
+    return SceneEvidence(heatmaps, scene.masks, scene.ids, scene.true_edges)
+
+
+def predicted_heatmaps(scene: Scene, predict: PredictFn) -> np.ndarray:
+    if not scene.ids:
+        return np.zeros((0, *scene.depth_m.shape), np.float32)
+    return predict(scene.depth_m, scene.masks.astype(np.uint8))
+
+
+def sweep_all(
+    cp_evidence: Sequence[SceneEvidence], oracle_evidence: Sequence[SceneEvidence], grid: Any
+) -> pd.DataFrame:
+    """Every rule on the CP's heatmaps and on the oracle collapse map, one frame."""
+    frames = []
+    for source, scenes in (("cp", cp_evidence), ("oracle", oracle_evidence)):
+        for rule in RULES:
+            df = sweep_support(
+                scenes,
+                rule,
+                grid.prob_thresholds if source == "cp" else (0.5,),
+                grid.score_thresholds,
+                grid.bbox_margins_px,
+                grid.adjacency_ious,
+            )
+            df.insert(0, "method", rule if source == "cp" else f"oracle_{rule}")
+            frames.append(df)
+    return pd.concat(frames, ignore_index=True)
+
+
+def choose_all(sweep: pd.DataFrame) -> dict[str, SupportParams]:
+    return {
+        method: choose_support_params(sweep[sweep["method"] == method], rule)
+        for method, rule in ((m, m.removeprefix("oracle_")) for m in dict.fromkeys(sweep["method"]))
+    }
+
+
+def val_metrics_at(sweep: pd.DataFrame, method: str, params: SupportParams) -> dict[str, float]:
+    """Validation precision / recall / f1 of `method` at its chosen thresholds."""
+    rows = sweep[
+        (sweep["method"] == method)
+        & np.isclose(sweep["prob_threshold"], params.prob_threshold)
+        & np.isclose(sweep["score_threshold"], params.score_threshold)
+        & (sweep["bbox_margin_px"] == params.bbox_margin_px)
+        & np.isclose(sweep["adjacency_iou"], params.adjacency_iou)
+    ]
+    r = rows.iloc[0]
+    return {k: float(r[k]) for k in ("precision", "recall", "f1")}
+
+
+def random_edges(
+    scene: Scene, params: SupportParams, p_edge: float, rng: np.random.Generator
+) -> set[tuple[int, int]]:
+    """The floor: each pseudo-contact pair is an edge with probability `p_edge`, in a random
+    direction."""
+    contact = pseudo_contact(scene.masks, params.bbox_margin_px, params.adjacency_iou)
+    out = set()
+    for a, b in zip(*np.nonzero(np.triu(contact, 1))):
+        if rng.random() < p_edge:
+            x, y = (a, b) if rng.random() < 0.5 else (b, a)
+            out.add((scene.ids[x], scene.ids[y]))
+    return out
+
+
+def contact_edge_rate(scenes: Sequence[Scene], params: SupportParams) -> float:
+    """Share of pseudo-contact pairs that hold a true edge (either way) on validation scenes."""
+    pairs = edges = 0
+    for sc in scenes:
+        contact = np.triu(pseudo_contact(sc.masks, params.bbox_margin_px, params.adjacency_iou), 1)
+        truth = sc.moved & sc.contact
+        pairs += int(contact.sum())
+        edges += int((contact & (truth | truth.T)).sum())
+    return edges / pairs if pairs else 0.0
+
+
+def evaluate_scene(
+    scene: Scene,
+    heatmaps: np.ndarray,
+    chosen: dict[str, SupportParams],
+    p_edge: float,
+    rng: np.random.Generator,
+) -> tuple[list[dict[str, Any]], dict[str, set[tuple[int, int]]]]:
+    """Rows of scenes.csv for one test scene (one per method) and each method's edges."""
+    truth = scene.true_edges
+    oracle = oracle_heatmaps(scene.moved, scene.masks) if scene.ids else heatmaps
+    edges: dict[str, set[tuple[int, int]]] = {}
+    for method, params in chosen.items():
+        maps = oracle if method.startswith("oracle_") else heatmaps
+        found = infer_support(maps, scene.masks, scene.ids, params) if len(scene.ids) > 1 else []
+        edges[method] = {(e.supporter, e.supported) for e in found}
+    edges["random"] = random_edges(scene, chosen["coverage"], p_edge, rng) if scene.ids else set()
+    rows = []
+    for method, pred in edges.items():
+        precision, recall = edge_precision_recall(pred, truth)
+        rows.append(
+            {
+                "scene": scene.index,
+                "family": scene.family,
+                "n_objects": scene.n_objects,
+                "visible": len(scene.ids),
+                "method": method,
+                "n_true": len(truth),
+                "n_pred": len(pred),
+                "tp": len(pred & truth),
+                "precision": precision,
+                "recall": recall,
+            }
+        )
+    return rows, edges

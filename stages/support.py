@@ -1,0 +1,112 @@
+"""Stage support: thresholds chosen on val scenes, then Table 6.2's evidence on test scenes."""
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from clutterbench.collapse.predict import CollapsePredictor
+from clutterbench.config import BaseConfig, as_dict, load_section
+from clutterbench.data.config import DatasetConfig, GenerateConfig
+from clutterbench.data.generate import generate_dataset
+from clutterbench.errors import ClutterbenchError
+from clutterbench.io import write_json, write_text
+from clutterbench.planning.support import oracle_heatmaps
+from clutterbench.progress import progress_bar
+from clutterbench.report.support_figure import SupportPanel, support_figure
+from clutterbench.sim.config import SimConfig
+from clutterbench.stage import run_stage
+from clutterbench.trials.config import SupportEvalConfig
+from clutterbench.trials.scenes import stream_key
+from clutterbench.trials.support_eval import (
+    all_scenes,
+    choose_all,
+    contact_edge_rate,
+    evaluate_scene,
+    evidence,
+    predicted_heatmaps,
+    split_scenes,
+    sweep_all,
+    val_metrics_at,
+)
+
+OUT = Path("reports/support")
+SCENES = Path("data/support")
+
+
+def support(params: dict, base: BaseConfig) -> None:
+    cfg = load_section(SupportEvalConfig, "support", params)
+    gen = load_section(GenerateConfig, "generate", params)
+    sim = load_section(SimConfig, "sim", params)
+    if cfg.val_dataset not in gen.datasets:
+        raise ClutterbenchError(f"support.val_dataset: unknown dataset '{cfg.val_dataset}'")
+    model = Path(f"models/{cfg.model}/best.pt")
+    predictor = CollapsePredictor.from_checkpoint(model, image_size=sim.camera.image_size)
+
+    # 1. thresholds on validation scenes
+    val = split_scenes(
+        Path("data/generate"),
+        Path(f"data/split/{cfg.val_dataset}.json"),
+        "val",
+        cfg.val_scenes,
+        cfg.moved_threshold_m,
+        cfg.min_pixels,
+    )
+    cp_ev, oracle_ev = [], []
+    with progress_bar("support: val heatmaps", total=len(val)) as advance:
+        for sc in val:
+            cp_ev.append(evidence(sc, predicted_heatmaps(sc, predictor)))
+            oracle_ev.append(evidence(sc, oracle_heatmaps(sc.moved, sc.masks)))
+            advance(1)
+    sweep = sweep_all(cp_ev, oracle_ev, cfg)
+    write_text(OUT / "val_sweep.csv", sweep.to_csv(index=False))
+    chosen = choose_all(sweep)
+    p_edge = contact_edge_rate(val, chosen["coverage"])
+
+    # 2. test scenes from their own stream, with every removal simulated
+    test_ds = DatasetConfig(
+        n_scenes=cfg.test_scenes,
+        families=dict(cfg.test.families),
+        catalogue=cfg.test.catalogue,
+        n_objects=cfg.test.n_objects,
+        moved_threshold_m=cfg.moved_threshold_m,
+    )
+    shards = GenerateConfig(shard_size=10, workers=cfg.workers, max_attempts=cfg.max_attempts)
+    generate_dataset(stream_key("support"), test_ds, shards, sim, base.seed, SCENES / "scenes")
+
+    rows, truth, panels = [], {}, []
+    rng = np.random.default_rng([base.seed, 62])
+    with progress_bar("support: test scenes", total=cfg.test_scenes) as advance:
+        for sc in all_scenes(SCENES, "scenes", cfg.moved_threshold_m, cfg.min_pixels):
+            heat = predicted_heatmaps(sc, predictor)
+            scene_rows, edges = evaluate_scene(sc, heat, chosen, p_edge, rng)
+            rows += scene_rows
+            truth[str(sc.index)] = sorted(map(list, sc.true_edges))
+            if len(panels) < cfg.figure_scenes:
+                panels.append(
+                    SupportPanel(
+                        sc.depth_m,
+                        sc.masks,
+                        sc.ids,
+                        edges["coverage"],
+                        sc.true_edges,
+                        f"test scene {sc.index} ({sc.family})",
+                    )
+                )
+            advance(1)
+    write_json(SCENES / "truth.json", {"edges": truth, "moved_threshold_m": cfg.moved_threshold_m})
+    scenes = pd.DataFrame(rows)
+    write_text(OUT / "scenes.csv", scenes.to_csv(index=False))
+    thresholds = {m: as_dict(p) for m, p in chosen.items()} | {"random": {"p_edge": p_edge}}
+    val_at = {m: val_metrics_at(sweep, m, p) for m, p in chosen.items()}
+    write_json(
+        OUT / "thresholds.json", {"chosen": thresholds, "val": val_at, "val_scenes": len(val)}
+    )
+    support_figure(panels, OUT / "figure.png", "Inferred (white, dashed) and true (pink) support")
+    mean = scenes.groupby("method", sort=False)[["precision", "recall"]].mean()
+    for method, r in mean.iterrows():
+        print(f"support {method}: precision {r['precision']:.3f} recall {r['recall']:.3f}")
+
+
+if __name__ == "__main__":
+    run_stage(support)

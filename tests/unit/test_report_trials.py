@@ -1,0 +1,157 @@
+"""Tables 6.2 and 6.3 and the support figure, from hand-made records into a tmp dir."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from clutterbench.errors import ClutterbenchError
+from clutterbench.report.extraction import extraction_table
+from clutterbench.report.support import support_table, thresholds_text
+from clutterbench.report.support_figure import SupportPanel, support_figure
+from clutterbench.report.tables import load_thesis_figures, thesis_row
+
+
+@pytest.fixture(scope="module")
+def figures(root):
+    return load_thesis_figures(root / "reports/thesis_figures.yaml")
+
+
+def trial(condition: str, planner: str, n_objects: int, steps_ok: list[bool], out: bool) -> dict:
+    steps = [{"success": ok, "extracted": True, "others_still": ok} for ok in steps_ok]
+    return {
+        "condition": condition,
+        "planner": planner,
+        "n_objects": n_objects,
+        "stream": "ch6_3_10",
+        "family": "random",
+        "perception": "instance",
+        "steps": steps,
+        "target_out": out,
+        "success": out and all(steps_ok),
+        "n_disturbed": 0 if all(steps_ok) else 1,
+        "disturbance_m": 0.004,
+    }
+
+
+RECORDS = {
+    "ss": [trial("ss", "single_step", n, [ok], ok) for n, ok in ((3, True), (5, False))],
+    "ms": [
+        trial("ms", "multi_step", 3, [True, True], True),
+        trial("ms", "multi_step", 10, [True, False, True], True),
+        trial("ms", "multi_step", 7, [True], False),
+    ],
+    "rnd": [trial("rnd", "random", 4, [False], False)],
+}
+ROWS = {"single_step/3-5": "ss", "multi_step/3-10": "ms", "random/3-10": "rnd"}
+
+
+def line_of(md: str, start: str) -> str:
+    (line,) = [ln for ln in md.splitlines() if ln.startswith(start)]
+    return line
+
+
+def test_extraction_table_puts_the_thesis_rates_beside_ours(tmp_path, figures):
+    raw = extraction_table(RECORDS, ROWS, figures, tmp_path, "tiny", ["extra note"])
+    md = (tmp_path / "table_6_3.md").read_text()
+    thesis_step = thesis_row(figures, "table_6_3", "multi_step/3-10")
+    thesis_episode = thesis_row(figures, "table_6_3", "multi_step_single_arm/per_target")
+    multi = line_of(md, "| multi-step extraction")
+    # ours: 5 of 6 steps, 1 of 3 episodes, 2 steps on average; the thesis as printed
+    assert "5/6 = 83.3% [43.6, 97.0]" in multi
+    assert "1/3 = 33.3% [6.1, 79.2]" in multi
+    assert f"{thesis_step['success']}/{thesis_step['trials']} = 91.2%" in multi
+    assert f"{thesis_episode['success']}/{thesis_episode['trials']} = 80.0%" in multi
+    assert "| 2 | 2.3 |" in multi  # mean steps: ours, thesis
+    assert "| 3-10 | 3-10 |" in multi  # objects: ours (from the records), thesis
+    single = line_of(md, "| single-step extraction")
+    assert "1/2 = 50.0%" in single and "= 85.0%" in single and "80.0%" not in single
+    assert "| 4 | — |" in line_of(md, "| random (floor)")  # no thesis row
+    assert "- extra note" in md and "tiny scale" in md and "real-robot" in md
+    assert list(raw["row"]) == list(ROWS)
+    assert raw.iloc[1]["step_success_k"] == 5 and raw.iloc[1]["thesis_mean_steps"] == 2.3
+    csv = pd.read_csv(tmp_path / "table_6_3.csv")  # the raw numbers, not the formatted text
+    assert csv.loc[1, "success_rate"] == pytest.approx(1 / 3)
+    assert csv.loc[1, "mean_disturbance_m"] == pytest.approx(0.004)
+
+
+def test_extraction_table_names_a_missing_condition_or_a_wrong_planner(tmp_path, figures):
+    with pytest.raises(ClutterbenchError, match="condition 'bimanual_3_10'"):
+        extraction_table(RECORDS, {"bimanual/3-10": "bimanual_3_10"}, figures, tmp_path, "t")
+    with pytest.raises(ClutterbenchError, match="ran planner single_step, not multi_step"):
+        extraction_table(RECORDS, {"multi_step/3-10": "ss"}, figures, tmp_path, "t")
+    with pytest.raises(ClutterbenchError, match="'<method>/<objects>'"):
+        extraction_table(RECORDS, {"teleport/3": "ss"}, figures, tmp_path, "t")
+
+
+def scenes_frame() -> pd.DataFrame:
+    nan = math.nan
+    rows = [
+        # scene, family, n_objects, method, n_true, n_pred, tp, precision, recall
+        (0, "stacked", 4, "iou", 2, 1, 1, 1.0, 0.5),
+        (1, "stacked", 5, "iou", 4, 4, 2, 0.5, 0.5),
+        (2, "random", 6, "iou", 1, 0, 0, nan, 0.0),
+        (0, "stacked", 4, "coverage", 2, 3, 2, 2 / 3, 1.0),
+        (1, "stacked", 5, "coverage", 4, 2, 2, 1.0, 0.5),
+        (2, "random", 6, "coverage", 0, 1, 0, 0.0, nan),
+    ]
+    cols = ["scene", "family", "n_objects", "method", "n_true", "n_pred", "tp"]
+    return pd.DataFrame(rows, columns=[*cols, "precision", "recall"])
+
+
+def test_support_table_means_over_defined_scenes_and_pools_counts(tmp_path, figures):
+    methods = {"iou": "CP + IoU rule (thesis)", "coverage": "CP + coverage rule (eq. 6.2)"}
+    params = {"prob_threshold": 0.35, "score_threshold": 0.2, "bbox_margin_px": 3}
+    thresholds = {"iou": params | {"adjacency_iou": 0.0, "rule": "iou"}}
+    stats = support_table(scenes_frame(), methods, thresholds, figures, tmp_path, "tiny")
+    iou, cov = stats.iloc[0], stats.iloc[1]
+    # iou: precision over scenes 0, 1 only (scene 2 inferred nothing): (1 + 0.5) / 2
+    assert iou["precision"] == pytest.approx(0.75)
+    assert iou["recall"] == pytest.approx((0.5 + 0.5 + 0.0) / 3)
+    assert iou["pooled_precision"] == pytest.approx(3 / 5)  # sum tp / sum n_pred
+    assert iou["pooled_recall"] == pytest.approx(3 / 7)  # sum tp / sum n_true
+    assert (iou["scenes"], iou["scenes_precision"], iou["scenes_recall"]) == (3, 2, 3)
+    assert cov["precision"] == pytest.approx((2 / 3 + 1.0 + 0.0) / 3)
+    assert cov["recall"] == pytest.approx(0.75)
+    assert (cov["pooled_precision"], cov["pooled_recall"]) == pytest.approx((4 / 6, 4 / 6))
+    md = (tmp_path / "table_6_2.md").read_text()
+    mean = thesis_row(figures, "table_6_2", "mean")
+    iou_line = line_of(md, "| CP + IoU rule (thesis)")
+    assert f"| 0.750 | {mean['precision']:.3f} |" in iou_line
+    assert "p>0.35, score>0.20, margin 3 px, adj IoU>0.00" in iou_line
+    assert f"{mean['precision']:.3f}" not in line_of(md, "| CP + coverage rule")
+    assert "validation scenes" in md and "3 simulated test scenes (random 1, stacked 2)" in md
+    fam = (tmp_path / "table_6_2_families.md").read_text()
+    assert "| CP + IoU rule (thesis) | stacked | 0.750 | 0.500 |" in fam
+    assert "| CP + IoU rule (thesis) | random | — | 0.000 |" in fam
+
+
+def test_support_table_names_a_method_without_rows(tmp_path, figures):
+    with pytest.raises(ClutterbenchError, match="no rows for method 'oracle_iou'"):
+        support_table(scenes_frame(), {"oracle_iou": "oracle"}, {}, figures, tmp_path, "t")
+    assert thresholds_text(None) == "—"
+
+
+def panel(k: int) -> SupportPanel:
+    depth = np.full((32, 40), 0.6, dtype=np.float32)
+    masks = np.zeros((3, 32, 40), dtype=bool)
+    masks[0, 20:30, 4:36] = True
+    masks[1, 8:20, 6:18] = True
+    masks[2, 8:20, 22:34] = True
+    depth[masks.any(axis=0)] = 0.5
+    return SupportPanel(depth, masks, [3, 5, 8], {(3, 5), (5, 8)}, {(3, 5), (3, 8)}, f"s{k}")
+
+
+def test_support_figure_is_byte_identical_across_calls(tmp_path):
+    panels = [panel(k) for k in range(4)]
+    support_figure(panels, tmp_path / "a.png", "support relations")
+    support_figure(panels, tmp_path / "b.png", "support relations")
+    a = (tmp_path / "a.png").read_bytes()
+    assert a[:8] == b"\x89PNG\r\n\x1a\n" and a == (tmp_path / "b.png").read_bytes()
+    support_figure(panels[:1], tmp_path / "c.png", "support relations")
+    assert (tmp_path / "c.png").read_bytes() != a
+    with pytest.raises(ClutterbenchError, match="1 to 6 panels"):
+        support_figure([panel(k) for k in range(7)], tmp_path / "d.png", "too many")
