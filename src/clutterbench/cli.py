@@ -3,6 +3,7 @@
     clutterbench scene show SPEC.json --out scene.png
     clutterbench scene act SPEC.json --remove K [--support J] [--pull] [--mcap out.mcap]
     clutterbench scene make OUT.json --stack N [--size-mm H W D]
+    clutterbench plan SPEC.json --target K [--execute] [--mcap out.mcap]
 
 User-facing problems (ClutterbenchError) end a command with one red line on stderr,
 "error: <message>", and exit code 2. Heavy imports (SAPIEN, matplotlib) happen inside the
@@ -172,9 +173,9 @@ def scene_show(
 
 
 # -- scene act ----------------------------------------------------------------------------------
-def _check_indices(n: int, target: int, support: int | None) -> None:
+def _check_indices(n: int, target: int, support: int | None, flag: str = "--remove") -> None:
     if not 0 <= target < n:
-        raise ClutterbenchError(f"--remove {target}: no such box (the scene has boxes 0..{n - 1})")
+        raise ClutterbenchError(f"{flag} {target}: no such box (the scene has boxes 0..{n - 1})")
     if support is not None:
         if not 0 <= support < n:
             raise ClutterbenchError(
@@ -343,6 +344,126 @@ def scene_make(
         )
         spec.save(out)
         typer.echo(f"wrote {out} ({stack} boxes, settled in {result.steps} steps)")
+
+
+# -- plan ---------------------------------------------------------------------------------------
+@app.command("plan")
+def plan(
+    spec_path: Annotated[Path, typer.Argument(metavar="SPEC.json", help="Scene spec to plan on.")],
+    target: Annotated[int, typer.Option("--target", metavar="K", help="Box to extract.")],
+    execute: Annotated[
+        bool, typer.Option("--execute", help="Run the plan in simulation and judge it.")
+    ] = False,
+    planner: Annotated[
+        str, typer.Option("--planner", help="multi_step | bimanual | single_step | oracle | random")
+    ] = "multi_step",
+    rule: Annotated[str, typer.Option("--rule", help="Support rule: coverage | iou.")] = "coverage",
+    model: Annotated[Path, typer.Option("--model", help="Collapse predictor checkpoint.")] = Path(
+        "models/cp_focal/best.pt"
+    ),
+    thresholds: Annotated[
+        Path, typer.Option("--thresholds", help="Val-chosen thresholds (support stage).")
+    ] = Path("reports/support/thresholds.json"),
+    mcap: Annotated[
+        Path | None, typer.Option("--mcap", help="With --execute: write the episode as MCAP.")
+    ] = None,
+) -> None:
+    """Infer the support graph of one scene (thesis 6.2.2), print it beside the physics truth
+    with the extraction order and the bimanual option as JSON; --execute runs the plan."""
+    with _user_errors():
+        import numpy as np
+
+        from clutterbench.config import load_params, load_section
+        from clutterbench.io import read_json
+        from clutterbench.planning.cpg import bimanual_plan, build_cpg, extraction_order
+        from clutterbench.planning.extraction import CollapseGraphPlanner
+        from clutterbench.planning.support import SupportParams
+        from clutterbench.sim.physics import BoxWorld
+        from clutterbench.sim.render import observe
+        from clutterbench.sim.spec import SceneSpec
+        from clutterbench.trials.ch6 import ch6_jobs, load_predictor, run_extraction
+        from clutterbench.trials.config import PLANNERS, ConditionConfig, TrialsConfig
+        from clutterbench.trials.harness import write_mcap
+        from clutterbench.trials.scenes import truth_moved_contact
+
+        if planner not in PLANNERS:
+            raise ClutterbenchError(f"--planner {planner}: not one of {', '.join(PLANNERS)}")
+        if rule not in ("coverage", "iou"):
+            raise ClutterbenchError(f"--rule {rule}: not one of coverage, iou")
+        spec = SceneSpec.load(spec_path)
+        _check_indices(spec.n, target, None, "--target")
+        physics = _physics_config()
+        params = load_params("params.yaml") if Path("params.yaml").exists() else {}
+        trials = (
+            load_section(TrialsConfig, "trials", params) if "trials" in params else TrialsConfig()
+        )
+        chosen = read_json(thresholds)
+        if not isinstance(chosen, dict) or rule not in chosen.get("chosen", {}):
+            raise ClutterbenchError(f"{thresholds}: no thresholds for rule '{rule}'")
+        support = SupportParams(**chosen["chosen"][rule])
+        cp_max = trials.ch6.cp_max if trials.ch6.cp_max is not None else support.score_threshold
+        predict = load_predictor(model, spec.camera.image_size)
+        cp = CollapseGraphPlanner(predict, support, cp_max, trials.ch6.min_pixels)
+        obs = observe(BoxWorld.from_spec(spec, physics, render=True), spec.camera)
+        if target not in obs.visible_boxes(trials.ch6.min_pixels):
+            raise ClutterbenchError(f"--target {target}: the camera does not see that box")
+        edges = cp.support_edges(obs)
+        graph = build_cpg(edges, target)
+        moved, contact = truth_moved_contact(spec, physics, trials.ch6.moved_threshold_m)
+        bim = bimanual_plan(graph, target)
+        out: dict[str, Any] = {
+            "target": target,
+            "visible": obs.visible_boxes(trials.ch6.min_pixels),
+            "thresholds": chosen["chosen"][rule],
+            "inferred_edges": [
+                {"supporter": e.supporter, "supported": e.supported, "score": round(e.score, 4)}
+                for e in edges
+            ],
+            "true_edges": [
+                {"supporter": int(a), "supported": int(b)}
+                for a, b in zip(*np.nonzero(moved & contact))
+            ],
+            "extraction_order": extraction_order(graph, target),
+            "bimanual": {
+                "hold": bim.hold,
+                "pull": bim.pull,
+                "steps_to_target": bim.steps_to_target,
+            },
+        }
+        if execute:
+            cond = ConditionConfig(planner=planner, stream=next(iter(trials.streams), "cli"))
+            streams = trials.streams or {}
+            job = ch6_jobs(
+                "cli",
+                cond,
+                trials,
+                streams.get(cond.stream),
+                0,
+                physics,
+                spec.camera,
+                support,
+                cp_max,
+                model,
+            )[0]
+            result = run_extraction(spec, job, target)
+            if mcap is not None:
+                write_mcap(mcap, [result], {"spec": spec_path.name, "planner": planner})
+            rec = result.record
+            out["execute"] = {
+                k: rec[k]
+                for k in (
+                    "planner",
+                    "success",
+                    "target_out",
+                    "others_still",
+                    "end",
+                    "n_disturbed",
+                    "disturbance_m",
+                    "aborted_steps",
+                    "steps",
+                )
+            }
+        typer.echo(json.dumps(out))
 
 
 if __name__ == "__main__":

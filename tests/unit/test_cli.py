@@ -142,3 +142,59 @@ def test_physics_config_from_params_yaml(tmp_path: Path) -> None:
         "base: {scale: tiny}\nsim:\n  physics:\n    timestep_s: 0.002\n"
     )
     assert _physics_config().timestep_s == 0.002
+
+
+def test_plan_prints_inferred_and_true_support_and_executes(tmp_path):
+    """`clutterbench plan` on the 3-box stack: the physics truth is bottom -> middle -> top,
+    the JSON carries the extraction order and the bimanual option, --execute judges it."""
+    import torch
+
+    from clutterbench.models import build_model
+    from clutterbench.models.checkpoint import save_checkpoint
+    from clutterbench.models.collapse_map import CollapseMapConfig
+    from clutterbench.models.vgg import VGGConfig
+
+    torch.manual_seed(0)
+    cfg = CollapseMapConfig(
+        input_size=128, encoder=VGGConfig(width=0.125), decoder_channels=(32, 16, 16, 8, 8)
+    )
+    model = tmp_path / "best.pt"
+    save_checkpoint(model, "collapse_map", build_model("collapse_map", cfg), {"epoch": 0})
+    thresholds = tmp_path / "thresholds.json"
+    params = {
+        "rule": "coverage",
+        "prob_threshold": 0.5,
+        "score_threshold": 0.3,
+        "bbox_margin_px": 2,
+        "adjacency_iou": 0.0,
+    }
+    thresholds.write_text(json.dumps({"chosen": {"coverage": params}}))
+    spec = Path(__file__).resolve().parents[1] / "data" / "stack3.json"
+    args = [
+        "plan",
+        str(spec),
+        "--target",
+        "0",
+        "--model",
+        str(model),
+        "--thresholds",
+        str(thresholds),
+        "--execute",
+        "--planner",
+        "oracle",
+    ]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.output)
+    truth = {(e["supporter"], e["supported"]) for e in out["true_edges"]}
+    assert truth == {(0, 1), (1, 2)}
+    assert out["extraction_order"][-1] == 0 and set(out["bimanual"]) == {
+        "hold",
+        "pull",
+        "steps_to_target",
+    }
+    # The oracle takes the stack down from the top: three clean steps.
+    assert [s["box"] for s in out["execute"]["steps"]] == [2, 1, 0]
+    assert out["execute"]["success"] is True
+    bad = CliRunner().invoke(app, [*args[:3], "7", *args[4:]])
+    assert bad.exit_code == 2 and "--target 7" in bad.output

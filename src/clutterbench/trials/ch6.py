@@ -150,19 +150,35 @@ def pull_out(
 
 
 def run_ch6_episode(job: dict[str, Any]) -> EpisodeResult:
-    """One ch. 6 extraction episode -> its record and MCAP events."""
+    """One ch. 6 extraction episode on scene `job["index"]` of its stream."""
+    spec = draw_trial_spec(
+        job["stream"],
+        job["stream_cfg"],
+        job["seed"],
+        job["index"],
+        job["physics"],
+        job["camera"],
+        job["max_attempts"],
+    )
+    return run_extraction(spec, job)
+
+
+def run_extraction(
+    spec: SceneSpec, job: dict[str, Any], target: int | None = None
+) -> EpisodeResult:
+    """Extract `target` (None: drawn from the stream's target stream) from the settled `spec`
+    with the job's planner -> the episode's record and MCAP events."""
     physics: PhysicsConfig = job["physics"]
     camera: CameraConfig = job["camera"]
     params: Ch6TrialParams = job["params"]
-    stream_cfg: SceneStreamConfig = job["stream_cfg"]
-    spec = draw_trial_spec(
-        job["stream"], stream_cfg, job["seed"], job["index"], physics, camera, job["max_attempts"]
-    )
     world = BoxWorld.from_spec(spec, physics, render=True)
     log = EpisodeLog(record_images=job["record_images"])
     dt = physics.timestep_s
     obs = observe(world, camera)
-    target = draw_target(job["seed"], job["stream"], job["index"], obs, params.min_target_pixels)
+    if target is None:
+        target = draw_target(
+            job["seed"], job["stream"], job["index"], obs, params.min_target_pixels
+        )
     planner = make_planner(job, world, spec)
     start = world.positions()
     steps: list[dict[str, Any]] = []
