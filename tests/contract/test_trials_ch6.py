@@ -42,6 +42,16 @@ def test_truth_support_graph_of_a_stack_is_bottom_middle_top(stack3, physics):
     assert truth == {(0, 1), (1, 2)}
 
 
+def test_boxes_side_by_side_give_no_edge(physics):
+    """Two boxes standing side by side on the floor (touching): neither supports the other."""
+    size = np.array([0.1, 0.1, 0.08])
+    poses = np.array([[0.14, y, 0.04, 1.0, 0.0, 0.0, 0.0] for y in (-0.0501, 0.0501)])
+    spec = SceneSpec(sizes_m=np.stack([size, size]), poses=poses)
+    moved, contact = truth_moved_contact(spec, physics, THR)
+    assert not moved.any()
+    assert not (moved & contact).any()
+
+
 def test_pulling_the_top_is_clean_and_pulling_the_bottom_fails(stack3, physics):
     params = TrialsConfig().ch6
     for box, expect in ((2, True), (0, False)):
