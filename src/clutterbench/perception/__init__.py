@@ -1,0 +1,1 @@
+"""Perception: object masks from an observation (instance image or depth segmentation)."""
