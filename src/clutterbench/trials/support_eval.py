@@ -140,9 +140,17 @@ def sweep_all(
 
 
 def choose_all(sweep: pd.DataFrame) -> dict[str, SupportParams]:
+    """Each method's thresholds: the best f1 of mean precision and recall on val scenes.
+    Where no grid point has both means defined (a few val scenes without any true or any
+    predicted edge), the pooled f1 decides, ranked below every defined one."""
+    denom = 2 * sweep["tp"] + sweep["fp"] + sweep["fn"]
+    pooled = np.where(denom > 0, 2 * sweep["tp"] / denom.where(denom > 0, 1), 1.0)
+    ranked = sweep.assign(f1=sweep["f1"].fillna(pd.Series(pooled - 2.0, index=sweep.index)))
     return {
-        method: choose_support_params(sweep[sweep["method"] == method], rule)
-        for method, rule in ((m, m.removeprefix("oracle_")) for m in dict.fromkeys(sweep["method"]))
+        method: choose_support_params(
+            ranked[ranked["method"] == method], method.removeprefix("oracle_")
+        )
+        for method in dict.fromkeys(sweep["method"])
     }
 
 
