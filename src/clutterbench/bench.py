@@ -141,9 +141,11 @@ def bench_replay(
 
 if __name__ == "__main__":
     from clutterbench.collapse.bench import bench_models
+    from clutterbench.trials.bench import bench_trials
 
     res = bench_sim()
     for k, v in res.items():
         print(f"{k}: {v}")
     bench_replay()
     bench_models()
+    bench_trials()

@@ -1,0 +1,85 @@
+"""`make bench`, trials part: support-graph latency and wall time per trial, on one core.
+
+Needs the trained collapse predictor (models/<trials.ch6.model>/best.pt) and the support
+thresholds (reports/support/thresholds.json); skipped with a message when they are missing.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from clutterbench.config import load_params, load_section
+from clutterbench.io import read_json, write_json, write_text
+from clutterbench.planning.cpg import build_cpg
+from clutterbench.planning.extraction import CollapseGraphPlanner
+from clutterbench.planning.support import SupportParams
+from clutterbench.sim.config import SimConfig
+from clutterbench.sim.physics import BoxWorld
+from clutterbench.sim.render import ensure_renderer, observe
+from clutterbench.trials.ch6 import ch6_jobs, load_predictor, run_ch6_episode
+from clutterbench.trials.config import ConditionConfig, TrialsConfig
+from clutterbench.trials.scenes import draw_trial_spec
+
+THRESHOLDS = Path("reports/support/thresholds.json")
+
+
+def bench_trials(
+    graphs: int = 20, episodes: int = 10, out_dir: Path = Path("reports/bench")
+) -> dict | None:
+    params = load_params("params.yaml")
+    params = {**params, "base": {**params["base"], "scale": "default"}}
+    sim = load_section(SimConfig, "sim", params)
+    trials = load_section(TrialsConfig, "trials", params)
+    model = Path(f"models/{trials.ch6.model}/best.pt")
+    if not model.exists() or not THRESHOLDS.exists():
+        print(f"bench trials: skipped ({model} or {THRESHOLDS} missing; run dvc repro first)")
+        return None
+    torch.set_num_threads(1)
+    ensure_renderer()
+    support = SupportParams(**read_json(THRESHOLDS)["chosen"]["coverage"])
+    predict = load_predictor(model, sim.camera.image_size)
+    planner = CollapseGraphPlanner(predict, support, support.score_threshold, trials.ch6.min_pixels)
+    stream = trials.streams["ch6_10"]
+    graph_s = []
+    for i in range(graphs + 1):
+        spec = draw_trial_spec("bench", stream, 99, i, sim.physics, sim.camera, 30)
+        obs = observe(BoxWorld.from_spec(spec, sim.physics, render=True), sim.camera)
+        t0 = time.perf_counter()
+        build_cpg(planner.support_edges(obs), obs.visible_boxes(trials.ch6.min_pixels)[0])
+        if i:  # the first call pays for lazy initialisation
+            graph_s.append(time.perf_counter() - t0)
+    result: dict = {
+        "support_graph_10_objects_ms_median": 1000 * float(np.median(graph_s)),
+        "threads": 1,
+    }
+    for planner_name in ("single_step", "multi_step", "bimanual", "oracle", "random"):
+        cond = ConditionConfig(planner=planner_name, stream="ch6_3_10", episodes=episodes)
+        jobs = ch6_jobs(
+            "bench",
+            cond,
+            trials,
+            trials.streams["ch6_3_10"],
+            99,
+            sim.physics,
+            sim.camera,
+            support,
+            support.score_threshold,
+            model,
+        )
+        wall = []
+        for job in jobs:
+            t0 = time.perf_counter()
+            run_ch6_episode(job)
+            wall.append(time.perf_counter() - t0)
+        result[f"trial_{planner_name}_s_median"] = float(np.median(wall))
+    write_json(out_dir / "trials.json", result)
+    lines = ["# Trials benchmark (one core)", "", "| measure | value |", "|---|---|"]
+    lines += [f"| {k} | {v:.3f} |" for k, v in result.items() if k != "threads"]
+    write_text(out_dir / "trials.md", "\n".join(lines) + "\n")
+    for k, v in result.items():
+        print(f"{k}: {v}")
+    return result
