@@ -53,7 +53,7 @@ def _parse_row(row: str) -> tuple[str, str]:
 
 
 def _thesis_rate_text(row: Mapping[str, Any]) -> str | None:
-    """'52/57 = 91.2%': counts and the rate as printed in the thesis (not recomputed)."""
+    """'k/n = x%': counts and the rate as printed in the thesis (not recomputed)."""
     if "success" not in row or "trials" not in row:
         return None
     text = f"{row['success']}/{row['trials']}"

@@ -56,7 +56,7 @@ class Rate:
         return wilson_interval(self.k, self.n)
 
     def text(self) -> str:
-        """'52/57 = 91.2% [81.1, 96.2]': percent, Wilson 95% interval; '—' when n == 0."""
+        """'3/4 = 75.0% [30.1, 95.4]': percent, Wilson 95% interval; '—' when n == 0."""
         if self.n == 0:
             return "—"
         lo, hi = self.ci95
