@@ -18,7 +18,7 @@ def evaluate(params: dict, base: BaseConfig) -> None:
     cfg = load_section(EvaluateConfig, "evaluate", params)
     if name not in cfg.runs:
         raise ClutterbenchError(f"evaluate.runs.{name}: no such run (known: {', '.join(cfg.runs)})")
-    run = cfg.runs[name]
+    run, cfg = cfg.runs[name], cfg.for_run(name)
     gen = load_section(GenerateConfig, "generate", params)
     for key, dataset in (("dataset", run.dataset), ("val_dataset", run.val_dataset)):
         if dataset not in gen.datasets:

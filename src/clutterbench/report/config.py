@@ -14,3 +14,5 @@ class ReportConfig:
     """Thesis Table 5.1 row -> our evaluate run filling it (null: not run, said in the table)."""
     table_6_1: Mapping[str, str | None] = dataclasses.field(default_factory=dict)
     """Thesis Table 6.1 row -> our evaluate run."""
+    table_4_2: Mapping[str, str | None] = dataclasses.field(default_factory=dict)
+    """Thesis Table 4.2 row (model x ground truth) -> our evaluate run."""
