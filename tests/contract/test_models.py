@@ -242,3 +242,15 @@ def test_cross_entropy_training_step_drives_loss_down(arch):
     for c in (CLASS_E, CLASS_S, CLASS_C):
         hit = (pred == c) & (classes == c)
         assert hit.sum() > 0.5 * (classes == c).sum(), PULL_CLASSES[c]
+
+
+def test_predict_collapse_takes_mask_pairs(arch):
+    torch.manual_seed(0)
+    model = build_model(arch, tiny_config(arch, **CH4)).eval()
+    depth, masks, _ = pull_batch()
+    predictor = CollapsePredictor(model, batch_size=3, bf16=False, channels_last=False)
+    heat = predict_collapse(predictor, depth[0, 0].numpy(), masks.numpy())
+    with torch.no_grad():
+        probs = torch.softmax(model(depth[:1].expand(4, -1, -1, -1), masks), dim=1)
+    assert heat.shape == (4, SIZE, SIZE)
+    np.testing.assert_allclose(heat, probs[:, -1].numpy(), atol=1e-5)  # the C class

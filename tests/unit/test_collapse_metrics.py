@@ -15,6 +15,7 @@ from clutterbench.collapse.metrics import (
     scores,
     sweep_row,
 )
+from clutterbench.collapse.predict import collapse_probs
 
 
 def test_focal_loss_matches_hand_computed_values():
@@ -120,8 +121,16 @@ def test_pixel_counts_keep_per_sample_counts_beside_the_sums():
     prob = torch.tensor([[[[0.9, 0.9], [0.1, 0.1]]], [[[0.9, 0.1], [0.1, 0.1]]]])
     truth = torch.tensor([[[[1.0, 0.0], [0.0, 0.0]]], [[[1.0, 1.0], [1.0, 1.0]]]])
     counts = PixelCounts(0.4)
-    counts.update(prob[:1], truth[:1])
-    counts.update(prob[1:], truth[1:])
-    assert counts.summary()["iou"] == pytest.approx(2 / 6)
-    assert counts.pair_means()["pair_mean_iou"] == pytest.approx((1 / 2 + 1 / 4) / 2)
-    assert (counts.tp, counts.fp, counts.fn, counts.tn) == (2, 1, 3, 2)
+    counts.update(prob, truth)  # one batch of two samples
+    counts.update(prob[1:], 0 * truth[1:])  # and one more: IoU 0
+    assert counts.summary()["iou"] == pytest.approx(2 / 7)
+    assert counts.pair_means()["pair_mean_iou"] == pytest.approx((1 / 2 + 1 / 4 + 0) / 3)
+    assert (counts.tp, counts.fp, counts.fn, counts.tn) == (2, 2, 3, 5)
+
+
+def test_collapse_probability_is_the_sigmoid_or_the_last_class():
+    one = torch.tensor([[[[0.0, math.log(3.0)]]]])
+    assert collapse_probs(one).flatten().tolist() == pytest.approx([0.5, 0.75])
+    four = torch.log(torch.tensor([0.1, 0.2, 0.3, 0.4])).reshape(1, 4, 1, 1)  # B, E, S, C
+    prob = collapse_probs(four)
+    assert prob.shape == (1, 1, 1, 1) and float(prob) == pytest.approx(0.4)
