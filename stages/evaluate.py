@@ -18,7 +18,7 @@ def evaluate(params: dict, base: BaseConfig) -> None:
     cfg = load_section(EvaluateConfig, "evaluate", params)
     if name not in cfg.runs:
         raise ClutterbenchError(f"evaluate.runs.{name}: no such run (known: {', '.join(cfg.runs)})")
-    run = cfg.runs[name]
+    run, cfg = cfg.runs[name], cfg.for_run(name)
     gen = load_section(GenerateConfig, "generate", params)
     for key, dataset in (("dataset", run.dataset), ("val_dataset", run.val_dataset)):
         if dataset not in gen.datasets:
@@ -46,7 +46,10 @@ def evaluate(params: dict, base: BaseConfig) -> None:
     collapse_figure(result.samples, title, out / "figure.png")
     scores = ", ".join(f"{k} {metrics[k]:.3f}" for k in ("pixel_accuracy", "iou", "precision"))
     chosen = metrics["val_chosen_threshold"]
-    print(f"{name}: {scores}; at val-chosen {chosen:.2f}: IoU {metrics['iou_at_val_chosen']:.3f}")
+    print(
+        f"{name}: {scores}; per-pair IoU {metrics['pair_mean_iou']:.3f}; "
+        f"at val-chosen {chosen:.2f}: IoU {metrics['iou_at_val_chosen']:.3f}"
+    )
 
 
 if __name__ == "__main__":

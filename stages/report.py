@@ -14,6 +14,7 @@ from clutterbench.report.config import ReportConfig
 from clutterbench.report.datasets import dataset_stats, datasets_table
 from clutterbench.report.extraction import extraction_table
 from clutterbench.report.support import support_table
+from clutterbench.report.table_4_2 import table_4_2
 from clutterbench.report.tables import load_thesis_figures
 from clutterbench.stage import run_stage
 from clutterbench.trials.records import read_records
@@ -45,6 +46,15 @@ def report(params: dict, base: BaseConfig) -> None:
             Path("reports/tables"),
             base.scale,
         )
+    table_4_2(
+        cfg.table_4_2,
+        run_models,
+        {name: evaluate.for_run(name).threshold for name in evaluate.runs},
+        figures,
+        sources,
+        Path("reports/tables"),
+        base.scale,
+    )
 
     support = Path("reports/support")
     if not (support / "scenes.csv").exists():

@@ -1,25 +1,30 @@
-"""Every collapse network: shapes, checkpoint round trip, one-batch overfit, bad checkpoints."""
+"""Every collapse network: shapes, checkpoint round trip, one-batch overfit, bad checkpoints;
+the two-mask, four-class configuration of thesis ch. 4 and its cross-entropy training step."""
 
 import dataclasses
+import hashlib
 
 import numpy as np
 import pytest
 import torch
 
+from clutterbench.collapse.config import TrainConfig, TrainModelConfig
 from clutterbench.collapse.losses import bce_loss
 from clutterbench.collapse.predict import CollapsePredictor, predict_collapse
+from clutterbench.collapse.train import loss_fn, train_step
+from clutterbench.data.labels import CLASS_B, CLASS_C, CLASS_E, CLASS_S, PULL_CLASSES
 from clutterbench.errors import ClutterbenchError
 from clutterbench.models import ARCHS, build_model
-from clutterbench.models.checkpoint import load_checkpoint, save_checkpoint
+from clutterbench.models.checkpoint import FORMAT, load_checkpoint, save_checkpoint
 from clutterbench.models.vgg import VGG16Encoder, VGGConfig
 
 SIZE = 64
 
 
-def tiny_config(arch: str):
+def tiny_config(arch: str, **extra):
     cfg_cls = ARCHS[arch][0]
     fields = {f.name for f in dataclasses.fields(cfg_cls)}
-    kw = {"input_size": SIZE, "encoder": VGGConfig(width=0.125)}
+    kw = {"input_size": SIZE, "encoder": VGGConfig(width=0.125), **extra}
     if "decoder_channels" in fields:
         kw["decoder_channels"] = (32, 16, 16, 8, 8)
     if "fc_channels" in fields:
@@ -119,3 +124,133 @@ def test_checkpoint_errors_are_one_line(arch, tmp_path):
     save_checkpoint(path, arch, build_model(arch, tiny_config(arch)), {})
     with pytest.raises(ClutterbenchError, match="takes 64x64 images but the data are 128x128"):
         CollapsePredictor.from_checkpoint(path, image_size=128)
+
+
+# --- thesis ch. 4: extraction + support masks -> B / E / S / C ---
+
+CH4 = {"n_masks": 2, "n_classes": len(PULL_CLASSES)}
+
+# (parameter count, (name, shape) of every state entry hashed) of the one-mask, one-class
+# networks as they were before n_masks / n_classes existed (commit 4299e7a), at the default
+# config (128 px, width 0.25; the trained cmn_bs32's 1,480,145) and the tiny one above.
+ONE_MASK_NETWORKS = {
+    ("collapse_map", "default"): (1480145, "890db464b103"),
+    ("collapse_map", "tiny"): (344513, "cab0c20480e0"),
+    ("fcn8s", "default"): (3153187, "b48c908ea0a8"),
+    ("fcn8s", "tiny"): (250675, "5d0a801e4a52"),
+}
+
+
+def pull_batch(n: int = 4):
+    """Depth, (extract, support) masks and a B / E / S / C class map per pair."""
+    depth, extract, collapse = scene_batch(n)
+    support = torch.zeros_like(extract)
+    classes = torch.full((n, SIZE, SIZE), CLASS_B, dtype=torch.int64)
+    for i in range(n):
+        support[i, :, 44:54, 8 + 4 * i : 28 + 4 * i] = 1
+        classes[i][collapse[i, 0] > 0] = CLASS_C
+        classes[i][support[i, 0] > 0] = CLASS_S
+        classes[i][extract[i, 0] > 0] = CLASS_E
+    return depth, torch.cat([extract, support], dim=1), classes
+
+
+def state_signature(model: torch.nn.Module) -> tuple[int, str]:
+    shapes = [(k, tuple(v.shape)) for k, v in model.state_dict().items()]
+    digest = hashlib.sha256(repr(shapes).encode()).hexdigest()[:12]
+    return sum(p.numel() for p in model.parameters()), digest
+
+
+def test_two_masks_four_classes_give_class_logits(arch):
+    torch.manual_seed(0)
+    model = build_model(arch, tiny_config(arch, **CH4)).eval()
+    depth, masks, _ = pull_batch()
+    out = model(depth, masks)
+    assert out.shape == (4, 4, SIZE, SIZE) and out.dtype == torch.float32
+    with pytest.raises(ValueError, match=r"must be \(B, 2, H, W\)"):
+        model(depth, masks[:, :1])
+    # The second mask reaches the output: changing the support changes the logits.
+    moved = masks.clone()
+    moved[:, 1] = moved[:, 1].roll(12, dims=-1)
+    with torch.no_grad():
+        assert not torch.allclose(model(depth, masks), model(depth, moved))
+
+
+def test_mask_encoders_are_independent():
+    # Thesis Fig. 4.2: each mask has its own encoder; grouped convs keep them apart.
+    torch.manual_seed(0)
+    model = build_model("collapse_map", tiny_config("collapse_map", **CH4)).eval()
+    depth, masks, _ = pull_batch()
+    with torch.no_grad():
+        feats = model.mask_encoder(masks)
+        only_extract = model.mask_encoder(torch.cat([masks[:, :1], 0 * masks[:, 1:]], dim=1))
+    half = feats.shape[1] // 2
+    assert half == model.cfg.mask_channels[-1]
+    assert torch.equal(feats[:, :half], only_extract[:, :half])
+    assert not torch.equal(feats[:, half:], only_extract[:, half:])
+
+
+@pytest.mark.parametrize("scale", ["default", "tiny"])
+def test_one_mask_network_is_unchanged(arch, scale):
+    cfg = ARCHS[arch][0]() if scale == "default" else tiny_config(arch)
+    assert (cfg.n_masks, cfg.n_classes) == (1, 1)
+    assert state_signature(build_model(arch, cfg)) == ONE_MASK_NETWORKS[arch, scale]
+
+
+def test_checkpoint_without_masks_and_classes_loads_as_one_mask(arch, tmp_path):
+    torch.manual_seed(0)
+    model = build_model(arch, tiny_config(arch)).eval()
+    path = tmp_path / "old.pt"
+    save_checkpoint(path, arch, model, {})
+    payload = torch.load(path, weights_only=True)
+    assert payload["format"] == FORMAT
+    del payload["net"]["n_masks"], payload["net"]["n_classes"]  # as written before they existed
+    torch.save(payload, path)
+    ckpt = load_checkpoint(path)
+    assert (ckpt.net.n_masks, ckpt.net.n_classes) == (1, 1)
+    depth, target, _ = scene_batch()
+    with torch.no_grad():
+        assert torch.equal(ckpt.model()(depth, target), model(depth, target))
+
+
+def test_checkpoint_round_trip_keeps_masks_and_classes(arch, tmp_path):
+    model = build_model(arch, tiny_config(arch, **CH4)).eval()
+    save_checkpoint(tmp_path / "best.pt", arch, model, {})
+    ckpt = load_checkpoint(tmp_path / "best.pt")
+    assert ckpt.net == model.cfg and (ckpt.net.n_masks, ckpt.net.n_classes) == (2, 4)
+
+
+def test_cross_entropy_training_step_drives_loss_down(arch):
+    """The training loop's step with the ce loss on a fixed batch of class maps."""
+    torch.manual_seed(0)
+    net = tiny_config(arch, **CH4)
+    mcfg = TrainModelConfig(
+        arch=arch, dataset="x", batch_size=4, lr=1e-2, epochs=1, net=net, loss="ce"
+    )
+    cfg = TrainConfig(models={"m": mcfg}, bf16=False, channels_last=False)
+    model = build_model(arch, net).train()
+    opt = torch.optim.Adam(model.parameters(), lr=mcfg.lr)
+    depth, masks, classes = pull_batch()
+    batch = {"depth_m": depth, "target": masks, "classes": classes}
+    loss = loss_fn(cfg, mcfg)
+    losses = [float(train_step(model, batch, opt, loss, cfg)) for _ in range(60)]
+    assert losses[0] == pytest.approx(float(torch.log(torch.tensor(4.0))), rel=0.5)
+    assert losses[-1] < 0.25 * losses[0], losses[::10]
+    model.eval()
+    with torch.no_grad():
+        pred = model(depth, masks).argmax(dim=1)
+    assert (pred == classes).float().mean() > 0.95
+    for c in (CLASS_E, CLASS_S, CLASS_C):
+        hit = (pred == c) & (classes == c)
+        assert hit.sum() > 0.5 * (classes == c).sum(), PULL_CLASSES[c]
+
+
+def test_predict_collapse_takes_mask_pairs(arch):
+    torch.manual_seed(0)
+    model = build_model(arch, tiny_config(arch, **CH4)).eval()
+    depth, masks, _ = pull_batch()
+    predictor = CollapsePredictor(model, batch_size=3, bf16=False, channels_last=False)
+    heat = predict_collapse(predictor, depth[0, 0].numpy(), masks.numpy())
+    with torch.no_grad():
+        probs = torch.softmax(model(depth[:1].expand(4, -1, -1, -1), masks), dim=1)
+    assert heat.shape == (4, SIZE, SIZE)
+    np.testing.assert_allclose(heat, probs[:, -1].numpy(), atol=1e-5)  # the C class

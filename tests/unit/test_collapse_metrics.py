@@ -1,12 +1,21 @@
-"""Focal loss (thesis eq. 6.1) and pixel metrics (eq. 5.10, 5.11) against hand-computed values."""
+"""Focal loss (thesis eq. 6.1), pixel metrics (eq. 5.10, 5.11) and their per-pair means
+(Table 4.2) against hand-computed values."""
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
 from clutterbench.collapse.losses import FocalConfig, bce_loss, focal_loss
-from clutterbench.collapse.metrics import PixelCounts, best_iou_row, scores, sweep_row
+from clutterbench.collapse.metrics import (
+    PixelCounts,
+    best_iou_row,
+    pair_means,
+    scores,
+    sweep_row,
+)
+from clutterbench.collapse.predict import collapse_probs
 
 
 def test_focal_loss_matches_hand_computed_values():
@@ -88,3 +97,40 @@ def test_best_iou_row_skips_undefined_and_prefers_the_lowest_threshold():
         {"threshold": 0.4, "iou": 0.25},
     ]
     assert best_iou_row(rows)["threshold"] == 0.2
+
+
+def test_pair_means_average_each_pairs_ratios_and_say_how_empty_pairs_count():
+    # pair 0: tp 2, fp 2, fn 0 -> IoU 0.5, precision 0.5, recall 1
+    # pair 1: nothing true, 1 predicted -> IoU 0, precision 0, recall undefined
+    # pair 2: 2 true, nothing predicted -> IoU 0, precision undefined, recall 0
+    # pair 3: empty in both -> all three undefined
+    m = pair_means(np.array([2, 0, 0, 0]), np.array([2, 1, 0, 0]), np.array([0, 0, 2, 0]))
+    assert m["pair_mean_iou"] == pytest.approx(0.5 / 3)
+    assert m["pair_mean_precision"] == pytest.approx(0.25)
+    assert m["pair_mean_recall"] == pytest.approx(0.5)
+    assert (m["pair_mean_iou_samples"], m["pair_mean_precision_samples"]) == (3, 2)
+    assert m["pair_mean_recall_samples"] == 2 and m["samples_empty_both"] == 1
+    assert m["pair_mean_iou_empty_as_one"] == pytest.approx(1.5 / 4)
+    assert m["pair_mean_precision_empty_as_one"] == pytest.approx(2.5 / 4)
+    assert m["pair_mean_recall_empty_as_one"] == pytest.approx(3.0 / 4)
+    assert math.isnan(pair_means(np.zeros(2), np.zeros(2), np.zeros(2))["pair_mean_iou"])
+
+
+def test_pixel_counts_keep_per_sample_counts_beside_the_sums():
+    # Two 1x2x2 samples: the per-pair mean differs from the pooled IoU.
+    prob = torch.tensor([[[[0.9, 0.9], [0.1, 0.1]]], [[[0.9, 0.1], [0.1, 0.1]]]])
+    truth = torch.tensor([[[[1.0, 0.0], [0.0, 0.0]]], [[[1.0, 1.0], [1.0, 1.0]]]])
+    counts = PixelCounts(0.4)
+    counts.update(prob, truth)  # one batch of two samples
+    counts.update(prob[1:], 0 * truth[1:])  # and one more: IoU 0
+    assert counts.summary()["iou"] == pytest.approx(2 / 7)
+    assert counts.pair_means()["pair_mean_iou"] == pytest.approx((1 / 2 + 1 / 4 + 0) / 3)
+    assert (counts.tp, counts.fp, counts.fn, counts.tn) == (2, 2, 3, 5)
+
+
+def test_collapse_probability_is_the_sigmoid_or_the_last_class():
+    one = torch.tensor([[[[0.0, math.log(3.0)]]]])
+    assert collapse_probs(one).flatten().tolist() == pytest.approx([0.5, 0.75])
+    four = torch.log(torch.tensor([0.1, 0.2, 0.3, 0.4])).reshape(1, 4, 1, 1)  # B, E, S, C
+    prob = collapse_probs(four)
+    assert prob.shape == (1, 1, 1, 1) and float(prob) == pytest.approx(0.4)

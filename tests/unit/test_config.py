@@ -6,6 +6,7 @@ import dataclasses
 
 import pytest
 
+from clutterbench.collapse.config import EvaluateConfig, TrainConfig
 from clutterbench.config import load_params, load_section, parse, resolve_scale
 from clutterbench.data.config import DatasetConfig, GenerateConfig
 from clutterbench.data.split import Fractions, SplitConfig
@@ -27,8 +28,17 @@ def test_repo_params_parse_at_every_scale(root):
         gen = load_section(GenerateConfig, "generate", p)
         load_section(SimConfig, "sim", p)
         split = load_section(SplitConfig, "split", p)
-        load_section(ReportConfig, "report", p)
+        report = load_section(ReportConfig, "report", p)
         assert set(split.datasets) == set(gen.datasets)
+        train = load_section(TrainConfig, "train", p)
+        evaluate = load_section(EvaluateConfig, "evaluate", p)
+        assert {m.dataset for m in train.models.values()} <= set(gen.datasets)
+        assert {r.model for r in evaluate.runs.values()} <= set(train.models)
+        for table in (report.table_5_1, report.table_6_1, report.table_4_2):
+            assert {r for r in table.values() if r is not None} <= set(evaluate.runs)
+    ch4 = [evaluate.for_run(r).threshold for r in report.table_4_2.values() if r is not None]
+    assert len(ch4) == 4 and set(ch4) == {0.4}  # thesis 4.4.1's pixel threshold
+    assert evaluate.for_run("cmn_bs32_ch5").threshold == evaluate.threshold
     tiny = {**params, "base": {**params["base"], "scale": "tiny"}}
     assert load_section(SimConfig, "sim", tiny).camera.image_size == 64
 
@@ -65,3 +75,26 @@ def test_configs_are_frozen():
     cfg = parse(Fractions, {}, "f")
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.train = 0.3  # type: ignore[misc]
+
+
+MODEL = {"arch": "collapse_map", "dataset": "ch4_same", "batch_size": 4, "lr": 1e-3, "epochs": 1}
+
+
+@pytest.mark.parametrize(
+    ("model", "message"),
+    [
+        ({"net": {"n_masks": 2, "n_classes": 4}, "loss": "bce"}, "m.loss: bce does not fit"),
+        ({"net": {"n_masks": 1}, "loss": "ce"}, "m.loss: ce does not fit n_classes 1"),
+        ({"net": {"n_masks": 1, "n_classes": 4}, "loss": "ce"}, "m.net.n_classes: 1-mask"),
+        ({"net": {"n_masks": 2, "n_classes": 3}, "loss": "ce"}, "m.net.n_classes: 2-mask"),
+        ({"net": {"n_masks": 3}}, "m.net.n_masks: no samples give 3 masks"),
+        ({"net": {"n_masks": 0}}, "m.net.n_masks: 0 is out of range"),
+    ],
+)
+def test_masks_classes_and_loss_must_fit(model, message):
+    with pytest.raises(ClutterbenchError, match=message.replace(".", r"\.")) as info:
+        parse(TrainConfig, {"models": {"m": {**MODEL, **model}}}, "train")
+    assert "\n" not in str(info.value)
+    ok = {"net": {"n_masks": 2, "n_classes": 4}, "loss": "ce"}
+    net = parse(TrainConfig, {"models": {"m": {**MODEL, **ok}}}, "train").models["m"].net
+    assert (net.n_masks, net.n_classes) == (2, 4)

@@ -1,5 +1,5 @@
-"""The lazy, sharded CollapseDataset: same items as loading everything, bounded memory,
-shard-local shuffling, and the split's data hash checked."""
+"""The lazy, sharded datasets: same items as loading everything, bounded memory,
+shard-local shuffling, the split's data hash checked; ch. 4 pull samples and their flip."""
 
 from __future__ import annotations
 
@@ -8,11 +8,24 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from torch.utils.data import DataLoader
 
 from clutterbench.data import shards as shards_module
-from clutterbench.data.dataset import CollapseDataset, ShardShuffleSampler, shard_window_order
-from clutterbench.data.labels import collapse_mask, moved_matrix, target_mask
+from clutterbench.data.dataset import (
+    CollapseDataset,
+    PullPairDataset,
+    ShardShuffleSampler,
+    open_pairs,
+    shard_window_order,
+)
+from clutterbench.data.labels import (
+    CLASS_C,
+    ch4_class_map,
+    collapse_mask,
+    moved_matrix,
+    target_mask,
+)
 from clutterbench.data.split import Fractions, split_dataset
 from clutterbench.data.synthetic import write_synthetic_dataset
 from clutterbench.errors import ClutterbenchError
@@ -150,3 +163,91 @@ def test_split_naming_absent_scenes_is_refused(data, tmp_path):
     write_json(tmp_path / "toy.json", {**record, "train": [0, N_SCENES + 3]})
     with pytest.raises(ClutterbenchError, match=f"scene {N_SCENES + 3} "):
         CollapseDataset(data / "gen", tmp_path / "toy.json", "train", 0.005)
+
+
+# --- thesis ch. 4: (scene, extract, support) samples labelled by the pull tensor ---
+
+
+@pytest.fixture(scope="module")
+def pulls(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("pulls")
+    write_synthetic_dataset(root / "gen", "piles", 9, 4, SIZE, (4, 6), pulls=True)
+    split_dataset("piles", Fractions(0.6, 0.2, 0.2), 0, root / "gen", root / "split")
+    return root
+
+
+def open_pulls(root: Path, split: str = "train", **kw) -> PullPairDataset:
+    return PullPairDataset(root / "gen", root / "split/piles.json", split, 0.005, **kw)
+
+
+def eager_pulls(root: Path) -> dict[str, np.ndarray]:
+    parts = [load_npz(p) for p in sorted((root / "gen/piles").glob("shard-*.npz"))]
+    return {k: np.concatenate([p[k] for p in parts]) for k in ("depth_m", "instance", "pull_m")}
+
+
+def test_pull_samples_are_ordered_pairs_of_visible_boxes(pulls):
+    ds, ref = open_pulls(pulls), eager_pulls(pulls)
+    split = read_json(pulls / "split/piles.json")["train"]
+    expected = []
+    for s, scene in enumerate(split):
+        visible = [
+            x
+            for x in range(int(ds.scenes["n_objects"][s]))
+            if (ref["instance"][scene] == x + 1).sum() >= 10
+        ]
+        expected += [(s, x, y) for x in visible for y in visible if x != y]
+    assert [tuple(p) for p in ds.pairs.tolist()] == expected and len(expected) > 20
+
+
+def test_pull_items_are_the_class_maps_of_the_pull_tensor(pulls):
+    ds, ref = open_pulls(pulls), eager_pulls(pulls)
+    split = read_json(pulls / "split/piles.json")["train"]
+    collapsing = 0
+    for i in range(len(ds)):
+        s, x, sup = ds.pairs[i]
+        scene, n = split[s], int(ds.scenes["n_objects"][s])
+        classes = ch4_class_map(
+            ref["instance"][scene], x, sup, ref["pull_m"][scene, x, sup, :n], 0.005
+        )
+        item = ds[i]
+        assert item["target"].shape == (2, SIZE, SIZE) and item["classes"].dtype == torch.int64
+        np.testing.assert_array_equal(item["depth_m"][0], ref["depth_m"][scene])
+        np.testing.assert_array_equal(item["target"][0], target_mask(ref["instance"][scene], x))
+        np.testing.assert_array_equal(item["target"][1], target_mask(ref["instance"][scene], sup))
+        np.testing.assert_array_equal(item["classes"], classes)
+        np.testing.assert_array_equal(item["collapse"][0], classes == CLASS_C)
+        # some other box moves (it may be hidden, so without C pixels)
+        disp = np.delete(ref["pull_m"][scene, x, sup, :n], [x, sup])
+        assert ds.pair_collapses(i) == bool((disp > 0.005).any())
+        collapsing += ds.pair_collapses(i)
+    assert 0 < collapsing < len(ds)  # both kinds of pairs are exercised
+
+
+def test_flip_flips_image_masks_and_labels_together(pulls):
+    plain = open_pulls(pulls)
+    flipped_any = unflipped_any = False
+    for seed in range(6):
+        aug = open_pulls(pulls, flip=True, seed=seed)
+        for i in (0, 7):
+            a, b = plain[i], aug[i]
+            flipped = {k: v.flip(-1) for k, v in a.items()}
+            if all(torch.equal(b[k], flipped[k]) for k in a):
+                flipped_any = True
+            else:
+                assert all(torch.equal(b[k], a[k]) for k in a), "flipped only some arrays"
+                unflipped_any = True
+    assert flipped_any and unflipped_any
+    assert not torch.equal(plain[0]["classes"], plain[0]["classes"].flip(-1))  # flips show
+
+
+def test_open_pairs_picks_the_samples_of_the_network_inputs(pulls, data):
+    assert isinstance(
+        open_pairs(2, pulls / "gen", pulls / "split/piles.json", "val", 0.005), PullPairDataset
+    )
+    assert isinstance(
+        open_pairs(1, pulls / "gen", pulls / "split/piles.json", "val", 0.005), CollapseDataset
+    )
+    with pytest.raises(ClutterbenchError, match="dataset 'toy' holds no pull labels"):
+        open_pairs(2, data / "gen", data / "split/toy.json", "val", 0.005)
+    with pytest.raises(ClutterbenchError, match="no dataset feeds 3 masks"):
+        open_pairs(3, data / "gen", data / "split/toy.json", "val", 0.005)

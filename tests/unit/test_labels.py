@@ -5,7 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from clutterbench.data.labels import collapse_mask, moved_matrix, support_edges, target_mask
+from clutterbench.data.labels import (
+    CLASS_B,
+    CLASS_C,
+    CLASS_E,
+    CLASS_S,
+    PULL_CLASSES,
+    ch4_class_map,
+    collapse_mask,
+    moved_matrix,
+    support_edges,
+    target_mask,
+)
 from clutterbench.data.split import Fractions, split_scenes
 from clutterbench.io import load_npz, save_npz
 from clutterbench.sim.geometry import (
@@ -34,6 +45,35 @@ def test_masks_from_instance_image():
     assert collapse_mask(inst, np.array([False, True, True])).tolist() == [[0, 0, 0], [1, 1, 0]]
     with pytest.raises(AssertionError):
         target_mask(inst.astype(np.int32), 0)
+
+
+def test_ch4_class_map_on_four_boxes():
+    # Boxes 0..3 drawn as ids 1..4; box 0 is pulled out while box 2 is held.
+    inst = np.array(
+        [
+            [0, 1, 1, 2, 2],
+            [0, 1, 1, 2, 2],
+            [3, 3, 4, 4, 0],
+            [3, 3, 4, 4, 0],
+        ],
+        dtype=np.uint8,
+    )
+    # box 1 moves 6 mm (> 5 mm: C), box 3 moves 5 mm exactly (not more: B)
+    disp = np.array([NAN, 0.006, NAN, 0.005])
+    B, E, S, C = CLASS_B, CLASS_E, CLASS_S, CLASS_C
+    expected = [[B, E, E, C, C], [B, E, E, C, C], [S, S, B, B, B], [S, S, B, B, B]]
+    got = ch4_class_map(inst, 0, 2, disp, 0.005)
+    assert got.dtype == np.uint8 and got.tolist() == expected
+    assert PULL_CLASSES[C] == "C" and PULL_CLASSES[B] == "B" and C == len(PULL_CLASSES) - 1
+    # The extracted and held boxes are E and S whatever their displacement; NaN never moves.
+    disp = np.array([0.3, NAN, 0.2, 0.01])
+    expected = [[B, E, E, B, B], [B, E, E, B, B], [S, S, C, C, B], [S, S, C, C, B]]
+    assert ch4_class_map(inst, 0, 2, disp, 0.005).tolist() == expected
+    # Swapping the roles swaps E and S.
+    swapped = ch4_class_map(inst, 2, 0, disp, 0.005)
+    assert (swapped == E).tolist() == (got == S).tolist()
+    with pytest.raises(AssertionError):
+        ch4_class_map(inst, 1, 1, disp, 0.005)
 
 
 def test_quaternions_and_aabb():

@@ -44,7 +44,7 @@ def test_row_settings_override_the_table_and_null_means_not_stated():
         thesis_settings(figures, "t", "a")
 
 
-@pytest.mark.parametrize("table", ["table_5_1", "table_6_1"])
+@pytest.mark.parametrize("table", ["table_5_1", "table_6_1", "table_4_2"])
 def test_every_row_of_the_thesis_tables_has_readable_settings(root, table):
     figures = load_thesis_figures(root / "reports/thesis_figures.yaml")
     for row in figures[table]["rows"]:

@@ -21,7 +21,7 @@ import torch
 
 from clutterbench.collapse.bench_memory import bench_train_memory
 from clutterbench.collapse.config import TrainConfig
-from clutterbench.collapse.losses import bce_loss
+from clutterbench.collapse.losses import bce_loss, ce_loss
 from clutterbench.collapse.predict import CollapsePredictor, predict_collapse
 from clutterbench.config import load_params, load_section
 from clutterbench.data.dataset import CollapseDataset
@@ -33,33 +33,41 @@ STEPS = 3
 SCENE_OBJECTS = 10
 
 
-def _inputs(n: int, size: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def _inputs(
+    n: int, size: int, n_masks: int = 1, n_classes: int = 1
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """depth, masks and labels: a 0/1 collapse map (n_classes 1) or class indices."""
     g = torch.Generator().manual_seed(0)
     depth = 0.5 + 0.3 * torch.rand(n, 1, size, size, generator=g)
-    target = (torch.rand(n, 1, size, size, generator=g) > 0.95).float()
+    target = (torch.rand(n, n_masks, size, size, generator=g) > 0.95).float()
+    if n_classes > 1:
+        return depth, target, torch.randint(0, n_classes, (n, size, size), generator=g)
     return depth, target, (torch.rand(n, 1, size, size, generator=g) > 0.9).float()
 
 
-def time_train_step(arch: str, net: Any, channels_last: bool, bf16: bool) -> float:
-    """ms per image of one Adam step (forward, BCE, backward, update), batch of BATCH."""
+def time_train_step(
+    arch: str, net: Any, channels_last: bool, bf16: bool, batch: int = BATCH, steps: int = STEPS
+) -> float:
+    """ms per image of one Adam step (forward, BCE or CE, backward, update), batch `batch`,
+    median of `steps` after one warm-up step."""
     torch.manual_seed(0)
     model = build_model(arch, net).train()
-    depth, target, truth = _inputs(BATCH, net.input_size)
+    depth, target, truth = _inputs(batch, net.input_size, net.n_masks, net.n_classes)
     if channels_last:
         model = model.to(memory_format=torch.channels_last)
         depth, target = (x.contiguous(memory_format=torch.channels_last) for x in (depth, target))
     opt = torch.optim.Adam(model.parameters(), lr=1e-4)
     times = []
-    for _ in range(STEPS + 1):  # the first step warms up oneDNN kernels
+    for _ in range(steps + 1):  # the first step warms up oneDNN kernels
         t0 = time.perf_counter()
         with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
             logits = model(depth, target)
-        loss = bce_loss(logits, truth)
+        loss = bce_loss(logits, truth) if net.n_classes == 1 else ce_loss(logits, truth)
         opt.zero_grad()
         loss.backward()
         opt.step()
         times.append(time.perf_counter() - t0)
-    return 1e3 * float(np.median(times[1:])) / BATCH
+    return 1e3 * float(np.median(times[1:])) / batch
 
 
 def time_predict(predictor: CollapsePredictor, n_targets: int, repeats: int = 5) -> float:

@@ -73,9 +73,7 @@ def epoch_peak_rss(
     for b, batch in enumerate(loader):
         if b < train_batches:
             d, t = batch["depth_m"], batch["target"]
-            value = loss(
-                forward_logits(model, d, t, cfg.bf16, cfg.channels_last), batch["collapse"]
-            )
+            value = loss(forward_logits(model, d, t, cfg.bf16, cfg.channels_last), batch)
             opt.zero_grad(set_to_none=True)
             value.backward()
             opt.step()

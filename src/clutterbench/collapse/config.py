@@ -8,6 +8,8 @@ from typing import Any, Literal
 
 from clutterbench.collapse.losses import FocalConfig
 from clutterbench.config import bounded
+from clutterbench.data.labels import OUTPUT_CHANNELS
+from clutterbench.errors import ClutterbenchError
 from clutterbench.models import parse_net_config
 from clutterbench.sim.noise import DepthNoiseConfig
 
@@ -27,9 +29,11 @@ class TrainModelConfig:
     epochs: int = bounded(ge=1)
     """Maximum epochs."""
     net: Any = dataclasses.field(default_factory=dict)
-    """The arch's config (CollapseMapConfig / FCN8sConfig fields)."""
-    loss: Literal["bce", "focal"] = "bce"
-    """bce (thesis ch. 5) or focal, eq. (6.1) (thesis ch. 6)."""
+    """The arch's config (CollapseMapConfig / FCN8sConfig fields); its n_masks picks the
+    samples: 1 = (scene, target) removals, 2 = (scene, extract, support) pulls (ch. 4)."""
+    loss: Literal["bce", "focal", "ce"] = "bce"
+    """bce (thesis ch. 5) or focal, eq. (6.1) (thesis ch. 6) on a collapse map (n_classes 1);
+    ce: softmax cross-entropy over classes (n_classes > 1, thesis ch. 4)."""
     lr_schedule: Literal["constant", "cosine"] = "constant"
     """constant (thesis) or cosine decay to lr / 100 over `epochs` (short CPU runs)."""
     patience: int = bounded(5, ge=1)
@@ -37,7 +41,26 @@ class TrainModelConfig:
     noise: bool = True
     """Add simulated sensor noise to training depth (thesis 5.2.2)."""
     flip: bool = True
-    """Random left-right flips (gravity is symmetric about the shelf's vertical plane)."""
+    """Random left-right flips (gravity is symmetric about the shelf's vertical plane;
+    thesis 4.3.1 doubles its ch. 4 data this way)."""
+
+
+def check_labels(m: TrainModelConfig, key: str) -> None:
+    """One-line errors when the network's masks, classes and loss do not fit together."""
+    n_masks, n_classes = m.net.n_masks, m.net.n_classes
+    if n_masks not in OUTPUT_CHANNELS:
+        raise ClutterbenchError(
+            f"{key}.net.n_masks: no samples give {n_masks} masks (known: "
+            f"{', '.join(map(str, OUTPUT_CHANNELS))})"
+        )
+    if n_classes not in OUTPUT_CHANNELS[n_masks]:
+        raise ClutterbenchError(
+            f"{key}.net.n_classes: {n_masks}-mask samples label "
+            f"{' or '.join(map(str, OUTPUT_CHANNELS[n_masks]))} channels, not {n_classes}"
+        )
+    if (m.loss == "ce") != (n_classes > 1):
+        need = "ce" if n_classes > 1 else "bce or focal"
+        raise ClutterbenchError(f"{key}.loss: {m.loss} does not fit n_classes {n_classes} ({need})")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,6 +83,7 @@ class TrainConfig:
             if isinstance(m.net, Mapping):
                 net = parse_net_config(m.arch, m.net, f"train.models.{name}.net")
                 object.__setattr__(m, "net", net)
+            check_labels(m, f"train.models.{name}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,6 +98,9 @@ class EvalRunConfig:
     model was trained on. Never the test set, so the choice does not peek at the test."""
     split: Literal["train", "val", "test"] = "test"
     """Which split of `dataset` is evaluated."""
+    threshold: float | None = bounded(None, gt=0.0, le=1.0)
+    """This run's pixel threshold, where its table states another than evaluate.threshold
+    (thesis Table 4.2: 0.4); null: evaluate.threshold."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,3 +114,8 @@ class EvaluateConfig:
     """Targets per forward pass."""
     figure_samples: int = bounded(8, ge=1)
     """Test pairs drawn in the figure (thesis Fig. 5.8 / 6.5)."""
+
+    def for_run(self, run: str) -> EvaluateConfig:
+        """This config with run `run`'s own threshold, where it has one."""
+        own = self.runs[run].threshold
+        return self if own is None else dataclasses.replace(self, threshold=own)

@@ -1,7 +1,10 @@
-"""Offline evaluation of a checkpoint on a test split (thesis 5.3.1, Table 5.1 / 6.1).
+"""Offline evaluation of a checkpoint on a test split (thesis 5.3.1, 4.4.1; Tables 5.1,
+6.1, 4.2).
 
-Metrics are reported at the fixed params threshold (the thesis' rule) and at the threshold
-with the best IoU on a validation split, chosen without looking at the test set.
+Metrics of the collapse class are reported at the fixed params threshold (the thesis' rule),
+summed over all test pixels (Tables 5.1, 6.1) and averaged over test samples (Table 4.2), and
+at the threshold with the best IoU on a validation split, chosen without looking at the test
+set.
 """
 
 from __future__ import annotations
@@ -19,16 +22,16 @@ from torch.utils.data import DataLoader
 from clutterbench.collapse.config import EvaluateConfig
 from clutterbench.collapse.metrics import PixelCounts, best_iou_row, sweep_row
 from clutterbench.collapse.predict import CollapsePredictor, forward_probs
-from clutterbench.data.dataset import CollapseDataset
-from clutterbench.data.labels import moved_matrix
+from clutterbench.data.dataset import PairDataset, open_pairs
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_text
 from clutterbench.models.checkpoint import check_compatible, load_checkpoint
 from clutterbench.progress import progress_bar
 
 ProbSource = Callable[[dict[str, torch.Tensor]], torch.Tensor]
-"""A batch of dataset items (depth_m, target, collapse; each (B, 1, H, W)) -> collapse
-probabilities (B, 1, H, W). The network in the stage; tests inject others (e.g. the truth)."""
+"""A batch of dataset items (depth_m, target masks, collapse: (B, 1 or n_masks, H, W)) ->
+collapse probabilities (B, 1, H, W). The network in the stage; tests inject others (e.g. the
+truth)."""
 
 SCORES = ("pixel_accuracy", "iou", "precision", "recall")
 
@@ -43,8 +46,9 @@ class SplitRef:
     threshold_m: float
     """A box counts as moved above this displacement (generate.datasets.<d>)."""
 
-    def load(self, gen_dir: Path) -> CollapseDataset:
-        ds = CollapseDataset(gen_dir, self.split_file, self.split, self.threshold_m)
+    def load(self, gen_dir: Path, n_masks: int = 1) -> PairDataset:
+        """The samples of a network with `n_masks` input masks (1: targets, 2: pulls)."""
+        ds = open_pairs(n_masks, gen_dir, self.split_file, self.split, self.threshold_m)
         if len(ds) == 0:
             raise ClutterbenchError(
                 f"{self.split_file}: the '{self.split}' split holds no (scene, target) pairs"
@@ -55,13 +59,14 @@ class SplitRef:
 @dataclasses.dataclass(frozen=True)
 class EvalResult:
     metrics: dict[str, Any]
-    """Test scores at the params threshold and at the val-chosen one, set sizes, choice."""
+    """Test scores at the params threshold (summed over pixels, and per-sample means) and at
+    the val-chosen one, set sizes, choice."""
     sweep: list[dict[str, float]]
     """Test scores at every sweep threshold."""
     val_sweep: list[dict[str, float]]
     """Validation scores at every sweep threshold (the threshold is chosen from these)."""
     samples: dict[str, np.ndarray]
-    """Test pairs for the figure: depth_m, target, truth, prob."""
+    """Test pairs for the figure: depth_m, target (n_masks, H, W each), truth, prob."""
 
 
 def check_val_split(test: SplitRef, val: SplitRef, trained_on: str | None, key: str) -> None:
@@ -90,7 +95,7 @@ def network_probs(predictor: CollapsePredictor) -> ProbSource:
 
 
 def accumulate(
-    ds: CollapseDataset,
+    ds: PairDataset,
     probs: ProbSource,
     threshold: float,
     batch_size: int,
@@ -110,7 +115,7 @@ def accumulate(
             for j in range(len(prob)):
                 if start + j in picks:
                     samples["depth_m"].append(batch["depth_m"][j, 0].numpy())
-                    samples["target"].append(batch["target"][j, 0].numpy())
+                    samples["target"].append(batch["target"][j].numpy())
                     samples["truth"].append(batch["collapse"][j, 0].numpy())
                     samples["prob"].append(prob[j, 0].numpy())
             start += len(prob)
@@ -119,8 +124,8 @@ def accumulate(
 
 
 def evaluate_sets(
-    test_ds: CollapseDataset,
-    val_ds: CollapseDataset,
+    test_ds: PairDataset,
+    val_ds: PairDataset,
     probs: ProbSource,
     cfg: EvaluateConfig,
     desc: str = "evaluate",
@@ -144,6 +149,7 @@ def evaluate_sets(
     n_pos, n_all = counts.tp + counts.fn, counts.tp + counts.fn + counts.fp + counts.tn
     metrics = {
         **counts.summary(),
+        **counts.pair_means(),
         "threshold": cfg.threshold,
         "pairs": len(test_ds),
         "scenes": int(len(test_ds.scenes["n_objects"])),
@@ -166,9 +172,11 @@ def evaluate_checkpoint(
     cfg: EvaluateConfig,
     val_key: str = "val_dataset",
 ) -> EvalResult:
-    """Rebuild the network from its checkpoint alone and evaluate it (see evaluate_sets)."""
-    test_ds, val_ds = test.load(gen_dir), val.load(gen_dir)
+    """Rebuild the network from its checkpoint alone and evaluate it (see evaluate_sets) on
+    the samples its inputs take (its n_masks)."""
     ckpt = load_checkpoint(ckpt_path)
+    n_masks = ckpt.net.n_masks
+    test_ds, val_ds = test.load(gen_dir, n_masks), val.load(gen_dir, n_masks)
     for ds in (test_ds, val_ds):
         check_compatible(ckpt, ckpt_path, int(ds.scenes["depth_m"].shape[-1]))
     check_val_split(test, val, ckpt.meta.get("dataset"), val_key)
@@ -183,14 +191,12 @@ def write_sweep_csv(path: Path, sweep: list[dict[str, float]]) -> None:
     write_text(path, "\n".join(lines) + "\n")
 
 
-def figure_pairs(ds: CollapseDataset, n: int) -> set[int]:
+def figure_pairs(ds: PairDataset, n: int) -> set[int]:
     """`n` pairs spread evenly over the set, from those where something collapses (the
-    interesting ones in thesis Fig. 5.8 / 6.5), topped up with quiet ones if too few."""
+    interesting ones in thesis Fig. 4.8 / 5.8 / 6.5), topped up with quiet ones if too few."""
     collapsing, quiet = [], []
-    for i, (s, x) in enumerate(ds.pairs):
-        n_obj = int(ds.scenes["n_objects"][s])
-        moved = moved_matrix(ds.scenes["removal_m"][s, :n_obj, :n_obj], ds.threshold_m)[x]
-        (collapsing if moved.any() else quiet).append(i)
+    for i in range(len(ds)):
+        (collapsing if ds.pair_collapses(i) else quiet).append(i)
     chosen = _spread(collapsing, n)
     return set(chosen + _spread(quiet, n - len(chosen)))
 

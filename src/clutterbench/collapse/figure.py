@@ -1,4 +1,5 @@
-"""Figure like thesis Fig. 5.8 / 6.5: depth, target mask, predicted heatmap, ground truth."""
+"""Figure like thesis Fig. 5.8 / 6.5 (and 4.8): depth, input masks, predicted heatmap,
+ground truth."""
 
 from __future__ import annotations
 
@@ -13,25 +14,37 @@ import numpy as np  # noqa: E402
 from clutterbench.io import atomic_path  # noqa: E402
 
 
-def ground_truth_rgb(target: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """Thesis Fig. 5.8 (d): collapse regions red, target green, on black."""
-    rgb = np.zeros((*target.shape, 3), dtype=np.float32)
+def ground_truth_rgb(masks: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Thesis Fig. 5.8 (d) / 4.8: collapse regions red, target (extracted object) green,
+    supported object blue, on black. masks: (H, W) target or (n_masks, H, W)."""
+    masks = masks.reshape(-1, *truth.shape)
+    rgb = np.zeros((*truth.shape, 3), dtype=np.float32)
     rgb[truth > 0.5, 0] = 1.0
-    rgb[target > 0.5, 1] = 1.0
+    for channel, mask in zip((1, 2), masks):
+        rgb[mask > 0.5, channel] = 1.0
     return rgb
 
 
+def masks_image(masks: np.ndarray) -> np.ndarray:
+    """One mask as a grey image; extraction and support masks as green and blue."""
+    if masks.ndim == 2 or len(masks) == 1:
+        return masks.reshape(masks.shape[-2:])
+    return ground_truth_rgb(masks, np.zeros(masks.shape[-2:]))
+
+
 def collapse_figure(samples: dict[str, np.ndarray], title: str, path: Path) -> None:
-    """One column per sample; rows: depth, target, heatmap in [0, 1], ground truth."""
+    """One column per sample; rows: depth, input masks, heatmap in [0, 1], ground truth."""
     n = len(samples["depth_m"])
     fig, axes = plt.subplots(4, n, figsize=(1.6 * n + 0.8, 7.0), squeeze=False)
-    rows = ("depth (m)", "target mask", "collapse map", "ground truth")
+    n_masks = samples["target"].shape[1] if samples["target"].ndim == 4 else 1
+    masks = "target mask" if n_masks == 1 else "extract / support"
+    rows = ("depth (m)", masks, "collapse map", "ground truth")
     for j in range(n):
         depth = samples["depth_m"][j]
         valid = depth[depth > 0]
         lo, hi = (float(valid.min()), float(valid.max())) if valid.size else (0.0, 1.0)
         axes[0, j].imshow(depth, cmap="gray_r", vmin=lo, vmax=hi)
-        axes[1, j].imshow(samples["target"][j], cmap="gray", vmin=0, vmax=1)
+        axes[1, j].imshow(masks_image(samples["target"][j]), cmap="gray", vmin=0, vmax=1)
         heat = axes[2, j].imshow(samples["prob"][j], cmap="jet", vmin=0, vmax=1)
         axes[3, j].imshow(ground_truth_rgb(samples["target"][j], samples["truth"][j]))
     for ax in axes.flat:

@@ -1,4 +1,4 @@
-"""Per-pixel losses on collapse logits."""
+"""Per-pixel losses on collapse logits (one channel) and class logits (thesis ch. 4)."""
 
 from __future__ import annotations
 
@@ -32,3 +32,9 @@ def focal_loss(logits: torch.Tensor, target: torch.Tensor, cfg: FocalConfig) -> 
 def bce_loss(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """Binary cross-entropy, mean over pixels (the ch. 5 collapse map network)."""
     return F.binary_cross_entropy_with_logits(logits.float(), target.float())
+
+
+def ce_loss(logits: torch.Tensor, classes: torch.Tensor) -> torch.Tensor:
+    """Softmax cross-entropy, mean over pixels: (B, K, H, W) logits, (B, H, W) class labels
+    (the ch. 4 network's B / E / S / C map; the thesis names no loss, CE is the FCN's)."""
+    return F.cross_entropy(logits.float(), classes.long())

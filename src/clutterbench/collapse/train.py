@@ -1,6 +1,7 @@
 """One training code path for every collapse network (thesis 5.2.2, 6.2.1).
 
-Adam, per-pixel BCE or focal loss, early stopping on validation loss; the best epoch's
+Adam, per-pixel BCE or focal loss on a collapse map, or cross-entropy over the B / E / S / C
+classes of thesis ch. 4 (4.3.1), early stopping on validation loss; the best epoch's
 weights are saved as models/<name>/best.pt. Each epoch appends a row to the CSV log (dvc
 plots) and a record plus a validation heatmap to the run's MCAP file (Foxglove). Wall times
 go to a separate timing file that is no dvc output, so a rerun leaves every tracked output
@@ -12,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import time
 import zlib
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -21,11 +23,11 @@ from torch import nn
 from torch.utils.data import DataLoader
 
 from clutterbench.collapse.config import TrainConfig, TrainModelConfig
-from clutterbench.collapse.losses import bce_loss, focal_loss
+from clutterbench.collapse.losses import bce_loss, ce_loss, focal_loss
 from clutterbench.collapse.metrics import PixelCounts
-from clutterbench.collapse.predict import forward_logits, forward_probs
+from clutterbench.collapse.predict import collapse_probs, forward_logits, forward_probs
 from clutterbench.config import as_dict
-from clutterbench.data.dataset import CollapseDataset
+from clutterbench.data.dataset import PairDataset, open_pairs
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json
 from clutterbench.logs.csv_log import CsvLog
@@ -62,13 +64,19 @@ def model_seed(base_seed: int, name: str) -> int:
     return (base_seed * 1_000_003 + zlib.crc32(name.encode())) % 2**31
 
 
-def loss_fn(cfg: TrainConfig, mcfg: TrainModelConfig):
+Loss = Callable[[torch.Tensor, dict[str, torch.Tensor]], torch.Tensor]
+"""(logits, batch) -> mean loss; the loss picks its labels from the batch."""
+
+
+def loss_fn(cfg: TrainConfig, mcfg: TrainModelConfig) -> Loss:
+    if mcfg.loss == "ce":
+        return lambda logits, batch: ce_loss(logits, batch["classes"])
     if mcfg.loss == "focal":
-        return lambda logits, y: focal_loss(logits, y, cfg.focal)
-    return bce_loss
+        return lambda logits, batch: focal_loss(logits, batch["collapse"], cfg.focal)
+    return lambda logits, batch: bce_loss(logits, batch["collapse"])
 
 
-def image_size(ds: CollapseDataset) -> int:
+def image_size(ds: PairDataset) -> int:
     h, w = ds.scenes["depth_m"].shape[-2:]
     if h != w:
         raise ClutterbenchError(f"images are {h}x{w}; the networks take square images")
@@ -76,18 +84,18 @@ def image_size(ds: CollapseDataset) -> int:
 
 
 def evaluate_loss(
-    model: nn.Module, loader: DataLoader, loss, cfg: TrainConfig, threshold: float
+    model: nn.Module, loader: DataLoader, loss: Loss, cfg: TrainConfig, threshold: float
 ) -> tuple[float, dict[str, float]]:
-    """Mean loss and pixel scores over `loader` (eval mode, no grad)."""
+    """Mean loss and pixel scores of the collapse class over `loader` (eval mode, no grad)."""
     model.eval()
     counts, total, n = PixelCounts(threshold), 0.0, 0
     with torch.no_grad():
         for batch in loader:
-            d, y = batch["depth_m"], batch["collapse"]
+            d = batch["depth_m"]
             logits = forward_logits(model, d, batch["target"], cfg.bf16, cfg.channels_last)
-            total += float(loss(logits, y)) * len(d)
+            total += float(loss(logits, batch)) * len(d)
             n += len(d)
-            counts.update(torch.sigmoid(logits.float()), y)
+            counts.update(collapse_probs(logits), batch["collapse"])
     return total / max(n, 1), counts.summary()
 
 
@@ -99,10 +107,11 @@ def train_model(
     seed = model_seed(base_seed, name)
     torch.manual_seed(seed)
     noise = cfg.noise if mcfg.noise else None
-    train_ds = CollapseDataset(
-        paths.gen_dir, paths.split_file, "train", threshold_m, noise, mcfg.flip, seed
+    n_masks = mcfg.net.n_masks
+    train_ds = open_pairs(
+        n_masks, paths.gen_dir, paths.split_file, "train", threshold_m, noise, mcfg.flip, seed
     )
-    val_ds = CollapseDataset(paths.gen_dir, paths.split_file, "val", threshold_m)
+    val_ds = open_pairs(n_masks, paths.gen_dir, paths.split_file, "val", threshold_m)
     for split, ds in (("train", train_ds), ("val", val_ds)):
         if len(ds) == 0:
             raise ClutterbenchError(f"train@{name}: dataset '{mcfg.dataset}' has no {split} pairs")
@@ -143,7 +152,8 @@ def train_model(
     }
     with EpisodeWriter(paths.model_dir / "train.mcap", {"model": name, **meta}) as mcap:
         mcap.write_depth(0.0, sample["depth_m"][0].numpy())
-        mcap.write_mono8(0.0, "/val/target", _to_mono8(sample["target"][0]))
+        for mask, topic in zip(sample["target"], ("/val/target", "/val/support")):
+            mcap.write_mono8(0.0, topic, _to_mono8(mask))
         mcap.write_mono8(0.0, "/val/truth", _to_mono8(sample["collapse"][0]))
         for epoch in range(1, mcfg.epochs + 1):
             t0 = time.perf_counter()
@@ -193,20 +203,37 @@ def train_model(
     return summary
 
 
+def train_step(
+    model: nn.Module,
+    batch: dict[str, torch.Tensor],
+    opt: torch.optim.Optimizer,
+    loss: Loss,
+    cfg: TrainConfig,
+) -> torch.Tensor:
+    """One optimizer step on one batch; returns the (detached) loss before the step."""
+    logits = forward_logits(model, batch["depth_m"], batch["target"], cfg.bf16, cfg.channels_last)
+    value = loss(logits, batch)
+    opt.zero_grad(set_to_none=True)
+    value.backward()
+    opt.step()
+    return value.detach()
+
+
 def _train_epoch(
-    model: nn.Module, loader: DataLoader, opt: torch.optim.Optimizer, loss, cfg, desc: str
+    model: nn.Module,
+    loader: DataLoader,
+    opt: torch.optim.Optimizer,
+    loss: Loss,
+    cfg: TrainConfig,
+    desc: str,
 ) -> float:
     model.train()
     total, n = 0.0, 0
     with progress_bar(desc, len(loader.dataset)) as advance:
         for batch in loader:
-            d, y = batch["depth_m"], batch["collapse"]
-            logits = forward_logits(model, d, batch["target"], cfg.bf16, cfg.channels_last)
-            value = loss(logits, y)
-            opt.zero_grad(set_to_none=True)
-            value.backward()
-            opt.step()
-            total += float(value.detach()) * len(d)
+            d = batch["depth_m"]
+            value = train_step(model, batch, opt, loss, cfg)
+            total += float(value) * len(d)
             n += len(d)
             advance(len(d))
     return total / max(n, 1)

@@ -1,4 +1,5 @@
-"""PyTorch Dataset over (scene, target) pairs; masks and labels derived at load time.
+"""PyTorch Datasets over (scene, target) pairs and, for thesis ch. 4, (scene, extract,
+support) triples; masks and labels derived at load time.
 
 Shards are read lazily (clutterbench.data.shards): memory holds the pair index and a few
 shards, whatever the dataset's size. Training draws pairs with ShardShuffleSampler so that
@@ -15,7 +16,13 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, Sampler
 
-from clutterbench.data.labels import collapse_mask, moved_matrix, target_mask
+from clutterbench.data.labels import (
+    CLASS_C,
+    ch4_class_map,
+    collapse_mask,
+    moved_matrix,
+    target_mask,
+)
 from clutterbench.data.shards import SceneColumns, ShardStore, load_split
 from clutterbench.errors import ClutterbenchError
 from clutterbench.sim.noise import DepthNoiseConfig, add_depth_noise
@@ -78,13 +85,10 @@ def index_scenes(store: ShardStore, indices: Sequence[int], min_target_pixels: i
     )
 
 
-class CollapseDataset(Dataset):
-    """Items are dicts of float32 tensors (1, H, W): depth_m, target, collapse.
-
-    One item per (scene, target box) pair: thesis 5.2.2 / 6.2.1 sample a target per
-    simulation; we use every visible box of every scene, since the removal matrix labels
-    them all. `scenes[key]` gives a split's per-scene arrays (image arrays read lazily).
-    """
+class _ShardPairs(Dataset):
+    """What the datasets share: the split's scenes read lazily from their shards, the
+    samples of those scenes (`pairs`, one row per sample, scene position first), and the
+    training augmentation (depth noise, left-right flip)."""
 
     def __init__(
         self,
@@ -104,7 +108,7 @@ class CollapseDataset(Dataset):
         self.store = ShardStore(gen_dir, record["dataset"], cache_shards)
         index = index_scenes(self.store, record[split], min_target_pixels)
         self.index = index
-        self.pairs = index.pairs
+        self.pairs = self._samples(index.pairs)
         self.scenes = SceneColumns(
             self.store,
             index.shard,
@@ -114,6 +118,10 @@ class CollapseDataset(Dataset):
         )
         self.threshold_m, self.noise, self.flip = threshold_m, noise, flip
         self.rng = np.random.default_rng(seed)
+
+    def _samples(self, visible: np.ndarray) -> np.ndarray:
+        """The samples, from the (scene position, visible box) pairs."""
+        return visible
 
     def __len__(self) -> int:
         return len(self.pairs)
@@ -127,23 +135,126 @@ class CollapseDataset(Dataset):
         """A shuffling sampler whose window matches this dataset's shard cache."""
         return ShardShuffleSampler(self.pair_shards, self.store.cache_shards, seed)
 
+    def _augment(self, depth_m: np.ndarray, images: list[np.ndarray]) -> list[np.ndarray]:
+        """[depth, *images], depth noised (if configured) and all flipped left-right together
+        with probability 1/2 (if configured). Images may have leading channel axes."""
+        if self.noise is not None:
+            depth_m = add_depth_noise(depth_m, self.noise, self.rng)
+        arrays = [depth_m, *images]
+        if self.flip and self.rng.random() < 0.5:
+            arrays = [a[..., ::-1] for a in arrays]
+        return arrays
+
+    def pair_collapses(self, i: int) -> bool:
+        """Whether some box moves in sample `i` (reads its scene's shard)."""
+        raise NotImplementedError
+
+
+def _float_tensor(a: np.ndarray) -> torch.Tensor:
+    # np.array copies: an item never shares memory with the shard cache.
+    return torch.from_numpy(np.array(a, dtype=np.float32))
+
+
+class CollapseDataset(_ShardPairs):
+    """Items are dicts of float32 tensors (1, H, W): depth_m, target, collapse.
+
+    One item per (scene, target box) pair: thesis 5.2.2 / 6.2.1 sample a target per
+    simulation; we use every visible box of every scene, since the removal matrix labels
+    them all. `scenes[key]` gives a split's per-scene arrays (image arrays read lazily).
+    """
+
+    n_masks = 1
+
     def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
         s, x = (int(v) for v in self.pairs[i])
         n = int(self.index.n_objects[s])
         shard = self.store.load(int(self.index.shard[s]), ("depth_m", "instance", "removal_m"))
         r = int(self.index.row[s])
-        depth, instance = shard["depth_m"][r], shard["instance"][r]
+        instance = shard["instance"][r]
         moved = moved_matrix(shard["removal_m"][r, :n, :n], self.threshold_m)[x]
-        if self.noise is not None:
-            depth = add_depth_noise(depth, self.noise, self.rng)
-        arrays = [depth, target_mask(instance, x), collapse_mask(instance, moved)]
-        if self.flip and self.rng.random() < 0.5:
-            arrays = [a[:, ::-1] for a in arrays]
+        arrays = self._augment(
+            shard["depth_m"][r], [target_mask(instance, x), collapse_mask(instance, moved)]
+        )
         names = ("depth_m", "target", "collapse")
-        # np.array copies: an item never shares memory with the shard cache.
+        return {k: _float_tensor(a)[None] for k, a in zip(names, arrays)}
+
+    def pair_collapses(self, i: int) -> bool:
+        s, x = (int(v) for v in self.pairs[i])
+        n = int(self.index.n_objects[s])
+        return bool(moved_matrix(self.scenes["removal_m"][s, :n, :n], self.threshold_m)[x].any())
+
+
+def extract_support_pairs(visible: np.ndarray) -> np.ndarray:
+    """(P, 2) (scene position, visible box) -> (Q, 3) (scene position, extract, support):
+    every ordered pair of two different visible boxes of each scene, scene by scene."""
+    rows = []
+    scenes, starts = np.unique(visible[:, 0], return_index=True)
+    for s, boxes in zip(scenes, np.split(visible[:, 1], starts[1:])):
+        rows += [(s, x, y) for x in boxes for y in boxes if x != y]
+    return np.array(rows, dtype=np.int64).reshape(-1, 3)
+
+
+class PullPairDataset(_ShardPairs):
+    """Thesis ch. 4 samples: one item per (scene, extract box, support box), both visible.
+
+    Items: depth_m (1, H, W), target (2, H, W) = extraction and support masks (float32),
+    collapse (1, H, W) = class C (float32), classes (H, W) int64 = the thesis Fig. 4.4 label
+    map (values index data.labels.PULL_CLASSES). Labels come from the generated pull tensor
+    pull_m[x, s, y] (generate.datasets.<d>.pulls: true).
+    """
+
+    n_masks = 2
+
+    def __init__(self, gen_dir: Path, *args, **kwargs):
+        super().__init__(gen_dir, *args, **kwargs)
+        if "pull_m" not in self.store.array_names():
+            raise ClutterbenchError(
+                f"dataset '{self.store.dataset}' holds no pull labels (pull_m); generate it "
+                "with pulls: true"
+            )
+
+    def _samples(self, visible: np.ndarray) -> np.ndarray:
+        return extract_support_pairs(visible)
+
+    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
+        s, x, sup = (int(v) for v in self.pairs[i])
+        n = int(self.index.n_objects[s])
+        shard = self.store.load(int(self.index.shard[s]), ("depth_m", "instance", "pull_m"))
+        r = int(self.index.row[s])
+        instance = shard["instance"][r]
+        classes = ch4_class_map(instance, x, sup, shard["pull_m"][r, x, sup, :n], self.threshold_m)
+        masks = np.stack([target_mask(instance, x), target_mask(instance, sup)])
+        depth, masks, classes = self._augment(shard["depth_m"][r], [masks, classes])
         return {
-            k: torch.from_numpy(np.array(a, dtype=np.float32))[None] for k, a in zip(names, arrays)
+            "depth_m": _float_tensor(depth)[None],
+            "target": _float_tensor(masks),
+            "collapse": _float_tensor(classes == CLASS_C)[None],
+            "classes": torch.from_numpy(np.array(classes, dtype=np.int64)),
         }
+
+    def pair_collapses(self, i: int) -> bool:
+        s, x, sup = (int(v) for v in self.pairs[i])
+        n = int(self.index.n_objects[s])
+        moved = np.nan_to_num(self.scenes["pull_m"][s, x, sup, :n], nan=0.0) > self.threshold_m
+        moved[[x, sup]] = False
+        return bool(moved.any())
+
+
+PairDataset = CollapseDataset | PullPairDataset
+DATASETS: dict[int, type[CollapseDataset] | type[PullPairDataset]] = {
+    CollapseDataset.n_masks: CollapseDataset,
+    PullPairDataset.n_masks: PullPairDataset,
+}
+"""Number of network input masks -> the dataset that feeds such a network."""
+
+
+def open_pairs(n_masks: int, *args, **kwargs) -> PairDataset:
+    """The dataset for a network with `n_masks` input masks (arguments as CollapseDataset):
+    (scene, target) pairs labelled by removal, or (scene, extract, support) labelled by
+    pulling (thesis ch. 4)."""
+    if n_masks not in DATASETS:
+        raise ClutterbenchError(f"no dataset feeds {n_masks} masks (known: {sorted(DATASETS)})")
+    return DATASETS[n_masks](*args, **kwargs)
 
 
 def shard_window_order(

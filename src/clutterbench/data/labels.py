@@ -1,8 +1,17 @@
-"""Labels derived at load time from a scene's instance image and removal matrix."""
+"""Labels derived at load time from a scene's instance image and removal / pull tensors."""
 
 from __future__ import annotations
 
 import numpy as np
+
+PULL_CLASSES = ("B", "E", "S", "C")
+"""Thesis Fig. 4.4 classes, by label value: background, extracted object, supported object,
+collapsing region. Collapse is the last class (the networks' collapse channel)."""
+CLASS_B, CLASS_E, CLASS_S, CLASS_C = range(len(PULL_CLASSES))
+OUTPUT_CHANNELS = {1: (1,), 2: (1, len(PULL_CLASSES))}
+"""Network input masks -> the output channels their labels can train: one target mask ->
+a collapse map (1); extraction + support masks (pull labels) -> a collapse map (1) or the
+four classes of thesis Fig. 4.4."""
 
 
 def moved_matrix(removal_m: np.ndarray, threshold_m: float) -> np.ndarray:
@@ -34,3 +43,28 @@ def support_edges(removal_m: np.ndarray, threshold_m: float) -> list[tuple[int, 
     """Ground-truth support relations SUPP(x, y): removing x moves y (thesis 6.2.2)."""
     m = moved_matrix(removal_m, threshold_m)
     return [(int(x), int(y)) for x, y in zip(*np.nonzero(m))]
+
+
+def ch4_class_map(
+    instance: np.ndarray,
+    extract: int,
+    support: int,
+    displacement_m: np.ndarray,
+    threshold_m: float,
+) -> np.ndarray:
+    """(H, W) uint8 label map of one (extract, support) pull, thesis Fig. 4.4: E = pixels of
+    box `extract`, S = pixels of box `support`, C = pixels of every other box whose
+    displacement exceeds `threshold_m`, B = everything else.
+
+    displacement_m: (N,) metres moved by each box in that pull (pull_m[x, s, :N]; NaN for
+    the extracted and the held box)."""
+    assert instance.dtype == np.uint8, "instance must be uint8 ids, 0 = background"
+    assert displacement_m.ndim == 1, "displacement_m is one pull's (N,) displacements"
+    n = len(displacement_m)
+    assert 0 <= extract < n and 0 <= support < n and extract != support
+    with np.errstate(invalid="ignore"):
+        moved = np.nan_to_num(displacement_m, nan=0.0) > threshold_m
+    lut = np.full(256, CLASS_B, dtype=np.uint8)
+    lut[1 : 1 + n][moved] = CLASS_C
+    lut[1 + extract], lut[1 + support] = CLASS_E, CLASS_S
+    return lut[instance]

@@ -2,7 +2,8 @@
 
 For tests and benchmarks that need data of a given shape and size in seconds: boxes are
 rectangles of tilted planes in front of a back wall, drawn in order (later ones occlude),
-and the removal matrix is random. Only the layout is realistic, not the labels.
+and the removal matrix (and, with pulls, the pull tensor) is random. Only the layout is
+realistic, not the labels.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ def synthetic_scenes(
     size: int,
     n_objects: tuple[int, int],
     families: Mapping[str, float],
+    pulls: bool = False,
 ) -> dict[str, np.ndarray]:
     """Per-scene arrays of one shard (every key a generated shard has, but config_hash)."""
     s, n_max = len(scene_indices), n_objects[1]
@@ -49,7 +51,7 @@ def synthetic_scenes(
         r = rng.exponential(0.005, size=(n[k], n[k])).astype(np.float32)
         np.fill_diagonal(r, 0.0)
         removal[k, : n[k], : n[k]] = r
-    return {
+    arrays = {
         "scene_index": np.array(scene_indices, dtype=np.int64),
         "n_objects": n.astype(np.int16),
         "family": np.array(
@@ -64,6 +66,24 @@ def synthetic_scenes(
         "rejected": rng.poisson(0.3, size=(s, len(REJECT_REASONS))).astype(np.int32),
         "steps": rng.integers(100, 1000, size=s),
     }
+    if pulls:
+        arrays["pull_m"] = synthetic_pulls(rng, n, n_max)
+    return arrays
+
+
+def synthetic_pulls(rng: np.random.Generator, n: np.ndarray, n_max: int) -> np.ndarray:
+    """(S, n_max, n_max + 1, n_max) P[x, s, y] as generate lays it out: support slot n_max is
+    "no support"; NaN where x == y, s == x or s == y, and beyond each scene's boxes."""
+    pull = np.full((len(n), n_max, n_max + 1, n_max), np.nan, np.float64)
+    for k, nk in enumerate(n):
+        r = rng.exponential(0.005, size=(nk, nk + 1, nk))
+        pull[k, :nk, :nk, :nk], pull[k, :nk, n_max, :nk] = r[:, :nk], r[:, nk]
+        for x in range(nk):
+            pull[k, x, :, x] = np.nan
+            pull[k, x, x, :] = np.nan
+            for s in range(nk):
+                pull[k, x, s, s] = np.nan
+    return pull
 
 
 def write_synthetic_dataset(
@@ -76,6 +96,7 @@ def write_synthetic_dataset(
     families: Mapping[str, float] | None = None,
     seed: int = 0,
     config_hash: str = "synthetic",
+    pulls: bool = False,
 ) -> dict[str, Any]:
     """Write gen_dir/name/{shard-NNNNN.npz, manifest.json}; returns the manifest."""
     families = families or {"random": 1.0}
@@ -85,7 +106,7 @@ def write_synthetic_dataset(
     for k, lo in enumerate(range(0, n_scenes, shard_size)):
         rng = np.random.default_rng([seed, k])  # each shard alone regenerable, like generate
         indices = list(range(lo, min(lo + shard_size, n_scenes)))
-        arrays = synthetic_scenes(rng, indices, size, n_objects, families)
+        arrays = synthetic_scenes(rng, indices, size, n_objects, families, pulls)
         shards.append(f"shard-{k:05d}.npz")
         save_npz(out / shards[-1], {**arrays, "config_hash": np.array(config_hash)})
         for f in arrays["family"]:

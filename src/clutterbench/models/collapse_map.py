@@ -1,9 +1,15 @@
-"""Collapse map network / collapse predictor (thesis Fig. 5.4, Fig. 6.3).
+"""Collapse map network / collapse predictor (thesis Fig. 5.4, Fig. 6.3) and the ch. 4
+extraction / support network (thesis Fig. 4.2): one network, configured by its masks and
+classes.
 
-Depth -> VGG-16 encoder; target mask -> 5 conv layers (16-32-32-32-64, BN + ReLU, each
-halving the size); both meet at 1/32 of the input and a decoder of five conv layers (each
-after a 2x upsampling, fed the VGG feature map of that size: the skip connections) and one
-1x1 conv gives a per-pixel collapse logit.
+Depth -> VGG-16 encoder; each input mask -> its own 5 conv layers (16-32-32-32-64, BN +
+ReLU, each halving the size); all meet at 1/32 of the input and a decoder of five conv
+layers (each after a 2x upsampling, fed the VGG feature map of that size: the skip
+connections) and one 1x1 conv gives per-pixel logits.
+
+n_masks = 1, n_classes = 1: target mask -> collapse logit (sigmoid), thesis ch. 5 / 6.
+n_masks = 2, n_classes = 4: extraction + support masks -> B / E / S / C logits (softmax),
+thesis ch. 4 (classes in clutterbench.data.labels.PULL_CLASSES; collapse is the last one).
 """
 
 from __future__ import annotations
@@ -31,7 +37,13 @@ class CollapseMapConfig:
     encoder: VGGConfig = VGGConfig()
     """Depth encoder."""
     mask_channels: tuple[int, int, int, int, int] = (16, 32, 32, 32, 64)
-    """Target-mask encoder conv widths (thesis 6.2.1)."""
+    """Conv widths of each mask's encoder (thesis 6.2.1)."""
+    n_masks: int = bounded(1, ge=1)
+    """Input masks, each with its own encoder: 1 (target, ch. 5 / 6) or 2 (extraction and
+    support, thesis 4.2.2)."""
+    n_classes: int = bounded(1, ge=1)
+    """Output channels: 1 = a collapse logit (sigmoid), > 1 = class logits (softmax) whose
+    last class is collapse (thesis Fig. 4.4: B, E, S, C)."""
     decoder_channels: tuple[int, int, int, int, int] = (128, 64, 32, 16, 16)
     """Decoder conv widths, from 1/16 up to full size."""
     depth_range_m: tuple[float, float] = (0.3, 1.0)
@@ -46,26 +58,31 @@ class CollapseMapNet(nn.Module):
         super().__init__()
         self.cfg = cfg
         self.depth_encoder = VGG16Encoder(cfg.encoder, in_channels=1)
-        c = 1
+        # One encoder per mask as grouped convolutions: group k sees only mask k, and its
+        # output channels are that mask's features (thesis Fig. 4.2: "two masks, each with
+        # five convolution layer network", concatenated). With one mask, a plain encoder
+        # with the same parameter names as before (old checkpoints load).
+        m, c = cfg.n_masks, cfg.n_masks
         layers = []
         for c_out in cfg.mask_channels:
-            layers.append(conv_bn_relu(c, c_out, stride=2))
-            c = c_out
+            layers.append(conv_bn_relu(c, m * c_out, stride=2, groups=m))
+            c = m * c_out
         self.mask_encoder = nn.Sequential(*layers)
         skips = cfg.encoder.skip_channels()  # strides 2, 4, 8, 16, 32
-        c = skips[-1] + cfg.mask_channels[-1]
+        c = skips[-1] + m * cfg.mask_channels[-1]
         self.decoder = nn.ModuleList()
         # Upsample to strides 16, 8, 4, 2 (concatenating that VGG map), then to full size.
         for c_out, c_skip in zip(cfg.decoder_channels, [*skips[3::-1], 0]):
             self.decoder.append(conv_bn_relu(c + c_skip, c_out))
             c = c_out
-        self.head = nn.Conv2d(c, 1, 1)
+        self.head = nn.Conv2d(c, cfg.n_classes, 1)
 
-    def forward(self, depth_m: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-        """(B, 1, H, W) depth in metres and target mask -> (B, 1, H, W) collapse logits."""
-        check_input(depth_m, target, self.cfg.input_size)
+    def forward(self, depth_m: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
+        """(B, 1, H, W) depth in metres and (B, n_masks, H, W) masks -> (B, n_classes, H, W)
+        logits."""
+        check_input(depth_m, masks, self.cfg.input_size, self.cfg.n_masks)
         feats = self.depth_encoder(normalise_depth(depth_m, *self.cfg.depth_range_m))
-        x = torch.cat([feats[-1], self.mask_encoder(target)], dim=1)
+        x = torch.cat([feats[-1], self.mask_encoder(masks)], dim=1)
         for i, conv in enumerate(self.decoder):
             skip = feats[3 - i] if i < 4 else depth_m
             x = upsample_to(x, skip)

@@ -19,19 +19,27 @@ def normalise_depth(depth_m: torch.Tensor, near_m: float, far_m: float) -> torch
     return torch.where(depth_m > 0, 2.0 * x - 1.0, torch.full_like(x, -1.0))
 
 
-def conv_bn_relu(c_in: int, c_out: int, stride: int = 1) -> nn.Sequential:
+def conv_bn_relu(c_in: int, c_out: int, stride: int = 1, groups: int = 1) -> nn.Sequential:
+    """3x3 conv + BN + ReLU; `groups` > 1 runs that many independent branches side by side
+    (channels split in equal groups)."""
     return nn.Sequential(
-        nn.Conv2d(c_in, c_out, 3, stride=stride, padding=1, bias=False),
+        nn.Conv2d(c_in, c_out, 3, stride=stride, padding=1, bias=False, groups=groups),
         nn.BatchNorm2d(c_out),
         nn.ReLU(inplace=True),
     )
 
 
-def check_input(depth_m: torch.Tensor, target: torch.Tensor, input_size: int) -> None:
+def check_input(
+    depth_m: torch.Tensor, masks: torch.Tensor, input_size: int, n_masks: int = 1
+) -> None:
     if depth_m.ndim != 4 or depth_m.shape[1] != 1:
         raise ValueError(f"depth_m must be (B, 1, H, W), got {tuple(depth_m.shape)}")
-    if target.shape != depth_m.shape:
-        raise ValueError(f"target {tuple(target.shape)} must match depth {tuple(depth_m.shape)}")
+    b, _, h, w = depth_m.shape
+    if masks.shape != (b, n_masks, h, w):
+        raise ValueError(
+            f"masks {tuple(masks.shape)} must be (B, {n_masks}, H, W) like depth "
+            f"{tuple(depth_m.shape)}"
+        )
     if depth_m.shape[-2:] != (input_size, input_size):
         raise ValueError(
             f"model takes {input_size}x{input_size} images, got "

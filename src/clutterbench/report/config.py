@@ -18,3 +18,5 @@ class ReportConfig:
     """Table 6.3 row (thesis_figures.yaml `row:` label, or a row of ours) -> trials condition."""
     table_6_2_methods: Mapping[str, str] = dataclasses.field(default_factory=dict)
     """Table 6.2 row: support method (reports/support/scenes.csv) -> label."""
+    table_4_2: Mapping[str, str | None] = dataclasses.field(default_factory=dict)
+    """Thesis Table 4.2 row (model x ground truth) -> our evaluate run."""
