@@ -14,6 +14,7 @@ from clutterbench.report.config import ReportConfig
 from clutterbench.report.datasets import dataset_stats, datasets_table
 from clutterbench.report.extraction import extraction_table
 from clutterbench.report.support import support_table
+from clutterbench.report.table_4_1 import table_4_1, table_4_1_target
 from clutterbench.report.table_4_2 import table_4_2
 from clutterbench.report.tables import load_thesis_figures
 from clutterbench.stage import run_stage
@@ -72,6 +73,14 @@ def report(params: dict, base: BaseConfig) -> None:
         for cond in cfg.table_6_3.values()
     }
     extraction_table(records, cfg.table_6_3, figures, Path("reports/tables"), base.scale)
+
+    by_condition: dict[str, list[dict]] = {}
+    for r in read_records(Path("reports/trials_ch4/records.jsonl")):
+        by_condition.setdefault(r["condition"], []).append(r)
+    table_4_1(by_condition, cfg.table_4_1, figures, Path("reports/tables"), base.scale)
+    table_4_1_target(
+        by_condition, cfg.table_4_1_target, figures, Path("reports/tables"), base.scale
+    )
 
 
 if __name__ == "__main__":

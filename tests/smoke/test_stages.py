@@ -27,6 +27,8 @@ from clutterbench.models.checkpoint import load_checkpoint, save_checkpoint
 from clutterbench.models.collapse_map import CollapseMapConfig, CollapseMapNet
 from clutterbench.models.vgg import VGGConfig
 from clutterbench.sim.config import SimConfig
+from clutterbench.trials.config import TrialsConfig
+from clutterbench.trials.records import read_records
 
 pytestmark = pytest.mark.slow
 COPY = ["dvc.yaml", "params.yaml", "stages", "src", "reports/thesis_figures.yaml"]
@@ -109,13 +111,30 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
         assert (run_dir / "figure.png").stat().st_size > 1000
         assert len((run_dir / "sweep.csv").read_text().splitlines()) == 101
         assert len((run_dir / "val_sweep.csv").read_text().splitlines()) == 101
+    trials = load_section(TrialsConfig, "trials", params)
+    ch4 = read_records(a / "reports/trials_ch4/records.jsonl")
+    assert len(ch4) == sum(c.episodes for c in trials.ch4_conditions.values())
+    for name in trials.ch4_conditions:
+        assert (
+            read_episode(a / "data/trials_ch4" / name / "episodes.mcap")["topics"]["/trial/outcome"]
+            == trials.ch4_conditions[name].episodes
+        )
+    for name, cond in trials.conditions.items():
+        assert len(read_records(a / "reports/trials" / name / "records.jsonl")) == cond.episodes
+    assert (a / "reports/trials_ch4/fig_4_8.png").stat().st_size > 1000
+    for table, rows in (("table_4_1", 24 + 6), ("table_4_1_target", 3), ("table_6_3", 7)):
+        frame = pd.read_csv(a / "reports/tables" / f"{table}.csv")
+        assert len(frame) == rows and frame["success_rate"].between(0, 1).all(), table
+    t42 = pd.read_csv(a / "reports/tables/table_4_2.csv")
+    assert len(t42) == 4
     status = run(["dvc", "status"], a).stdout
     assert "changed" not in status
 
 
 def test_same_params_give_byte_identical_data_and_tables(repro_twice):
     a, b = repro_twice
-    for tree in ("data", "models", "reports/train", "reports/evaluate", "reports/tables"):
+    trees = ("data", "models", "reports/train", "reports/evaluate", "reports/tables")
+    for tree in (*trees, "reports/support", "reports/trials", "reports/trials_ch4"):
         assert digest_tree(a / tree) == digest_tree(b / tree), tree
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from clutterbench.data.labels import PULL_CLASSES
 from clutterbench.planning.risk import (
     CLASSES,
     PairChoice,
@@ -34,8 +35,9 @@ def with_collapse(pixels: int) -> np.ndarray:
     return labels.reshape(H, W)
 
 
-def test_classes_are_in_the_thesis_order():
-    assert CLASSES == ("E", "S", "C", "B") and (E, S, C, B) == (0, 1, 2, 3)
+def test_classes_are_the_network_label_order():
+    # The planner indexes the network's output channels: they must be the training labels'.
+    assert CLASSES == PULL_CLASSES and (B, E, S, C) == (0, 1, 2, 3)
 
 
 def test_risk_index_by_hand():
@@ -46,8 +48,10 @@ def test_risk_index_by_hand():
     # union once, in R_C: 5 / 16.
     labels = np.stack([with_collapse(3)] * 3)
     probs = one_hot(labels)
-    probs[1, :, 3, :] = [[0.3], [0.3], [0.3], [0.1]]
-    probs[2, :, 3, :2] = [[0.05], [0.05], [0.45], [0.45]]
+    probs[1, :, 3, :] = 0.3
+    probs[1, C, 3, :] = 0.1
+    probs[2, :, 3, :2] = 0.05
+    probs[2, [B, C], 3, :2] = 0.45
     assert risk_index(probs).tolist() == [3 / 16, 3 / 12, 5 / 16]
     # The threshold is the thesis' 0.4: at 0.46 the 0.45 pixels fall out of every region.
     assert risk_index(probs[2:], threshold=0.46)[0] == pytest.approx(3 / 14)
@@ -70,7 +74,8 @@ def test_risk_from_labels_is_the_collapse_fraction():
 
 def test_the_two_readings_differ_where_regions_overlap_or_leave_gaps():
     probs = one_hot(with_collapse(3)[None])
-    probs[0, :, 3, :] = [[0.3], [0.3], [0.3], [0.1]]  # undecided; argmax calls them E
+    probs[0, :, 3, :] = 0.3  # undecided; argmax calls them B, not C
+    probs[0, C, 3, :] = 0.1
     assert risk_index(probs)[0] == 3 / 12
     assert risk_from_labels(probs.argmax(axis=1))[0] == 3 / 16
 

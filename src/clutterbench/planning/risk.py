@@ -15,9 +15,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-CLASSES = ("E", "S", "C", "B")
-"""Output channels of the ch. 4 network, in index order."""
-E, S, C, B = range(4)
+CLASSES = ("B", "E", "S", "C")
+"""Output channels of the ch. 4 network, in index order (data.labels.PULL_CLASSES: the label
+values it was trained on; collapse last)."""
+B, E, S, C = range(4)
 PIXEL_THRESHOLD = 0.4
 """A pixel belongs to a class's region when its probability is above this (thesis 4.4.1)."""
 

@@ -18,5 +18,9 @@ class ReportConfig:
     """Table 6.3 row (thesis_figures.yaml `row:` label, or a row of ours) -> trials condition."""
     table_6_2_methods: Mapping[str, str] = dataclasses.field(default_factory=dict)
     """Table 6.2 row: support method (reports/support/scenes.csv) -> label."""
+    table_4_1: Mapping[str, str] = dataclasses.field(default_factory=dict)
+    """Table 4.1 row '<method>/<box set>' -> trials_ch4 condition (totals added per method)."""
+    table_4_1_target: Mapping[str, str] = dataclasses.field(default_factory=dict)
+    """Predetermined-target row (method) -> trials_ch4 condition."""
     table_4_2: Mapping[str, str | None] = dataclasses.field(default_factory=dict)
     """Thesis Table 4.2 row (model x ground truth) -> our evaluate run."""

@@ -118,6 +118,56 @@ class Ch6TrialParams:
     """An episode stops (failed) after this many extraction attempts."""
 
 
+CH4_PLANNERS = ("risk", "random", "oracle")
+"""ch. 4 trial policies: argmin of the risk index r_c over the candidates through a ch. 4
+network (eqs. 4.1, 4.2); a uniformly random candidate; every candidate simulated from the
+canonical start, the best kept."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Ch4ConditionConfig:
+    """One chapter 4 trials condition -> stage trials_ch4@<name> (thesis Table 4.1)."""
+
+    planner: Literal["risk", "random", "oracle"]
+    """Policy (trials.config.CH4_PLANNERS)."""
+    stream: str
+    """Scene stream (a key of trials.streams)."""
+    episodes: int = bounded(100, ge=1)
+    """Number of trials."""
+    mode: Literal["pair", "target"] = "pair"
+    """"pair": choose the safest ordered (extract, support) pair (thesis 4.2.3 (1));
+    "target": the target is given, choose its support (4.2.3 (2))."""
+    model: str | None = None
+    """The ch. 4 network of the risk planner (a key of train.models); null for the others."""
+    perception: Literal["instance", "depth"] = "instance"
+    """Object masks from the simulator's instance image, or from the depth image alone."""
+
+    def __post_init__(self) -> None:
+        if (self.planner == "risk") != (self.model is not None):
+            raise ValueError(
+                f"model: the risk planner needs a ch. 4 network and the {self.planner} "
+                "planner takes none"
+                if self.planner == "risk"
+                else f"model: the {self.planner} planner takes no network (set model: null)"
+            )
+
+
+@dataclasses.dataclass(frozen=True)
+class Ch4TrialParams:
+    """How a chapter 4 pull is judged (thesis 4.3.3)."""
+
+    moved_threshold_m: float = bounded(0.005, gt=0.0)
+    """Strict success: no box other than the pulled and the held one moved more than this."""
+    min_pixels: int = bounded(20, ge=1)
+    """Planners see an object when its mask has at least this many pixels."""
+    min_target_pixels: int = bounded(40, ge=1)
+    """The predetermined target is drawn among boxes with at least this many visible pixels."""
+    pixel_threshold: float = bounded(0.4, gt=0.0, le=1.0)
+    """A pixel is in a class's region when its probability exceeds this (thesis 4.4.1)."""
+    figure_episode: int = bounded(0, ge=0)
+    """Episode drawn as thesis Fig. 4.8 by risk conditions in target mode."""
+
+
 @dataclasses.dataclass(frozen=True)
 class TrialsConfig:
     workers: int = bounded(2, ge=1)
@@ -128,15 +178,20 @@ class TrialsConfig:
     """Chapter 6 execution and judging."""
     conditions: Mapping[str, ConditionConfig] = dataclasses.field(default_factory=dict)
     """Condition name -> planner on a stream; each becomes stage trials@<name>."""
+    ch4: Ch4TrialParams = Ch4TrialParams()
+    """Chapter 4 judging."""
+    ch4_conditions: Mapping[str, Ch4ConditionConfig] = dataclasses.field(default_factory=dict)
+    """Condition name -> ch. 4 planner on a stream; each becomes stage trials_ch4@<name>."""
     max_attempts: int = bounded(30, ge=1)
     """A trial scene is redrawn at most this often."""
     mcap_images: bool = True
     """Write depth and instance images of every observation to the condition's MCAP."""
 
     def __post_init__(self) -> None:
-        for name, cond in self.conditions.items():
-            if cond.stream not in self.streams:
-                raise ValueError(
-                    f"conditions.{name}.stream: unknown stream '{cond.stream}' "
-                    f"(known: {', '.join(self.streams)})"
-                )
+        for group in ("conditions", "ch4_conditions"):
+            for name, cond in getattr(self, group).items():
+                if cond.stream not in self.streams:
+                    raise ValueError(
+                        f"{group}.{name}.stream: unknown stream '{cond.stream}' "
+                        f"(known: {', '.join(self.streams)})"
+                    )

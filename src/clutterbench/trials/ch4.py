@@ -1,0 +1,394 @@
+"""Chapter 4 trials: pull one box toward the camera while a second arm holds another
+(thesis 4.2.3, 4.3.3, Table 4.1).
+
+An episode: draw a scene from the condition's stream and settle it (the canonical start),
+observe it, segment it (simulator instance masks, or depth alone), let the planner choose an
+(extract, support) pair of segments, map the segments to the boxes the robot would grasp,
+then execute the pull from the canonical start exactly as the ch. 4 labels were made
+(`act_on_spec(..., "pull", extract, support)`) and judge it from physics:
+
+- success (the thesis' definition): no box other than the pulled one left the shelf;
+- strict success: also no other box moved more than `moved_threshold_m`.
+
+The risk planner sees only the depth image and the masks; the oracle reads the world.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from clutterbench.errors import ClutterbenchError
+from clutterbench.observation import Observation
+from clutterbench.perception.depth_segmentation import shelf_roi
+from clutterbench.perception.masks import Segmentation, match_segments, segment
+from clutterbench.planning.risk import (
+    Pair,
+    PairChoice,
+    candidate_pairs,
+    choose_safest_pair,
+    choose_support_for_target,
+    random_pair,
+    risk_index,
+)
+from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.labelling import act_on_spec
+from clutterbench.sim.physics import BoxWorld
+from clutterbench.sim.render import observe
+from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.config import Ch4ConditionConfig, Ch4TrialParams, SceneStreamConfig
+from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
+from clutterbench.trials.scenes import draw_target, draw_trial_spec, policy_rng
+
+RISKS_LOGGED = 8
+"""The decision message lists the candidates of least risk, this many."""
+
+
+# -- the network: (depth, extraction mask, support mask) -> B / E / S / C -------------------
+def class_probs(predictor: Any, depth_m: np.ndarray, pair_masks: np.ndarray) -> np.ndarray:
+    """(A, 2, H, W) extraction + support masks of A candidates on one depth image -> (A, 4,
+    H, W) float32 class probabilities in the network's label order (planning.risk.CLASSES),
+    in batches of the predictor's batch size."""
+    import torch
+
+    from clutterbench.collapse.predict import forward_logits
+
+    assert pair_masks.ndim == 4 and pair_masks.shape[1] == 2, "pair masks must be (A, 2, H, W)"
+    depth = torch.from_numpy(np.ascontiguousarray(depth_m, dtype=np.float32))[None, None]
+    out = np.empty((len(pair_masks), 4, *depth_m.shape), dtype=np.float32)
+    with torch.no_grad():
+        for start in range(0, len(pair_masks), predictor.batch_size):
+            chunk = torch.from_numpy(
+                pair_masks[start : start + predictor.batch_size].astype(np.float32)
+            )
+            logits = forward_logits(
+                predictor.model,
+                depth.expand(len(chunk), -1, -1, -1),
+                chunk,
+                predictor.bf16,
+                predictor.channels_last,
+            )
+            if logits.shape[1] != 4:
+                raise ValueError(
+                    f"the ch. 4 planner needs a 4-class network (B/E/S/C), this one has "
+                    f"{logits.shape[1]} output channels"
+                )
+            out[start : start + len(chunk)] = torch.softmax(logits.float(), dim=1).numpy()
+    return out
+
+
+def pair_masks(seg: Segmentation, pairs: list[Pair]) -> np.ndarray:
+    """(A, 2, H, W) float32 extraction and support masks of candidate pairs of segment indices."""
+    out = np.zeros((len(pairs), 2, *seg.masks.shape[1:]), dtype=np.float32)
+    for a, (x, s) in enumerate(pairs):
+        out[a, 0] = seg.masks[x]
+        if s is not None:
+            out[a, 1] = seg.masks[s]
+    return out
+
+
+def plan_risk(
+    predictor: Any,
+    obs: Observation,
+    seg: Segmentation,
+    target: int | None,
+    pixel_threshold: float,
+) -> tuple[PairChoice, list[Pair], np.ndarray, np.ndarray]:
+    """Eqs. (4.1), (4.2) on segment indices: every ordered pair (target None) or every support
+    of `target`, batched through the network -> (choice, candidates, risks, class probs)."""
+    ks = list(range(len(seg.ids)))
+    if target is None:
+        pairs = candidate_pairs(ks)
+    else:
+        pairs = [(target, s) for s in ks if s != target]
+    probs = class_probs(predictor, obs.depth_m, pair_masks(seg, pairs))
+    risks = risk_index(probs, pixel_threshold)
+    if target is None:
+        choice = choose_safest_pair(pairs, risks)
+    else:
+        choice = choose_support_for_target(target, pairs, risks)
+    return choice, pairs, risks, probs
+
+
+# -- execution and the judge -----------------------------------------------------------------
+def pull_outcome(
+    spec: SceneSpec,
+    physics: PhysicsConfig,
+    extract: int,
+    support: int | None,
+    threshold_m: float,
+    world: BoxWorld | None = None,
+) -> dict[str, Any]:
+    """Pull `extract` out toward the camera with `support` held, from the canonical start (the
+    code path of the ch. 4 labels), and judge it from the boxes' motion."""
+    world = world or BoxWorld.from_spec(spec, physics)
+    disp = act_on_spec(spec, physics, "pull", extract, support, world=world)
+    others = [k for k in range(spec.n) if k not in (extract, support)]
+    on_shelf = spec.shelf.contains(world.positions())
+    left = [k for k in others if not on_shelf[k]]
+    moved = [k for k in others if disp[k] > threshold_m]
+    return {
+        "target_out": extract in world.removed,
+        "n_left_shelf": len(left),
+        "n_disturbed": len(moved),
+        "disturbance_m": float(np.sum(disp[others])) if others else 0.0,
+        "success": extract in world.removed and not left,
+        "strict_success": extract in world.removed and not left and not moved,
+        "displacement_m": disp,
+    }
+
+
+def _better(a: dict[str, Any], b: dict[str, Any] | None) -> bool:
+    if b is None:
+        return True
+    key = ("strict_success", "success")
+    return (tuple(a[k] for k in key), -a["n_disturbed"], -a["disturbance_m"]) > (
+        tuple(b[k] for k in key),
+        -b["n_disturbed"],
+        -b["disturbance_m"],
+    )
+
+
+def plan_oracle(
+    spec: SceneSpec,
+    physics: PhysicsConfig,
+    pairs: list[tuple[int, int | None]],
+    threshold_m: float,
+    rng: np.random.Generator,
+) -> tuple[int, int, int]:
+    """The ceiling: simulate the candidate box pairs from the canonical start in a random
+    order and keep the best (strict success, then success, then the least disturbance).
+    A strict success cannot be beaten on success, so the search stops at the first one.
+    -> (index of the chosen pair, pairs simulated, index of the first strict success or -1)."""
+    best, best_k, tried = None, 0, 0
+    for k in rng.permutation(len(pairs)):
+        x, s = pairs[int(k)]
+        out = pull_outcome(spec, physics, x, s, threshold_m)
+        tried += 1
+        if _better(out, best):
+            best, best_k = out, int(k)
+        if out["strict_success"]:
+            return best_k, tried, best_k
+    return best_k, tried, -1
+
+
+# -- one episode ---------------------------------------------------------------------------
+def observe_and_segment(
+    world: BoxWorld, spec: SceneSpec, job: dict[str, Any]
+) -> tuple[Observation, Segmentation]:
+    cond: Ch4ConditionConfig = job["cond"]
+    params: Ch4TrialParams = job["params"]
+    obs = observe(world, job["camera"])
+    seg = segment(obs, cond.perception, min_pixels=params.min_pixels, roi=shelf_roi(spec.shelf))
+    return obs, seg
+
+
+def target_segment(seg: Segmentation, instance: np.ndarray, box: int) -> int | None:
+    """The segment the user points at for box `box`: the one covering most of its pixels."""
+    overlap = [int(np.sum(m & (instance == box + 1))) for m in seg.masks]
+    if not overlap or max(overlap) == 0:
+        return None
+    return int(np.argmax(overlap))
+
+
+def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
+    """One ch. 4 trial on scene `job["index"]` of its stream."""
+    cond: Ch4ConditionConfig = job["cond"]
+    params: Ch4TrialParams = job["params"]
+    physics: PhysicsConfig = job["physics"]
+    spec = draw_trial_spec(
+        cond.stream,
+        job["stream_cfg"],
+        job["seed"],
+        job["index"],
+        physics,
+        job["camera"],
+        job["max_attempts"],
+    )
+    world = BoxWorld.from_spec(spec, physics, render=True)
+    obs, seg = observe_and_segment(world, spec, job)
+    log = EpisodeLog(record_images=job["record_images"])
+    log.observation(0.0, obs.depth_m, obs.instance)
+    log.poses(0.0, world.poses())
+    boxes = match_segments(seg, obs.instance)  # the harness's, never the planner's
+    target_box = target_k = None
+    if cond.mode == "target":
+        target_box = draw_target(
+            job["seed"], cond.stream, job["index"], obs, params.min_target_pixels
+        )
+        target_k = target_segment(seg, obs.instance, target_box)
+    decision: dict[str, Any] = {"candidates": 0}
+    chosen: tuple[int | None, int | None] = (None, None)  # segment indices
+    risk = None
+    if len(seg.ids) >= 2 and (cond.mode == "pair" or target_k is not None):
+        pairs = (
+            candidate_pairs(list(range(len(seg.ids))))
+            if target_k is None
+            else [(target_k, s) for s in range(len(seg.ids)) if s != target_k]
+        )
+        decision["candidates"] = len(pairs)
+        if cond.planner == "risk":
+            from clutterbench.trials.ch6 import load_predictor
+
+            predictor = load_predictor(job["model_path"], job["camera"].image_size)
+            choice, pairs, risks, _ = plan_risk(
+                predictor, obs, seg, target_k, params.pixel_threshold
+            )
+            chosen, risk = (choice.extract, choice.support), choice.risk
+            top = np.argsort(risks, kind="stable")[:RISKS_LOGGED]
+            decision["least_risk"] = [
+                [*pairs[k], round(float(risks[k]), 4) if np.isfinite(risks[k]) else None]
+                for k in top
+            ]
+        elif cond.planner == "random":
+            rng = policy_rng(job["seed"], cond.stream, job["index"], f"ch4_{cond.mode}_random")
+            chosen = random_pair(pairs, rng)
+        else:
+            box_pairs = [(boxes[x], boxes[s]) for x, s in pairs]
+            usable = [k for k, (x, s) in enumerate(box_pairs) if x is not None and x != s]
+            rng = policy_rng(job["seed"], cond.stream, job["index"], f"ch4_{cond.mode}_oracle")
+            if usable:
+                k, tried, _ = plan_oracle(
+                    spec, physics, [box_pairs[k] for k in usable], params.moved_threshold_m, rng
+                )
+                chosen = pairs[usable[k]]
+                decision["simulated"] = tried
+    x_box = boxes[chosen[0]] if chosen[0] is not None else None
+    s_box = boxes[chosen[1]] if chosen[1] is not None else None
+    valid = x_box is not None and s_box is not None and x_box != s_box
+    decision |= {"extract": chosen[0], "support": chosen[1], "boxes": [x_box, s_box]}
+    finite = risk is not None and np.isfinite(risk)
+    log.json(0.0, DECISION_TOPIC, decision | {"risk": round(risk, 4) if finite else None})
+    if x_box is not None:
+        out = pull_outcome(
+            spec,
+            physics,
+            x_box,
+            s_box if s_box != x_box else None,
+            params.moved_threshold_m,
+            world=world,
+        )
+    else:  # nothing graspable chosen (no pair, or a segment of no box): no box left the shelf
+        out = {
+            "target_out": False,
+            "n_left_shelf": 0,
+            "n_disturbed": 0,
+            "disturbance_m": 0.0,
+            "success": False,
+            "strict_success": False,
+        }
+    t_end = world.steps_taken * physics.timestep_s
+    log.poses(t_end, world.poses())
+    out.pop("displacement_m", None)
+    if target_box is not None:  # a predetermined target: the pull must take that box out
+        hit = x_box == target_box
+        out = out | {
+            "target_out": bool(out["target_out"] and hit),
+            "success": bool(out["success"] and hit),
+            "strict_success": bool(out["strict_success"] and hit),
+        }
+    record = {
+        "condition": job["condition"],
+        "episode": job["index"],
+        "seed": job["seed"],
+        "stream": cond.stream,
+        "family": spec.family,
+        "catalogue": job["stream_cfg"].catalogue,
+        "n_objects": spec.n,
+        "planner": cond.planner,
+        "mode": cond.mode,
+        "model": cond.model,
+        "perception": cond.perception,
+        "n_segments": len(seg.ids),
+        "n_candidates": decision["candidates"],
+        "target": target_box,
+        "extract": x_box,
+        "support": s_box,
+        # r_c is +inf where the network claims no region at all: no evidence, written null
+        "risk": None if risk is None or not np.isfinite(risk) else round(risk, 6),
+        "valid": bool(valid and (target_box is None or x_box == target_box)),
+    } | {k: _plain(v) for k, v in out.items()}
+    return EpisodeResult(record, log)
+
+
+def draw_figure(job: dict[str, Any], out_path: Path) -> None:
+    """Thesis Fig. 4.8 from one episode of a risk condition in target mode: its scene, its
+    target, the network's E / S / C for the supports of least risk (run in this process)."""
+    from clutterbench.report.risk_figure import risk_figure
+    from clutterbench.sim.render import ensure_renderer
+    from clutterbench.trials.ch6 import load_predictor
+
+    cond: Ch4ConditionConfig = job["cond"]
+    params: Ch4TrialParams = job["params"]
+    ensure_renderer()
+    spec = draw_trial_spec(
+        cond.stream,
+        job["stream_cfg"],
+        job["seed"],
+        job["index"],
+        job["physics"],
+        job["camera"],
+        job["max_attempts"],
+    )
+    world = BoxWorld.from_spec(spec, job["physics"], render=True)
+    obs, seg = observe_and_segment(world, spec, job)
+    box = draw_target(job["seed"], cond.stream, job["index"], obs, params.min_target_pixels)
+    k = target_segment(seg, obs.instance, box)
+    if k is None or len(seg.ids) < 2:
+        raise ClutterbenchError(f"figure: episode {job['index']} has no target segment to draw")
+    predictor = load_predictor(job["model_path"], job["camera"].image_size)
+    _, pairs, risks, probs = plan_risk(predictor, obs, seg, k, params.pixel_threshold)
+    labels = [
+        f"segment {s}" if cond.perception == "depth" else f"box {seg.ids[s]}" for _, s in pairs
+    ]
+    risk_figure(
+        out_path,
+        obs.depth_m,
+        seg.masks[k],
+        labels,
+        probs,
+        risks,
+        f"{job['condition']}, episode {job['index']}: extract box {box} (model {cond.model})",
+        params.pixel_threshold,
+    )
+
+
+def _plain(v: Any) -> Any:
+    """JSON-plain values; floats to 1e-6 so records read cleanly (bits stay deterministic)."""
+    if isinstance(v, bool | np.bool_):
+        return bool(v)
+    if isinstance(v, float | np.floating):
+        return round(float(v), 6)
+    return v
+
+
+def ch4_jobs(
+    condition: str,
+    cond: Ch4ConditionConfig,
+    params: Ch4TrialParams,
+    stream_cfg: SceneStreamConfig,
+    seed: int,
+    physics: PhysicsConfig,
+    camera: CameraConfig,
+    max_attempts: int,
+    record_images: bool,
+) -> list[dict[str, Any]]:
+    model_path = Path(f"models/{cond.model}/best.pt") if cond.model is not None else None
+    return [
+        {
+            "condition": condition,
+            "cond": cond,
+            "params": params,
+            "stream_cfg": stream_cfg,
+            "index": i,
+            "seed": seed,
+            "physics": physics,
+            "camera": camera,
+            "model_path": model_path,
+            "max_attempts": max_attempts,
+            "record_images": record_images,
+        }
+        for i in range(cond.episodes)
+    ]

@@ -1,0 +1,204 @@
+"""Chapter 4 trials: the E / S / C / B map of a hand-built pull, the judge, the planners,
+one episode per planner and mode, and the Fig. 4.8 figure."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from clutterbench.data.labels import CLASS_B, CLASS_C, CLASS_E, CLASS_S, ch4_class_map
+from clutterbench.models import build_model
+from clutterbench.models.checkpoint import save_checkpoint
+from clutterbench.models.collapse_map import CollapseMapConfig
+from clutterbench.models.vgg import VGGConfig
+from clutterbench.observation import Observation
+from clutterbench.perception.masks import masks_from_instance
+from clutterbench.planning.risk import risk_index
+from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.physics import BoxWorld
+from clutterbench.sim.render import ensure_renderer, observe
+from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.ch4 import (
+    ch4_jobs,
+    draw_figure,
+    plan_oracle,
+    plan_risk,
+    pull_outcome,
+    run_ch4_episode,
+)
+from clutterbench.trials.ch6 import load_predictor
+from clutterbench.trials.config import (
+    Ch4ConditionConfig,
+    Ch4TrialParams,
+    SceneStreamConfig,
+    TrialsConfig,
+)
+
+STACK3 = Path(__file__).resolve().parents[1] / "data" / "stack3.json"
+CAM = CameraConfig(image_size=64)
+THR = 0.005
+
+
+@pytest.fixture(scope="module")
+def stack3() -> SceneSpec:
+    return SceneSpec.load(STACK3)
+
+
+@pytest.fixture(scope="module")
+def tiny_ch4(tmp_path_factory) -> Path:
+    """An untrained 4-class ch. 4 network (2 masks in): the planners' plumbing, not skill."""
+    torch.manual_seed(0)
+    cfg = CollapseMapConfig(
+        input_size=64,
+        encoder=VGGConfig(width=0.125),
+        decoder_channels=(32, 16, 16, 8, 8),
+        n_masks=2,
+        n_classes=4,
+    )
+    path = tmp_path_factory.mktemp("ch4") / "best.pt"
+    save_checkpoint(path, "collapse_map", build_model("collapse_map", cfg), {"epoch": 0})
+    return path
+
+
+def test_class_map_of_a_hand_built_pull(stack3, physics):
+    """Stack bottom 0, middle 1, top 2: pulling the bottom while holding the top drags the
+    middle box along (C = its pixels); holding the middle keeps everything in place."""
+    ensure_renderer()
+    world = BoxWorld.from_spec(stack3, physics, render=True)
+    inst = observe(world, CAM).instance
+    dragged = pull_outcome(stack3, physics, 0, 2, THR)["displacement_m"]
+    labels = ch4_class_map(inst, 0, 2, dragged, THR)
+    assert np.array_equal(labels == CLASS_E, inst == 1)
+    assert np.array_equal(labels == CLASS_S, inst == 3)
+    assert np.array_equal(labels == CLASS_C, inst == 2) and (labels == CLASS_C).any()
+    assert np.array_equal(labels == CLASS_B, inst == 0)
+    held = pull_outcome(stack3, physics, 0, 1, THR)["displacement_m"]
+    assert not (ch4_class_map(inst, 0, 1, held, THR) == CLASS_C).any()
+
+
+def test_a_pull_that_drags_a_neighbour_off_the_shelf_fails(stack3, physics):
+    out = pull_outcome(stack3, physics, 0, 2, THR)
+    assert out["target_out"] and out["n_left_shelf"] == 1
+    assert not out["success"] and not out["strict_success"]
+    nothing_held = pull_outcome(stack3, physics, 0, None, THR)
+    assert nothing_held["n_left_shelf"] == 2 and not nothing_held["success"]
+
+
+def test_a_clean_pull_succeeds(stack3, physics):
+    for x, s in ((0, 1), (2, 1), (1, 2)):
+        out = pull_outcome(stack3, physics, x, s, THR)
+        assert out["success"] and out["strict_success"], (x, s)
+        assert out["n_left_shelf"] == 0 and out["n_disturbed"] == 0
+
+
+def test_oracle_keeps_a_strict_success(stack3, physics):
+    pairs = [(0, 2), (1, 0), (0, 1), (2, 0)]
+    k, tried, first = plan_oracle(stack3, physics, pairs, THR, np.random.default_rng(0))
+    assert first == k and pairs[k] in ((0, 1), (2, 0))
+    assert 1 <= tried <= len(pairs)
+    bad = [(0, 2), (1, 0), (0, None)]
+    k, tried, first = plan_oracle(stack3, physics, bad, THR, np.random.default_rng(0))
+    assert first == -1 and tried == len(bad)
+    assert bad[k] != (0, None)  # two boxes off the shelf is worse than one
+
+
+def test_risk_planner_takes_the_argmin_of_the_network_risks(stack3, physics, tiny_ch4):
+    ensure_renderer()
+    obs: Observation = observe(BoxWorld.from_spec(stack3, physics, render=True), CAM)
+    seg = masks_from_instance(obs, 5)
+    predictor = load_predictor(tiny_ch4, 64)
+    choice, pairs, risks, probs = plan_risk(predictor, obs, seg, None, 0.4)
+    assert len(pairs) == 6 and probs.shape == (6, 4, 64, 64)
+    assert np.allclose(probs.sum(axis=1), 1.0, atol=1e-4)
+    assert np.array_equal(risks, risk_index(probs, 0.4))
+    best = int(np.argmin(risks))
+    assert (choice.extract, choice.support) == pairs[best]
+    choice, pairs, _, _ = plan_risk(predictor, obs, seg, 1, 0.4)
+    assert pairs == [(1, 0), (1, 2)] and choice.extract == 1
+
+
+class ExtractCollapses(torch.nn.Module):
+    """A stand-in network: predicts the extracted object's own pixels as C and everything else
+    as B, so r_c is the extracted segment's share of the picture."""
+
+    def forward(self, depth_m: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
+        c = 10.0 * masks[:, :1]
+        zeros = torch.zeros_like(c)
+        return torch.cat([5.0 + zeros, zeros, zeros, c], dim=1)  # B, E, S, C
+
+
+def test_risk_planner_pulls_the_pair_of_least_predicted_collapse(stack3, physics):
+    from clutterbench.collapse.predict import CollapsePredictor
+
+    ensure_renderer()
+    obs = observe(BoxWorld.from_spec(stack3, physics, render=True), CAM)
+    seg = masks_from_instance(obs, 5)
+    predictor = CollapsePredictor(ExtractCollapses(), bf16=False, channels_last=False)
+    choice, pairs, risks, _ = plan_risk(predictor, obs, seg, None, 0.4)
+    area = seg.masks.sum(axis=(1, 2))
+    assert choice.extract == int(np.argmin(area))
+    assert choice.risk == pytest.approx(area.min() / seg.masks[0].size)
+    assert len(set(risks.tolist())) == len(seg.ids)  # one risk per extracted segment
+
+
+def _jobs(tiny_ch4: Path, **cond) -> list[dict]:
+    stream = SceneStreamConfig(families={"pile": 1}, n_objects=(5, 5), catalogue="various")
+    c = Ch4ConditionConfig(stream="s", episodes=2, **cond)
+    cfg = TrialsConfig(streams={"s": stream}, ch4_conditions={"c": c})
+    params = Ch4TrialParams(min_pixels=5, min_target_pixels=10)
+    jobs = ch4_jobs("c", cfg.ch4_conditions["c"], params, stream, 0, PhysicsConfig(), CAM, 30, True)
+    for j in jobs:
+        j["model_path"] = tiny_ch4 if c.model is not None else None
+    return jobs
+
+
+@pytest.mark.parametrize(
+    "cond",
+    [
+        {"planner": "risk", "model": "m"},
+        {"planner": "risk", "model": "m", "perception": "depth"},
+        {"planner": "random"},
+        {"planner": "oracle"},
+        {"planner": "risk", "model": "m", "mode": "target"},
+        {"planner": "oracle", "mode": "target"},
+    ],
+)
+def test_every_planner_gives_a_judged_record(cond, tiny_ch4, physics):
+    job = _jobs(tiny_ch4, **cond)[1]
+    rec = run_ch4_episode(job).record
+    again = run_ch4_episode(job).record
+    assert rec == again  # deterministic
+    assert rec["planner"] == cond["planner"] and rec["mode"] == cond.get("mode", "pair")
+    assert rec["n_objects"] == 5 and rec["family"] == "pile"
+    assert rec["success"] == (rec["target_out"] and rec["n_left_shelf"] == 0)
+    assert rec["strict_success"] == (rec["success"] and rec["n_disturbed"] == 0)
+    if rec["mode"] == "target":
+        assert rec["target"] is not None and rec["n_candidates"] <= 4
+        if rec["success"]:
+            assert rec["extract"] == rec["target"]
+    else:
+        assert rec["n_candidates"] == rec["n_segments"] * (rec["n_segments"] - 1)
+    if cond["planner"] == "oracle":
+        assert rec["strict_success"] or rec["valid"]  # the ceiling pulls real boxes
+
+
+def test_same_scenes_for_every_planner_on_one_stream(tiny_ch4):
+    a = [run_ch4_episode(j).record for j in _jobs(tiny_ch4, planner="random")]
+    b = [run_ch4_episode(j).record for j in _jobs(tiny_ch4, planner="oracle")]
+    assert [r["n_segments"] for r in a] == [r["n_segments"] for r in b]
+
+
+def test_figure_4_8_is_drawn(tiny_ch4, tmp_path):
+    job = _jobs(tiny_ch4, planner="risk", model="m", mode="target")[0]
+    draw_figure(job, tmp_path / "fig.png")
+    assert (tmp_path / "fig.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_condition_needs_a_model_exactly_for_the_risk_planner():
+    with pytest.raises(ValueError, match="needs a ch. 4 network"):
+        Ch4ConditionConfig(planner="risk", stream="s")
+    with pytest.raises(ValueError, match="takes no network"):
+        Ch4ConditionConfig(planner="oracle", stream="s", model="ch4_same")
