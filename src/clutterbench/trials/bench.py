@@ -27,6 +27,61 @@ from clutterbench.trials.scenes import draw_trial_spec
 THRESHOLDS = Path("reports/support/thresholds.json")
 
 
+def bench_ch4(trials: TrialsConfig, sim: SimConfig, scenes: int) -> dict:
+    """Ch. 4 planning latency: every ordered pair of a 10-box pile through the network
+    (thesis eqs. 4.1, 4.2), and the median wall time of one trial per ch. 4 planner."""
+    from clutterbench.perception.masks import masks_from_instance
+    from clutterbench.trials.ch4 import ch4_jobs, plan_risk, run_ch4_episode
+    from clutterbench.trials.config import Ch4ConditionConfig
+
+    out: dict = {}
+    models = {c.model for c in trials.ch4_conditions.values() if c.model is not None}
+    model = next((m for m in sorted(models) if Path(f"models/{m}/best.pt").exists()), None)
+    if model is None:
+        print("bench trials: ch. 4 skipped (no trained ch. 4 model; run dvc repro first)")
+        return out
+    predictor = load_predictor(Path(f"models/{model}/best.pt"), sim.camera.image_size)
+    plan_s, pairs = [], []
+    for i in range(scenes + 1):
+        spec = draw_trial_spec(
+            "bench", trials.streams["ch4_same_10"], 99, i, sim.physics, sim.camera, 30
+        )
+        obs = observe(BoxWorld.from_spec(spec, sim.physics, render=True), sim.camera)
+        seg = masks_from_instance(obs, trials.ch4.min_pixels)
+        t0 = time.perf_counter()
+        _, cands, _, _ = plan_risk(predictor, obs, seg, None, trials.ch4.pixel_threshold)
+        if i:
+            plan_s.append(time.perf_counter() - t0)
+            pairs.append(len(cands))
+    out["ch4_plan_10_objects_s_median"] = float(np.median(plan_s))
+    out["ch4_plan_10_objects_pairs_mean"] = float(np.mean(pairs))
+    for planner in ("risk", "random", "oracle"):
+        cond = Ch4ConditionConfig(
+            planner=planner,
+            stream="ch4_various_5",
+            episodes=scenes,
+            model=model if planner == "risk" else None,
+        )
+        jobs = ch4_jobs(
+            "bench",
+            cond,
+            trials.ch4,
+            trials.streams[cond.stream],
+            99,
+            sim.physics,
+            sim.camera,
+            trials.max_attempts,
+            trials.mcap_images,
+        )
+        wall = []
+        for job in jobs:
+            t0 = time.perf_counter()
+            run_ch4_episode(job)
+            wall.append(time.perf_counter() - t0)
+        out[f"ch4_trial_{planner}_5_objects_s_median"] = float(np.median(wall))
+    return out
+
+
 def bench_trials(
     graphs: int = 20, episodes: int = 10, out_dir: Path = Path("reports/bench")
 ) -> dict | None:
@@ -76,6 +131,7 @@ def bench_trials(
             run_ch6_episode(job)
             wall.append(time.perf_counter() - t0)
         result[f"trial_{planner_name}_s_median"] = float(np.median(wall))
+    result |= bench_ch4(trials, sim, graphs)
     write_json(out_dir / "trials.json", result)
     lines = ["# Trials benchmark (one core)", "", "| measure | value |", "|---|---|"]
     lines += [f"| {k} | {v:.3f} |" for k, v in result.items() if k != "threads"]
