@@ -27,6 +27,8 @@ from clutterbench.sim.config import REJECT_REASONS
 THESIS_DATASET = {
     "ch4_same": "ch4_fcn_pairs",
     "ch4_various": "ch4_fcn_pairs",
+    "ch4_same_test": "ch4_table_4_2_eval",
+    "ch4_various_test": "ch4_table_4_2_eval",
     "ch5": "ch5_collapse_map_train",
     "ch6": "ch6_cp_total",
     "ch6_test": "ch6_cp_test",
