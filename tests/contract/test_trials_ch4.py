@@ -144,6 +144,30 @@ def test_risk_planner_pulls_the_pair_of_least_predicted_collapse(stack3, physics
     assert len(set(risks.tolist())) == len(seg.ids)  # one risk per extracted segment
 
 
+class FaintExtractCollapse(torch.nn.Module):
+    """Everything background above 0.4, and a faint P(C) (~0.12) on the extracted object: every
+    r_c is 0, and only the expected collapsing area tells the candidates apart."""
+
+    def forward(self, depth_m: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
+        c = 3.0 * masks[:, :1]
+        zeros = torch.zeros_like(c)
+        return torch.cat([5.0 + zeros, zeros, zeros, c], dim=1)
+
+
+def test_equal_risks_go_to_the_least_expected_collapse(stack3, physics):
+    from clutterbench.collapse.predict import CollapsePredictor
+
+    ensure_renderer()
+    obs = observe(BoxWorld.from_spec(stack3, physics, render=True), CAM)
+    seg = masks_from_instance(obs, 5)
+    area = seg.masks.sum(axis=(1, 2))
+    assert int(np.argmin(area)) != 0  # else the first candidate would win anyway
+    predictor = CollapsePredictor(FaintExtractCollapse(), bf16=False, channels_last=False)
+    choice, _, risks, _ = plan_risk(predictor, obs, seg, None, 0.4)
+    assert (risks == 0).all()
+    assert choice.extract == int(np.argmin(area))
+
+
 def _jobs(tiny_ch4: Path, **cond) -> list[dict]:
     stream = SceneStreamConfig(families={"pile": 1}, n_objects=(5, 5), catalogue="various")
     c = Ch4ConditionConfig(stream="s", episodes=2, **cond)

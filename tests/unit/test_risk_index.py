@@ -15,6 +15,7 @@ from clutterbench.planning.risk import (
     random_pair,
     risk_from_labels,
     risk_index,
+    soft_collapse,
 )
 
 E, S, C, B = (CLASSES.index(k) for k in "ESCB")
@@ -136,3 +137,23 @@ def test_random_pair_is_seeded_and_covers_every_pair():
     assert {random_pair(pairs, rng) for _ in range(200)} == set(pairs)
     with pytest.raises(ValueError, match="no candidate"):
         random_pair([], rng)
+
+
+def test_equal_risks_go_to_the_least_expected_collapse():
+    # Both candidates claim no C pixel above 0.4 (r_c = 0), but the second one's collapse
+    # probability is lower everywhere: the tie-break takes it; without one, the first wins.
+    probs = one_hot(np.stack([with_collapse(0)] * 3))
+    probs[0, C] += 0.3
+    probs[1, C] += 0.1
+    probs[2, C] += 0.2
+    probs /= probs.sum(axis=1, keepdims=True)
+    pairs = [(0, 1), (1, 0), (2, 0)]
+    risks = risk_index(probs)
+    assert risks.tolist() == [0.0, 0.0, 0.0]
+    soft = soft_collapse(probs)
+    assert soft[1] < soft[2] < soft[0]
+    assert choose_safest_pair(pairs, risks) == PairChoice(0, 1, 0.0)
+    assert choose_safest_pair(pairs, risks, soft) == PairChoice(1, 0, 0.0)
+    assert choose_support_for_target(2, pairs, risks, soft) == PairChoice(2, 0, 0.0)
+    # The risk still comes first: a lower r_c beats a lower tie-break.
+    assert choose_safest_pair(pairs, [0.1, 0.2, 0.0], soft) == PairChoice(2, 0, 0.0)

@@ -85,8 +85,21 @@ def candidate_pairs(ids: Sequence[int], with_no_support: bool = False) -> list[P
     return pairs
 
 
-def _argmin(pairs: Sequence[Pair], risks: np.ndarray) -> PairChoice:
-    k = int(np.argmin(risks))  # the first of equal minima: ties go to candidate order
+def soft_collapse(probs: np.ndarray) -> np.ndarray:
+    """(A, 4, H, W) class probabilities -> (A,) the expected share of the picture that
+    collapses, mean P(C): the tie-break of eq. (4.2) where r_c ties (e.g. at 0, when no pixel
+    of any candidate reaches the region threshold)."""
+    _check_probs(probs)
+    return probs[:, C].mean(axis=(1, 2), dtype=np.float64)
+
+
+def _argmin(
+    pairs: Sequence[Pair], risks: np.ndarray, tie_break: np.ndarray | None = None
+) -> PairChoice:
+    """The least risk; among equal risks the least `tie_break`, then the first candidate."""
+    order = np.arange(len(risks))
+    keys = (order, risks) if tie_break is None else (order, tie_break, risks)
+    k = int(np.lexsort(keys)[0])
     return PairChoice(extract=pairs[k][0], support=pairs[k][1], risk=float(risks[k]))
 
 
@@ -101,23 +114,41 @@ def _check_risks(pairs: Sequence[Pair], risks: Sequence[float] | np.ndarray) -> 
     return r
 
 
-def choose_safest_pair(pairs: Sequence[Pair], risks: Sequence[float] | np.ndarray) -> PairChoice:
+def _check_tie_break(pairs: Sequence[Pair], tie_break: Sequence[float] | np.ndarray | None):
+    if tie_break is None:
+        return None
+    t = np.asarray(tie_break, dtype=np.float64)
+    if t.shape != (len(pairs),) or np.isnan(t).any():
+        raise ValueError(f"tie_break must be {len(pairs)} numbers, one per candidate pair")
+    return t
+
+
+def choose_safest_pair(
+    pairs: Sequence[Pair],
+    risks: Sequence[float] | np.ndarray,
+    tie_break: Sequence[float] | np.ndarray | None = None,
+) -> PairChoice:
     """a = argmin over candidates of r_c(a')                       # thesis eq. (4.2)
 
-    Ties go to the first candidate in `pairs` order, so a choice is reproducible."""
-    return _argmin(pairs, _check_risks(pairs, risks))
+    Equal risks are decided by the least `tie_break` (e.g. soft_collapse) where given, then
+    by the first candidate in `pairs` order, so a choice is reproducible."""
+    return _argmin(pairs, _check_risks(pairs, risks), _check_tie_break(pairs, tie_break))
 
 
 def choose_support_for_target(
-    target: int, pairs: Sequence[Pair], risks: Sequence[float] | np.ndarray
+    target: int,
+    pairs: Sequence[Pair],
+    risks: Sequence[float] | np.ndarray,
+    tie_break: Sequence[float] | np.ndarray | None = None,
 ) -> PairChoice:
     """Thesis 4.2.3 (2): the target is given; eq. (4.2) over the candidates that extract it,
-    i.e. the choice of what to hold. Ties go to the first such candidate."""
+    i.e. the choice of what to hold. Ties as in choose_safest_pair."""
     r = _check_risks(pairs, risks)
+    t = _check_tie_break(pairs, tie_break)
     mine = [k for k, (x, _) in enumerate(pairs) if x == target]
     if not mine:
         raise ValueError(f"no candidate pair extracts target {target}")
-    return _argmin([pairs[k] for k in mine], r[mine])
+    return _argmin([pairs[k] for k in mine], r[mine], None if t is None else t[mine])
 
 
 def random_pair(pairs: Sequence[Pair], rng: np.random.Generator) -> Pair:

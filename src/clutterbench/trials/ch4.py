@@ -32,6 +32,7 @@ from clutterbench.planning.risk import (
     choose_support_for_target,
     random_pair,
     risk_index,
+    soft_collapse,
 )
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.labelling import act_on_spec
@@ -97,7 +98,8 @@ def plan_risk(
     pixel_threshold: float,
 ) -> tuple[PairChoice, list[Pair], np.ndarray, np.ndarray]:
     """Eqs. (4.1), (4.2) on segment indices: every ordered pair (target None) or every support
-    of `target`, batched through the network -> (choice, candidates, risks, class probs)."""
+    of `target`, batched through the network -> (choice, candidates, risks, class probs).
+    Equal risks go to the least mean P(C) (planning.risk.soft_collapse)."""
     ks = list(range(len(seg.ids)))
     if target is None:
         pairs = candidate_pairs(ks)
@@ -105,10 +107,13 @@ def plan_risk(
         pairs = [(target, s) for s in ks if s != target]
     probs = class_probs(predictor, obs.depth_m, pair_masks(seg, pairs))
     risks = risk_index(probs, pixel_threshold)
+    # r_c ties often (at 0 when no pixel reaches the threshold); the expected collapsing
+    # area decides among equal risks, the candidate order after that.
+    soft = soft_collapse(probs)
     if target is None:
-        choice = choose_safest_pair(pairs, risks)
+        choice = choose_safest_pair(pairs, risks, soft)
     else:
-        choice = choose_support_for_target(target, pairs, risks)
+        choice = choose_support_for_target(target, pairs, risks, soft)
     return choice, pairs, risks, probs
 
 
