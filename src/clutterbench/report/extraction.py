@@ -15,8 +15,7 @@ from typing import Any
 import pandas as pd
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.io import write_text
-from clutterbench.report.tables import Column, comparison_frame, write_table
+from clutterbench.report.tables import Column, comparison_frame, write_raw_csv, write_table
 from clutterbench.trials.stats import Rate, aggregate
 
 TABLE = "table_6_3"
@@ -191,11 +190,7 @@ def extraction_table(
     caption = figures[TABLE].get("caption", TABLE)
     notes = [*_notes(figures, used, scale), *notes_extra]
     write_table(frame, columns, out_dir, TABLE, f"Table 6.3: {caption}", notes)
-    raw_frame = pd.DataFrame.from_records(raw)
-    counts = [c for c in raw_frame.columns if c == "episodes" or c.endswith(("_k", "_n"))]
-    raw_frame = raw_frame.astype(dict.fromkeys(counts, "Int64"))
-    write_text(out_dir / f"{TABLE}.csv", raw_frame.to_csv(index=False))
-    return raw_frame
+    return write_raw_csv(raw, out_dir / f"{TABLE}.csv")
 
 
 def _grouped(used: Mapping[str, Sequence[Mapping[str, Any]]], describe: Callable) -> str:

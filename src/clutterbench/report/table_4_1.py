@@ -19,9 +19,14 @@ from typing import Any
 import pandas as pd
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.io import write_text
 from clutterbench.report.extraction import _grouped, _rate, _thesis_rate_text, _values
-from clutterbench.report.tables import Column, comparison_frame, thesis_row, write_table
+from clutterbench.report.tables import (
+    Column,
+    comparison_frame,
+    thesis_row,
+    write_raw_csv,
+    write_table,
+)
 from clutterbench.trials.stats import aggregate, rate
 
 TABLE = "table_4_1"
@@ -229,13 +234,7 @@ def _write(
         else []
     )
     write_table(frame, columns, out_dir, table, title, [*notes, *invalid_note])
-    raw_frame = pd.DataFrame.from_records(raw)
-    counts = [
-        c for c in raw_frame.columns if c in ("episodes", "invalid") or c.endswith(("_k", "_n"))
-    ]
-    raw_frame = raw_frame.astype(dict.fromkeys(counts, "Int64"))
-    write_text(out_dir / f"{table}.csv", raw_frame.to_csv(index=False))
-    return raw_frame
+    return write_raw_csv(raw, out_dir / f"{table}.csv", ("episodes", "invalid"))
 
 
 def table_4_1(

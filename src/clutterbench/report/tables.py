@@ -101,3 +101,15 @@ def write_table(
     lines += [""] + [f"- {n}" for n in notes]
     write_text(out_dir / f"{name}.md", "\n".join(lines).rstrip() + "\n")
     write_text(out_dir / f"{name}.csv", frame.to_csv(index=False))
+
+
+def write_raw_csv(
+    rows: Sequence[Mapping[str, Any]], path: Path, counts: Sequence[str] = ("episodes",)
+) -> pd.DataFrame:
+    """A trials table's raw rows as CSV: `counts` and every k / n column stay integers
+    (nullable, so a row that lacks one does not turn the column float). Returns the frame."""
+    frame = pd.DataFrame.from_records(rows)
+    ints = [c for c in frame.columns if c in counts or c.endswith(("_k", "_n"))]
+    frame = frame.astype(dict.fromkeys(ints, "Int64"))
+    write_text(Path(path), frame.to_csv(index=False))
+    return frame
