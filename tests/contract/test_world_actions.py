@@ -128,3 +128,27 @@ def test_density_from_the_spec_changes_the_mass(stack3):
     world = BoxWorld.from_spec(spec, PhysicsConfig())
     masses = [b.mass for b in world.bodies]
     assert masses[0] == pytest.approx(3 * masses[1], rel=1e-4)
+
+
+TOWER6 = Path(__file__).resolve().parents[1] / "data" / "tower6.json"
+
+
+def test_a_lifted_pull_slides_clear_of_the_box_below(physics):
+    """A settled 6-box stack from the ch. 6 trial stream: pulling its top box flat drags the
+    box below and topples the stack; raised by 3 mm first, it slides out and nothing moves."""
+    tower = SceneSpec.load(TOWER6)
+    flat = act_on_spec(tower, physics, "pull", 5)
+    lifted = act_on_spec(tower, physics, "pull", 5, lift_m=0.003)
+    assert np.nanmax(flat) > 0.05
+    assert np.nanmax(lifted) < THRESHOLD_M
+    assert np.isnan(flat[5]) and np.isnan(lifted[5])
+
+
+def test_lift_happens_once_per_pull_and_increments_still_compose(stack3, physics):
+    one = BoxWorld.from_spec(stack3, physics)
+    one.pull_step(2, 0.06, lift_m=0.004)
+    many = BoxWorld.from_spec(stack3, physics)
+    for _ in range(6):
+        many.pull_step(2, 0.01, lift_m=0.004)
+    assert np.array_equal(one.poses(), many.poses())
+    assert one.poses()[2, 2] == pytest.approx(stack3.poses[2, 2] + 0.004, abs=1e-4)

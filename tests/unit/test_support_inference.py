@@ -261,3 +261,24 @@ def test_choose_support_params_needs_a_defined_f1():
         choose_support_params(sweep, "iou")
     with pytest.raises(ValueError, match="rule"):
         choose_support_params(sweep, "coverage")
+
+
+def test_the_held_object_does_not_count_in_the_collapse_score():
+    """Eq. 6.2 during a bimanual pull: the object the other arm holds cannot collapse, so its
+    share of R_C is left out (Fig. 6.7 (d))."""
+    from clutterbench.observation import CameraModel, Observation
+    from clutterbench.planning.extraction import CollapseGraphPlanner
+
+    instance = np.zeros(HW, np.uint8)
+    instance[2:6, 0:4] = 1  # box 0: pulled
+    instance[2:6, 4:8] = 2  # box 1: beside it, wholly inside R_C
+    instance[6:8, 0:4] = 3  # box 2: under it, a quarter inside R_C
+    camera = CameraModel(np.eye(3), np.eye(4))
+    obs = Observation(np.ones(HW, np.float32), instance, camera)
+    heat = np.zeros(HW, np.float32)
+    heat[2:6, 4:8] = 1.0
+    heat[6, 0] = 1.0
+    params = SupportParams("coverage", 0.5, 0.3, 2, 0.0)
+    planner = CollapseGraphPlanner(lambda depth, masks: heat[None], params, 0.3, 1)
+    assert planner.collapse_score(obs, 0) == pytest.approx(1.0)
+    assert planner.collapse_score(obs, 0, hold=1) == pytest.approx(1 / 8)

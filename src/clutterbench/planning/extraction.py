@@ -87,9 +87,10 @@ class CollapseGraphPlanner:
         }
         return Decision(plan.pull, plan.hold, state)
 
-    def collapse_score(self, obs: Observation, box: int) -> float:
+    def collapse_score(self, obs: Observation, box: int, hold: int | None = None) -> float:
         """Thesis eq. (6.2) during a pull: R_C predicted for removing `box` now, against the
-        area of each object in pseudo-direct contact with it; the largest share."""
+        area of each object in pseudo-direct contact with it; the largest share. The object
+        the other arm holds (`hold`) cannot collapse and is left out (Fig. 6.7 (d))."""
         ids, masks = visible_objects(obs, self.min_pixels)
         if box not in ids or len(ids) < 2:
             return 0.0
@@ -100,7 +101,7 @@ class CollapseGraphPlanner:
         scores = [
             float(np.logical_and(area_c, masks[j]).sum() / masks[j].sum())
             for j in range(len(ids))
-            if j != k and contact[j]
+            if j != k and contact[j] and ids[j] != hold
         ]
         return max(scores, default=0.0)
 

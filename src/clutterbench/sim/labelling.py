@@ -121,12 +121,16 @@ def act_on_spec(
     target: int,
     support: int | None = None,
     world: BoxWorld | None = None,
+    lift_m: float = 0.0,
 ) -> np.ndarray:
     """Displacement (m) of every box when `target` is removed or pulled out (with `support`
-    held), simulated from the canonical start. The one code path of labels and replays."""
+    held; a pull raised by `lift_m` first), simulated from the canonical start. The one code
+    path of labels and replays."""
     world = world or BoxWorld.from_spec(spec, physics)
     assert world.steps_taken == 0, "actions start from a freshly built world"
-    return world.pull(target, support) if action == "pull" else world.remove(target, support)
+    if action == "pull":
+        return world.pull(target, support, lift_m)
+    return world.remove(target, support)
 
 
 class _Tally:

@@ -274,17 +274,30 @@ class BoxWorld:
         _, hi = self.aabbs()
         return float(hi[target, 0] + PULL_CLEARANCE_M)
 
-    def pull_step(self, target: int, distance_m: float) -> ActionResult:
+    def pull_step(self, target: int, distance_m: float, lift_m: float = 0.0) -> ActionResult:
         """Pull `target` toward the camera (-x) by `distance_m` at sim.physics.pull_speed_m_s,
         gripped (kinematic); the other boxes react but are not settled afterwards, so a
         planner can observe mid-pull and stop. Increments compose exactly: pulling 0.1 m once
-        steps the same poses as ten pulls of 0.01 m."""
+        steps the same poses as ten pulls of 0.01 m.
+
+        `lift_m` > 0: on the first increment the gripper first raises the box straight up by
+        that much (at the same speed), so it slides clear of what it rests on; later
+        increments of the same pull ignore it."""
         self._check(target)
+        assert lift_m >= 0.0, "lift_m must be >= 0"
         before = self.steps_taken
         dx = self.cfg.pull_speed_m_s * self.cfg.timestep_s
         if target not in self._pulls:
             self.hold([target])
-            self._pulls[target] = (self.entities[target].pose, 0)
+            start = self.entities[target].pose
+            if lift_m > 0.0:
+                n_lift = int(np.ceil(lift_m / dx - 1e-9))
+                for k in range(1, n_lift + 1):
+                    p = np.array(start.p) + np.array([0.0, 0.0, lift_m * k / n_lift])
+                    self.bodies[target].set_kinematic_target(sapien.Pose(p, start.q))
+                    self.step()
+                start = sapien.Pose(np.array(start.p) + np.array([0.0, 0.0, lift_m]), start.q)
+            self._pulls[target] = (start, 0)
         start, done = self._pulls[target]
         n_steps = int(np.ceil(distance_m / dx - 1e-9))
         prev = self.poses()
@@ -342,10 +355,11 @@ class BoxWorld:
             self.hold([support])
         return self.lift_out(target).displacement_m
 
-    def pull(self, target: int, support: int | None = None) -> np.ndarray:
-        """Pull `target` horizontally toward the camera (-x) until it has left the shelf,
-        then settle; returns displacements (m) as `remove` does (thesis 4.2.1)."""
+    def pull(self, target: int, support: int | None = None, lift_m: float = 0.0) -> np.ndarray:
+        """Pull `target` horizontally toward the camera (-x) until it has left the shelf
+        (raised by `lift_m` first, see `pull_step`), then settle; returns displacements (m)
+        as `remove` does (thesis 4.2.1)."""
         if support is not None:
             self.hold([support])
-        self.pull_step(target, self.pull_travel_m(target))
+        self.pull_step(target, self.pull_travel_m(target), lift_m)
         return self.lift_out(target).displacement_m

@@ -66,7 +66,7 @@ class OraclePlanner:
         now, index = spec_of_world(self.world, self.spec)
         ids, _ = visible_objects(obs, self.params.min_pixels)
         visible = [index.index(k) for k in ids if k in index]
-        disp = pull_consequences(now, self.physics, visible)
+        disp = pull_consequences(now, self.physics, visible, self.params.grasp_lift_m)
         edges = [
             SupportEdge(index[a], index[b], float(disp[a][b]))
             for a in visible
@@ -127,14 +127,14 @@ def pull_out(
     while pulled < travel - 1e-9:
         if monitor is not None:
             obs = observe(world, camera)
-            cp = float(monitor(obs, box))
+            cp = float(monitor(obs, box, hold))
             max_cp = max(max_cp, cp)
             log.json(world.steps_taken * dt, DECISION_TOPIC, {"box": box, "cp": round(cp, 4)})
             if cp > cp_max:
                 aborted = True
                 break
         step = min(params.pull_increment_m, travel - pulled)
-        world.pull_step(box, step)
+        world.pull_step(box, step, params.grasp_lift_m)
         pulled += step
         increments += 1
     if aborted:

@@ -110,6 +110,10 @@ class Ch6TrialParams:
     threshold chosen on validation scenes (the same evidence that draws an edge)."""
     moved_threshold_m: float = bounded(0.005, gt=0.0)
     """A box other than the pulled one moved when its centre moved more than this."""
+    grasp_lift_m: float = bounded(0.003, ge=0.0)
+    """The gripper raises the grasped box by this much before pulling it out, so it slides
+    clear of what it rests on instead of dragging it (and tipping a tall stack). Below
+    moved_threshold_m, so the lift alone never counts as moving a box resting on it."""
     min_target_pixels: int = bounded(40, ge=1)
     """The target is drawn among boxes with at least this many visible pixels."""
     min_pixels: int = bounded(20, ge=1)

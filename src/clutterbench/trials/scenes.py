@@ -100,11 +100,12 @@ def truth_moved_contact(
 
 
 def pull_consequences(
-    spec: SceneSpec, physics: PhysicsConfig, boxes: list[int]
+    spec: SceneSpec, physics: PhysicsConfig, boxes: list[int], lift_m: float = 0.0
 ) -> dict[int, np.ndarray]:
     """For each box x in `boxes`: (N,) displacement of every box when x alone is pulled out
-    toward the camera from the canonical start (NaN for x): what the trials' action does."""
-    return {x: act_on_spec(spec, physics, "pull", x) for x in boxes}
+    toward the camera (raised by `lift_m` first) from the canonical start (NaN for x): what
+    the trials' action does."""
+    return {x: act_on_spec(spec, physics, "pull", x, lift_m=lift_m) for x in boxes}
 
 
 def spec_of_world(world: BoxWorld, spec: SceneSpec) -> tuple[SceneSpec, list[int]]:
