@@ -12,12 +12,17 @@ from clutterbench.io import read_json, write_json
 from clutterbench.report.collapse import RunSources, collapse_table
 from clutterbench.report.config import ReportConfig
 from clutterbench.report.datasets import dataset_stats, datasets_table
-from clutterbench.report.extraction import extraction_table
+from clutterbench.report.extraction import (
+    extraction_families_table,
+    extraction_table,
+    trial_params_note,
+)
 from clutterbench.report.support import support_table
 from clutterbench.report.table_4_1 import table_4_1, table_4_1_target
 from clutterbench.report.table_4_2 import table_4_2
 from clutterbench.report.tables import load_thesis_figures
 from clutterbench.stage import run_stage
+from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.records import read_records
 
 
@@ -72,7 +77,13 @@ def report(params: dict, base: BaseConfig) -> None:
         cond: read_records(Path(f"reports/trials/{cond}/records.jsonl"))
         for cond in cfg.table_6_3.values()
     }
-    extraction_table(records, cfg.table_6_3, figures, Path("reports/tables"), base.scale)
+    trial_note = trial_params_note(load_section(TrialsConfig, "trials", params).ch6)
+    extraction_table(
+        records, cfg.table_6_3, figures, Path("reports/tables"), base.scale, [trial_note]
+    )
+    extraction_families_table(
+        records, cfg.table_6_3, Path("reports/tables"), base.scale, [trial_note]
+    )
 
     by_condition: dict[str, list[dict]] = {}
     for r in read_records(Path("reports/trials_ch4/records.jsonl")):

@@ -51,6 +51,7 @@ def support(params: dict, base: BaseConfig) -> None:
         cfg.val_scenes,
         cfg.moved_threshold_m,
         cfg.min_pixels,
+        sim.camera,
     )
     cp_ev, oracle_ev = [], []
     with progress_bar("support: val heatmaps", total=len(val)) as advance:
@@ -77,7 +78,7 @@ def support(params: dict, base: BaseConfig) -> None:
     rows, truth, panels = [], {}, []
     rng = np.random.default_rng([base.seed, 62])
     with progress_bar("support: test scenes", total=cfg.test_scenes) as advance:
-        for sc in all_scenes(SCENES, "scenes", cfg.moved_threshold_m, cfg.min_pixels):
+        for sc in all_scenes(SCENES, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera):
             heat = predicted_heatmaps(sc, predictor)
             scene_rows, edges = evaluate_scene(sc, heat, chosen, p_edge, rng)
             rows += scene_rows

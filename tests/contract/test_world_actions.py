@@ -152,3 +152,17 @@ def test_lift_happens_once_per_pull_and_increments_still_compose(stack3, physics
         many.pull_step(2, 0.01, lift_m=0.004)
     assert np.array_equal(one.poses(), many.poses())
     assert one.poses()[2, 2] == pytest.approx(stack3.poses[2, 2] + 0.004, abs=1e-4)
+
+
+def test_camera_points_of_a_stored_depth_match_the_rendering_camera(stack3, physics):
+    """Support evaluation back-projects stored depth images with the configured pinhole; its
+    points must be the rendering camera's up to a rigid motion (same distances)."""
+    from clutterbench.trials.support_eval import camera_points
+
+    obs = observe(BoxWorld.from_spec(stack3, physics, render=True), CAM)
+    ours = camera_points(obs.depth_m, CAM)[obs.instance > 0]
+    theirs = obs.camera.depth_to_points(obs.depth_m)[obs.instance > 0]
+    pick = np.linspace(0, len(ours) - 1, 40).astype(int)
+    d_ours = np.linalg.norm(ours[pick, None] - ours[None, pick], axis=-1)
+    d_theirs = np.linalg.norm(theirs[pick, None] - theirs[None, pick], axis=-1)
+    assert np.allclose(d_ours, d_theirs, atol=1e-5)

@@ -1,4 +1,5 @@
-"""Tables 6.2 and 6.3 and the support figure, from hand-made records into a tmp dir."""
+"""Tables 6.2 and 6.3 (and 6.3 by scene family) and the support figure, from hand-made
+records into a tmp dir."""
 
 from __future__ import annotations
 
@@ -9,10 +10,15 @@ import pandas as pd
 import pytest
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.report.extraction import extraction_table
+from clutterbench.report.extraction import (
+    extraction_families_table,
+    extraction_table,
+    trial_params_note,
+)
 from clutterbench.report.support import support_table, thresholds_text
 from clutterbench.report.support_figure import SupportPanel, support_figure
 from clutterbench.report.tables import load_thesis_figures, thesis_row
+from clutterbench.trials.config import Ch6TrialParams
 
 
 @pytest.fixture(scope="module")
@@ -20,14 +26,21 @@ def figures(root):
     return load_thesis_figures(root / "reports/thesis_figures.yaml")
 
 
-def trial(condition: str, planner: str, n_objects: int, steps_ok: list[bool], out: bool) -> dict:
+def trial(
+    condition: str,
+    planner: str,
+    n_objects: int,
+    steps_ok: list[bool],
+    out: bool,
+    family: str = "random",
+) -> dict:
     steps = [{"success": ok, "extracted": True, "others_still": ok} for ok in steps_ok]
     return {
         "condition": condition,
         "planner": planner,
         "n_objects": n_objects,
         "stream": "ch6_3_10",
-        "family": "random",
+        "family": family,
         "perception": "instance",
         "steps": steps,
         "target_out": out,
@@ -85,6 +98,78 @@ def test_extraction_table_names_a_missing_condition_or_a_wrong_planner(tmp_path,
         extraction_table(RECORDS, {"multi_step/3-10": "ss"}, figures, tmp_path, "t")
     with pytest.raises(ClutterbenchError, match="'<method>/<objects>'"):
         extraction_table(RECORDS, {"teleport/3": "ss"}, figures, tmp_path, "t")
+
+
+FAMILY_RECORDS = {
+    "ms": [
+        trial("ms", "multi_step", 5, [True, True], True, "stacked"),
+        trial("ms", "multi_step", 5, [False, True], True, "stacked"),
+        trial("ms", "multi_step", 3, [True], True, "shelved"),
+        trial("ms", "multi_step", 4, [False], False, "shelved"),
+    ],
+    "rnd": [
+        trial("rnd", "random", 6, [False, False, False], False, "shelved"),
+        trial("rnd", "random", 3, [True], True, "stacked"),
+    ],
+}
+FAMILY_ROWS = {"multi_step/3-10": "ms", "random/3-10": "rnd"}
+
+
+def test_extraction_families_table_splits_each_row_by_scene_family(tmp_path):
+    raw = extraction_families_table(FAMILY_RECORDS, FAMILY_ROWS, tmp_path, "tiny", ["a note"])
+    csv = pd.read_csv(tmp_path / "table_6_3_families.csv")
+    assert len(raw) == len(csv) == 4
+    got = {
+        (r.condition, r.family): (
+            r.step_success_k,
+            r.step_success_n,
+            r.success_k,
+            r.success_n,
+            r.mean_steps,
+            r.episodes,
+        )
+        for r in csv.itertuples()
+    }
+    # pooled, ms would read 4/6 steps and 2/4 episodes: each family has its own counts
+    assert got == {
+        ("ms", "shelved"): (1, 2, 1, 2, 1.0, 2),
+        ("ms", "stacked"): (3, 4, 1, 2, 2.0, 2),
+        ("rnd", "shelved"): (0, 3, 0, 1, 3.0, 1),
+        ("rnd", "stacked"): (1, 1, 1, 1, 1.0, 1),
+    }
+    # rows in the table's order, families sorted within each
+    assert list(zip(csv["row"], csv["family"], strict=True)) == [
+        ("multi_step/3-10", "shelved"),
+        ("multi_step/3-10", "stacked"),
+        ("random/3-10", "shelved"),
+        ("random/3-10", "stacked"),
+    ]
+    md = (tmp_path / "table_6_3_families.md").read_text()
+    stacked = line_of(md, "| multi-step extraction (CPG order, one arm) [ms] | stacked |")
+    assert "| 3/4 = 75.0% [30.1, 95.4] | 1/2 = 50.0% [9.5, 90.5] | 2 | 2 |" in stacked
+    assert "(thesis)" not in md and "- a note" in md and "tiny scale" in md
+
+
+def test_extraction_families_table_names_a_missing_condition_or_family(tmp_path):
+    with pytest.raises(ClutterbenchError, match="condition 'bimanual_3_10'"):
+        extraction_families_table(FAMILY_RECORDS, {"bimanual/3-10": "bimanual_3_10"}, tmp_path, "t")
+    no_family = {"ms": [{k: v for k, v in r.items() if k != "family"} for r in RECORDS["ms"]]}
+    with pytest.raises(ClutterbenchError, match="has no 'family'"):
+        extraction_families_table(no_family, {"multi_step/3-10": "ms"}, tmp_path, "t")
+
+
+def test_trial_params_note_reads_the_ch6_params_in_mm():
+    ch6 = Ch6TrialParams(
+        moved_threshold_m=0.005, grasp_lift_m=0.003, pull_increment_m=0.02, max_steps=14
+    )
+    assert trial_params_note(ch6) == (
+        "a box moved: its centre moved more than 5.0 mm; the gripper raises the grasped box "
+        "by 3.0 mm before pulling it out in 20.0 mm increments; an episode gives up after 14 "
+        "attempts."
+    )
+    flat = Ch6TrialParams(grasp_lift_m=0.0, pull_increment_m=0.0125, max_steps=1)
+    assert "without raising it in 12.5 mm increments" in trial_params_note(flat)
+    assert trial_params_note(flat).endswith("after 1 attempt.")
 
 
 def scenes_frame() -> pd.DataFrame:

@@ -20,8 +20,10 @@ from clutterbench.planning.support import (
     oracle_heatmaps,
     overlap_scores,
     pseudo_contact,
+    support_contact,
     support_matrix,
     support_scores,
+    surface_gaps,
     sweep_support,
     true_support_edges,
 )
@@ -282,3 +284,48 @@ def test_the_held_object_does_not_count_in_the_collapse_score():
     planner = CollapseGraphPlanner(lambda depth, masks: heat[None], params, 0.3, 1)
     assert planner.collapse_score(obs, 0) == pytest.approx(1.0)
     assert planner.collapse_score(obs, 0, hold=1) == pytest.approx(1 / 8)
+
+
+def _plane_points(depth: np.ndarray) -> np.ndarray:
+    """(H, W, 3) points of an orthographic view: x, y = pixel index in cm, z = depth (m)."""
+    v, u = np.mgrid[0 : depth.shape[0], 0 : depth.shape[1]].astype(np.float64)
+    return np.stack([u * 0.01, v * 0.01, depth], axis=-1)
+
+
+def test_surface_gaps_tell_touching_faces_from_a_box_far_behind():
+    """Three boxes side by side in the image: 0 and 1 meet at the same depth (touching); 2
+    borders 1 in the image but lies 10 cm behind it; 0 and 2 are far apart in the image."""
+    masks = np.zeros((3, 8, 12), bool)
+    masks[0, :, 0:4], masks[1, :, 4:8], masks[2, :, 8:12] = True, True, True
+    depth = np.full((8, 12), 0.5)
+    depth[:, 8:12] = 0.6
+    gaps = surface_gaps(_plane_points(depth), masks)
+    assert gaps[0, 1] == pytest.approx(0.01) and gaps[1, 0] == gaps[0, 1]
+    assert gaps[1, 2] == pytest.approx(np.hypot(0.01, 0.1))
+    assert np.isinf(gaps[0, 2]) and np.all(np.diag(gaps) == 0.0)
+    params = SupportParams("coverage", 0.5, 0.3, 2, 0.0, max_gap_m=0.05)
+    contact = support_contact(masks, params, gaps)
+    assert contact[0, 1] and not contact[1, 2] and not contact[0, 2]
+    thesis = support_contact(masks, SupportParams("coverage", 0.5, 0.3, 2, 0.0), gaps)
+    assert thesis[0, 1] and thesis[1, 2]  # the bounding-box rule alone takes both
+    with pytest.raises(ValueError, match="max_gap_m"):
+        support_contact(masks, params, None)
+    with pytest.raises(ValueError, match="max_gap_m"):
+        SupportParams("coverage", 0.5, 0.3, 2, 0.0, max_gap_m=0.0)
+
+
+def test_the_sweep_chooses_the_gap_test_that_removes_a_false_edge():
+    """Box 2 collapses when 1 is removed but does not touch it (10 cm behind): only the gap
+    test keeps the false edge 1 -> 2 out, so the sweep picks a max_gap_m."""
+    masks = np.zeros((3, 8, 12), bool)
+    masks[0, :, 0:4], masks[1, :, 4:8], masks[2, :, 8:12] = True, True, True
+    depth = np.full((8, 12), 0.5)
+    depth[:, 8:12] = 0.6
+    gaps = surface_gaps(_plane_points(depth), masks)
+    heat = np.zeros((3, 8, 12), np.float32)
+    heat[0][masks[1]] = 1.0  # removing 0 collapses 1 (true: they touch)
+    heat[1][masks[2]] = 1.0  # removing 1 moves 2 (not a support: no contact)
+    scene = SceneEvidence(heat, masks, [0, 1, 2], {(0, 1)}, gaps)
+    sweep = sweep_support([scene], "coverage", [0.5], [0.3], [2], [0.0], [None, 0.05])
+    assert list(sweep["precision"]) == [0.5, 1.0]
+    assert choose_support_params(sweep, "coverage").max_gap_m == 0.05

@@ -20,7 +20,8 @@ from clutterbench.planning.support import (
     SupportEdge,
     SupportParams,
     infer_support,
-    pseudo_contact,
+    support_contact,
+    surface_gaps,
 )
 
 PredictFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -73,7 +74,13 @@ class CollapseGraphPlanner:
         if len(ids) < 2:
             return []
         heatmaps = self.predict(obs.depth_m, masks.astype(np.uint8))
-        return infer_support(heatmaps, masks, ids, self.params)
+        return infer_support(heatmaps, masks, ids, self.params, self._gaps(obs, masks))
+
+    def _gaps(self, obs: Observation, masks: np.ndarray) -> np.ndarray | None:
+        """The objects' surface gaps when the rule tests them (from the depth alone)."""
+        if self.params.max_gap_m is None:
+            return None
+        return surface_gaps(obs.camera.depth_to_points(obs.depth_m), masks)
 
     def decide(self, obs: Observation, target: int, blocked: frozenset[int]) -> Decision:
         edges = self.support_edges(obs)
@@ -97,7 +104,7 @@ class CollapseGraphPlanner:
         k = ids.index(box)
         heat = self.predict(obs.depth_m, masks[k : k + 1].astype(np.uint8))[0]
         area_c = heat > self.params.prob_threshold
-        contact = pseudo_contact(masks, self.params.bbox_margin_px, self.params.adjacency_iou)[k]
+        contact = support_contact(masks, self.params, self._gaps(obs, masks))[k]
         scores = [
             float(np.logical_and(area_c, masks[j]).sum() / masks[j].sum())
             for j in range(len(ids))

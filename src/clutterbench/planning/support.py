@@ -12,6 +12,7 @@ import dataclasses
 import itertools
 from collections.abc import Sequence
 
+import cv2
 import numpy as np
 import pandas as pd
 
@@ -36,6 +37,9 @@ class SupportParams:
     """Each object's bounding box is grown by this many pixels on every side."""
     adjacency_iou: float
     """Pseudo-direct contact where the IoU of the grown boxes > adjacency_iou."""
+    max_gap_m: float | None = None
+    """... and (unless None, the thesis' rule alone) where the closest visible surface points
+    of the two objects, back-projected from the depth image, are nearer than this."""
 
     def __post_init__(self) -> None:
         if self.rule not in RULES:
@@ -44,6 +48,8 @@ class SupportParams:
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
                 raise ValueError(f"{name}: {value} is outside [0, 1]")
+        if self.max_gap_m is not None and not self.max_gap_m > 0.0:
+            raise ValueError(f"max_gap_m: {self.max_gap_m} is not > 0 (or null)")
         margin = self.bbox_margin_px
         if not isinstance(margin, int | np.integer) or isinstance(margin, bool) or margin < 0:
             raise ValueError(f"bbox_margin_px: {margin!r} is not an integer >= 0")
@@ -73,6 +79,8 @@ class SceneEvidence:
     """Box id of each mask index."""
     true_edges: set[tuple[int, int]]
     """Physics truth: (supporter, supported) box-id pairs."""
+    gaps_m: np.ndarray | None = None
+    """(K, K) `surface_gaps` of the scene (needed when a swept max_gap_m is not None)."""
 
 
 def _check_masks(masks: np.ndarray) -> None:
@@ -124,6 +132,47 @@ def grown_bbox_iou(bboxes: np.ndarray, margin_px: int, shape_hw: tuple[int, int]
     iou = np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
     np.fill_diagonal(iou, 1.0)
     return iou
+
+
+def surface_gaps(points: np.ndarray, masks: np.ndarray, band_px: int = 2) -> np.ndarray:
+    """(K, K) float64 distance (m) between the closest visible surface points of each pair of
+    objects near where their masks meet in the image: `points` (H, W, 3) back-projected depth
+    (any metric frame; NaN where nothing was seen), only pixels of one mask within `band_px`
+    of the other compared; inf where the masks do not come that close, diagonal 0."""
+    _check_masks(masks)
+    assert points.shape == (*masks.shape[1:], 3), "points must be (H, W, 3) for the masks"
+    k = masks.shape[0]
+    kernel = np.ones((2 * band_px + 1, 2 * band_px + 1), np.uint8)
+    grown = [cv2.dilate(m.astype(np.uint8), kernel) > 0 for m in masks]
+    gaps = np.full((k, k), np.inf)
+    np.fill_diagonal(gaps, 0.0)
+    for a, b in itertools.combinations(range(k), 2):
+        pa, pb = points[masks[a] & grown[b]], points[masks[b] & grown[a]]
+        pa, pb = pa[~np.isnan(pa).any(axis=1)], pb[~np.isnan(pb).any(axis=1)]
+        if len(pa) and len(pb):
+            d2 = ((pa[:, None, :] - pb[None, :, :]) ** 2).sum(axis=-1)
+            gaps[a, b] = gaps[b, a] = float(np.sqrt(d2.min()))
+    return gaps
+
+
+def _gap_contact(
+    contact: np.ndarray, gaps_m: np.ndarray | None, max_gap_m: float | None
+) -> np.ndarray:
+    if max_gap_m is None:
+        return contact
+    if gaps_m is None:
+        raise ValueError("max_gap_m is set but no surface gaps were given (need the depth)")
+    assert gaps_m.shape == contact.shape, "gaps_m must be (K, K) as the masks"
+    return contact & (gaps_m < max_gap_m)
+
+
+def support_contact(
+    masks: np.ndarray, params: SupportParams, gaps_m: np.ndarray | None = None
+) -> np.ndarray:
+    """(K, K) bool pseudo-direct contact under `params`: grown boxes overlap (thesis 6.2.2)
+    and, where params.max_gap_m is set, the visible surfaces come that close (`gaps_m`)."""
+    contact = pseudo_contact(masks, params.bbox_margin_px, params.adjacency_iou)
+    return _gap_contact(contact, gaps_m, params.max_gap_m)
 
 
 def _contact_from_iou(box_iou: np.ndarray, empty: np.ndarray, adjacency_iou: float) -> np.ndarray:
@@ -199,13 +248,18 @@ def support_matrix(scores: np.ndarray, contact: np.ndarray, score_threshold: flo
 
 
 def infer_support(
-    heatmaps: np.ndarray, masks: np.ndarray, ids: Sequence[int], params: SupportParams
+    heatmaps: np.ndarray,
+    masks: np.ndarray,
+    ids: Sequence[int],
+    params: SupportParams,
+    gaps_m: np.ndarray | None = None,
 ) -> list[SupportEdge]:
-    """Support relations of one scene (thesis 6.2.2, 6.2.3), sorted by (supporter, supported)."""
+    """Support relations of one scene (thesis 6.2.2, 6.2.3), sorted by (supporter, supported).
+    `gaps_m`: the scene's `surface_gaps`, needed when params.max_gap_m is set."""
     if len(ids) != masks.shape[0] or len(set(ids)) != len(ids):
         raise ValueError(f"ids: need {masks.shape[0]} distinct box ids, got {list(ids)}")
     scores = support_scores(heatmaps, masks, params.prob_threshold, params.rule)
-    contact = pseudo_contact(masks, params.bbox_margin_px, params.adjacency_iou)
+    contact = support_contact(masks, params, gaps_m)
     supp = support_matrix(scores, contact, params.score_threshold)
     edges = [
         SupportEdge(int(ids[a]), int(ids[b]), float(scores[a, b])) for a, b in np.argwhere(supp)
@@ -277,42 +331,44 @@ def sweep_support(
     score_thresholds: Sequence[float],
     margins_px: Sequence[int],
     adjacency_ious: Sequence[float],
+    max_gaps_m: Sequence[float | None] = (None,),
 ) -> pd.DataFrame:
     """Edge precision / recall (thesis eqs. 6.3, 6.4) of the support rule at every grid point.
 
-    One row per (prob_threshold, score_threshold, bbox_margin_px, adjacency_iou): precision and
+    One row per (prob_threshold, score_threshold, bbox_margin_px, adjacency_iou, max_gap_m,
+    the contact grid flattened in `contact_grid` order): precision and
     recall are means over the scenes where they are defined, f1 their harmonic mean (0 if both
     are 0, NaN if either is undefined); tp / fp / fn are pooled over the scenes. A true edge
     with an invisible box counts as missed.
     """
     if not scenes:
         raise ValueError("scenes: need at least one validation scene")
-    grid = list(itertools.product(prob_thresholds, score_thresholds, margins_px, adjacency_ious))
+    contact_grid = list(itertools.product(margins_px, adjacency_ious, max_gaps_m))
+    grid = list(itertools.product(prob_thresholds, score_thresholds, contact_grid))
     if not grid:
         raise ValueError("sweep grid is empty: every threshold list needs a value")
-    for p, s, m, a in grid:
-        SupportParams(rule, p, s, m, a)  # validates every value once
+    for p, s, (m, a, g) in grid:
+        SupportParams(rule, p, s, m, a, g)  # validates every value once
     score_thr = np.asarray(score_thresholds, dtype=np.float64)
-    n_p, n_s, n_m, n_a = (
-        len(v) for v in (prob_thresholds, score_thresholds, margins_px, adjacency_ious)
-    )
-    tp = np.zeros((n_p, n_s, n_m, n_a, len(scenes)), dtype=np.int64)
+    n_p, n_s, n_c = len(prob_thresholds), len(score_thresholds), len(contact_grid)
+    tp = np.zeros((n_p, n_s, n_c, len(scenes)), dtype=np.int64)
     n_pred = np.zeros_like(tp)
     n_true = np.array([len(sc.true_edges) for sc in scenes], dtype=np.int64)
     for i_sc, sc in enumerate(scenes):
         truth = _true_matrix(sc)
         bboxes, empty = mask_bboxes(sc.masks), ~sc.masks.any(axis=(1, 2))
-        contacts = []
-        for m in margins_px:
-            box_iou = grown_bbox_iou(bboxes, m, sc.masks.shape[1:])
-            contacts.append([_contact_from_iou(box_iou, empty, a) for a in adjacency_ious])
+        box_ious = {m: grown_bbox_iou(bboxes, m, sc.masks.shape[1:]) for m in margins_px}
+        contacts = [
+            _gap_contact(_contact_from_iou(box_ious[m], empty, a), sc.gaps_m, g)
+            for m, a, g in contact_grid
+        ]
         for i_p, p in enumerate(prob_thresholds):
             scores = support_scores(sc.heatmaps, sc.masks, p, rule)
             above = np.nan_to_num(scores, nan=-np.inf)[None] > score_thr[:, None, None]
-            for i_m, i_a in itertools.product(range(n_m), range(n_a)):
-                supp = _resolve_mutual(above & contacts[i_m][i_a], scores)  # (S, K, K)
-                tp[i_p, :, i_m, i_a, i_sc] = (supp & truth).sum(axis=(1, 2))
-                n_pred[i_p, :, i_m, i_a, i_sc] = supp.sum(axis=(1, 2))
+            for i_c, contact in enumerate(contacts):
+                supp = _resolve_mutual(above & contact, scores)  # (S, K, K)
+                tp[i_p, :, i_c, i_sc] = (supp & truth).sum(axis=(1, 2))
+                n_pred[i_p, :, i_c, i_sc] = supp.sum(axis=(1, 2))
     with np.errstate(invalid="ignore", divide="ignore"):
         precision_sc = np.where(n_pred > 0, tp / n_pred, np.nan)  # thesis eq. (6.3)
         recall_sc = np.where(n_true > 0, tp / n_true, np.nan)  # thesis eq. (6.4)
@@ -323,15 +379,17 @@ def sweep_support(
     f1 = np.where(np.isnan(precision) | np.isnan(recall), np.nan, f1)
     tp_all, pred_all = tp.sum(axis=-1), n_pred.sum(axis=-1)
     rows = []
-    for idx in np.ndindex(n_p, n_s, n_m, n_a):
-        i_p, i_s, i_m, i_a = idx
+    for idx in np.ndindex(n_p, n_s, n_c):
+        i_p, i_s, i_c = idx
+        margin, adjacency, gap = contact_grid[i_c]
         rows.append(
             {
                 "rule": rule,
                 "prob_threshold": float(prob_thresholds[i_p]),
                 "score_threshold": float(score_thresholds[i_s]),
-                "bbox_margin_px": int(margins_px[i_m]),
-                "adjacency_iou": float(adjacency_ious[i_a]),
+                "bbox_margin_px": int(margin),
+                "adjacency_iou": float(adjacency),
+                "max_gap_m": gap,
                 "precision": float(precision[idx]),
                 "recall": float(recall[idx]),
                 "f1": float(f1[idx]),
@@ -347,10 +405,12 @@ def sweep_support(
 
 def choose_support_params(sweep: pd.DataFrame, rule: str) -> SupportParams:
     """The grid point of `rule` with the highest f1; ties: higher precision, then the smallest
-    prob_threshold, score_threshold, bbox_margin_px, adjacency_iou (in that order)."""
+    prob_threshold, score_threshold, bbox_margin_px, adjacency_iou, then no gap test before
+    the largest max_gap_m (in that order)."""
     rows = sweep[(sweep["rule"] == rule) & sweep["f1"].notna()]
     if rows.empty:
         raise ValueError(f"rule: no sweep row of rule {rule!r} has a defined f1")
+    rows = rows.assign(_gap=rows["max_gap_m"].fillna(np.inf) if "max_gap_m" in rows else np.inf)
     keys = [
         "f1",
         "precision",
@@ -358,15 +418,18 @@ def choose_support_params(sweep: pd.DataFrame, rule: str) -> SupportParams:
         "score_threshold",
         "bbox_margin_px",
         "adjacency_iou",
+        "_gap",
     ]
     best = rows.sort_values(
-        keys, ascending=[False, False, True, True, True, True], kind="mergesort"
+        keys, ascending=[False, False, True, True, True, True, False], kind="mergesort"
     )
     row = best.iloc[0]
+    gap = float(row["_gap"])
     return SupportParams(
         rule=rule,
         prob_threshold=float(row["prob_threshold"]),
         score_threshold=float(row["score_threshold"]),
         bbox_margin_px=int(row["bbox_margin_px"]),
         adjacency_iou=float(row["adjacency_iou"]),
+        max_gap_m=None if np.isinf(gap) else gap,
     )

@@ -3,22 +3,36 @@ thesis' real-robot rows.
 
 Rows are labelled '<method>/<objects>' (the `row:` values of table_6_3 in
 reports/thesis_figures.yaml, or rows the thesis lacks such as the oracle and random ones);
-each maps to one trials condition. Every rate comes from trials.stats.aggregate.
+each maps to one trials condition. Every rate comes from trials.stats.aggregate. The same
+rows split by scene family make table_6_3_families (ours only).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.report.tables import Column, comparison_frame, write_raw_csv, write_table
-from clutterbench.trials.stats import Rate, aggregate
+from clutterbench.report.tables import (
+    Column,
+    comparison_frame,
+    grouped,
+    rate_text,
+    thesis_rate_text,
+    values_text,
+    write_raw_csv,
+    write_table,
+)
+from clutterbench.trials.stats import aggregate
+
+if TYPE_CHECKING:
+    from clutterbench.trials.config import Ch6TrialParams
 
 TABLE = "table_6_3"
+FAMILIES_TABLE = f"{TABLE}_families"
 
 METHODS = {
     "single_step": "single-step extraction (target pulled at once)",
@@ -40,6 +54,22 @@ COLUMNS = [
     Column("episodes", "episodes", "{:d}"),
 ]
 
+FAMILY_COLUMNS = [
+    Column("family", "family", "{}"),
+    Column("step_success", "success per step", "{}"),
+    Column("success", "success per episode", "{}"),
+    Column("mean_steps", "mean steps", "{:.3g}"),
+    Column("episodes", "episodes", "{:d}"),
+]
+"""Table 6.3 by scene family: ours only (the thesis has no per-family split)."""
+
+SUCCESS_NOTE = (
+    "success per step: the pulled box left the shelf and no other box moved beyond the "
+    "threshold, judged from physics after the action settled (never from a planner's "
+    "prediction). success per episode: the target left the shelf and every step kept the "
+    "others still. k/n = rate [Wilson 95% interval]."
+)
+
 
 def _parse_row(row: str) -> tuple[str, str]:
     method, sep, objects = row.partition("/")
@@ -49,14 +79,6 @@ def _parse_row(row: str) -> tuple[str, str]:
             f"{', '.join(METHODS)}"
         )
     return method, objects
-
-
-def _thesis_rate_text(row: Mapping[str, Any]) -> str | None:
-    """'k/n = x%': counts and the rate as printed in the thesis (not recomputed)."""
-    if "success" not in row or "trials" not in row:
-        return None
-    text = f"{row['success']}/{row['trials']}"
-    return f"{text} = {100 * row['success_rate']:.1f}%" if "success_rate" in row else text
 
 
 def _thesis_rows(figures: Mapping[str, Any], method: str, objects: str) -> list[dict[str, Any]]:
@@ -82,9 +104,9 @@ def thesis_figures_for(figures: Mapping[str, Any], method: str, objects: str) ->
     for r in _thesis_rows(figures, method, objects):
         out["objects"] = str(r["n_objects"])
         if r["rate_unit"] == "per_step":
-            out["step_success"] = _thesis_rate_text(r)
+            out["step_success"] = thesis_rate_text(r)
         else:
-            out["success"] = _thesis_rate_text(r)
+            out["success"] = thesis_rate_text(r)
             if "mean_steps" in r:
                 out["mean_steps"] = r["mean_steps"]
     return out
@@ -112,12 +134,6 @@ def _objects_text(records: Sequence[Mapping[str, Any]], row: str) -> str:
         raise ClutterbenchError(f"report.{TABLE}.{row}: trial records lack 'n_objects'")
     counts = sorted({int(r["n_objects"]) for r in records})
     return f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
-
-
-def _rate(agg: Mapping[str, Any], prefix: str) -> str | None:
-    if f"{prefix}_k" not in agg or pd.isna(agg[f"{prefix}_k"]):
-        return None
-    return Rate(int(agg[f"{prefix}_k"]), int(agg[f"{prefix}_n"])).text()
 
 
 def _condition_records(
@@ -168,9 +184,9 @@ def extraction_table(
         a = agg[0]
         ours = {
             "objects": _objects_text(records, row),
-            "step_success": _rate(a, "step_success"),
-            "success": _rate(a, "success"),
-            "strict_success": _rate(a, "strict_success"),
+            "step_success": rate_text(a, "step_success"),
+            "success": rate_text(a, "success"),
+            "strict_success": rate_text(a, "strict_success"),
             "mean_steps": a.get("mean_steps"),
             "mean_n_disturbed": a.get("mean_n_disturbed"),
             "mean_disturbance_mm": 1000.0 * a["mean_disturbance_m"]
@@ -193,16 +209,68 @@ def extraction_table(
     return write_raw_csv(raw, out_dir / f"{TABLE}.csv")
 
 
-def _grouped(used: Mapping[str, Sequence[Mapping[str, Any]]], describe: Callable) -> str:
-    """'a (cond, cond); b (cond)': conditions sharing a description named once."""
-    groups: dict[str, list[str]] = {}
-    for condition, records in used.items():
-        groups.setdefault(describe(records), []).append(condition)
-    return "; ".join(f"{d} ({', '.join(c)})" for d, c in groups.items())
+def extraction_families_table(
+    records_by_condition: Mapping[str, list[dict[str, Any]]],
+    rows: Mapping[str, str],
+    out_dir: Path,
+    scale: str,
+    notes_extra: Sequence[str] = (),
+) -> pd.DataFrame:
+    """Table 6.3 by scene family as reports/tables/table_6_3_families.md (one row per table
+    row and family, families sorted; ours only: the thesis has no per-family split) and
+    .csv (the raw aggregate per family). Returns the raw frame.
+
+    rows: '<method>/<objects>' -> trials condition, as for extraction_table."""
+    shown, raw, used = [], [], {}
+    for row, condition in rows.items():
+        method, _ = _parse_row(row)
+        records = _condition_records(records_by_condition, row, condition)
+        _check_planner(records, row, method)
+        label = f"{METHODS[method]} [{condition}]"
+        by_family = aggregate(records, "family").to_dict("records")
+        for a in sorted(by_family, key=lambda a: str(a["family"])):
+            ours = {
+                "family": a["family"],
+                "step_success": rate_text(a, "step_success"),
+                "success": rate_text(a, "success"),
+                "mean_steps": a.get("mean_steps"),
+                "episodes": a["episodes"],
+            }
+            shown.append((label, ours, {}))
+            raw.append({"row": row, "method": method, "condition": condition, **a})
+        used[condition] = records
+    # A column no row fills (steps of records without them) is left out.
+    columns = [c for c in FAMILY_COLUMNS if any(o.get(c.key) is not None for _, o, _ in shown)]
+    frame = comparison_frame(shown, columns, "method [our condition]")
+    notes = [
+        f"{scale} scale. ours: simulated trials in SAPIEN, one episode per scene, split by the "
+        "family of the scene; the thesis reports no per-family split.",
+        SUCCESS_NOTE,
+        f"trial scenes: {grouped(used, lambda rs: 'stream ' + values_text(rs, 'stream'))}.",
+        *notes_extra,
+    ]
+    title = "Table 6.3 by scene family: extraction success per step and per episode"
+    write_table(frame, columns, out_dir, FAMILIES_TABLE, title, notes)
+    return write_raw_csv(raw, out_dir / f"{FAMILIES_TABLE}.csv")
 
 
-def _values(records: Iterable[Mapping[str, Any]], key: str) -> str:
-    return ", ".join(sorted({str(r.get(key)) for r in records}))
+def _mm(metres: float) -> str:
+    return f"{1000.0 * metres:.1f} mm"
+
+
+def trial_params_note(ch6: Ch6TrialParams) -> str:
+    """The ch. 6 trial params that judge and execute an extraction, in words (a table
+    note): the moved threshold, the grasp lift, the pull increment and the attempt cap."""
+    lift = (
+        f"the gripper raises the grasped box by {_mm(ch6.grasp_lift_m)} before pulling it out"
+        if ch6.grasp_lift_m > 0
+        else "the gripper pulls the grasped box out without raising it"
+    )
+    attempts = f"{ch6.max_steps} attempt{'s' if ch6.max_steps != 1 else ''}"
+    return (
+        f"a box moved: its centre moved more than {_mm(ch6.moved_threshold_m)}; {lift} in "
+        f"{_mm(ch6.pull_increment_m)} increments; an episode gives up after {attempts}."
+    )
 
 
 def _notes(
@@ -212,16 +280,13 @@ def _notes(
     return [
         f"{scale} scale. ours: simulated trials in SAPIEN, one episode per scene; thesis: "
         f"real-robot numbers ({source}), a different robot, objects and scenes.",
-        "success per step: the pulled box left the shelf and no other box moved beyond the "
-        "threshold, judged from physics after the action settled (never from a planner's "
-        "prediction). success per episode: the target left the shelf and every step kept the "
-        "others still. k/n = rate [Wilson 95% interval].",
+        SUCCESS_NOTE,
         "thesis per-step rates: Table 6.3; thesis per-episode rate and mean steps: the "
         "single-arm experiments in the text, beside our row of the same method and objects.",
         "mean disturbed boxes: boxes not extracted that moved beyond the threshold between the "
         "start and the end of the episode; mean disturbance: the summed displacement of the "
         "boxes not extracted (SafePicking's translation metric), per episode.",
-        f"trial scenes: {_grouped(used, lambda rs: 'stream ' + _values(rs, 'stream'))}; "
-        f"families: {_grouped(used, lambda rs: _values(rs, 'family'))}.",
-        f"perception (masks): {_grouped(used, lambda rs: _values(rs, 'perception'))}.",
+        f"trial scenes: {grouped(used, lambda rs: 'stream ' + values_text(rs, 'stream'))}; "
+        f"families: {grouped(used, lambda rs: values_text(rs, 'family'))}.",
+        f"perception (masks): {grouped(used, lambda rs: values_text(rs, 'perception'))}.",
     ]

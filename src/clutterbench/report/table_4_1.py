@@ -19,11 +19,14 @@ from typing import Any
 import pandas as pd
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.report.extraction import _grouped, _rate, _thesis_rate_text, _values
 from clutterbench.report.tables import (
     Column,
     comparison_frame,
+    grouped,
+    rate_text,
+    thesis_rate_text,
     thesis_row,
+    values_text,
     write_raw_csv,
     write_table,
 )
@@ -183,8 +186,8 @@ def _ours(table: str, row: _Row) -> tuple[dict[str, Any], dict[str, Any]]:
     valid = rate(row.records, "valid")
     ours = {
         "objects": objects,
-        "success": _rate(a, "success"),
-        "strict_success": _rate(a, "strict_success"),
+        "success": rate_text(a, "success"),
+        "strict_success": rate_text(a, "strict_success"),
         "mean_n_disturbed": a.get("mean_n_disturbed"),
         "mean_disturbance_mm": 1000.0 * a["mean_disturbance_m"]
         if "mean_disturbance_m" in a
@@ -217,7 +220,7 @@ def _write(
     shown, raw = [], []
     for row in rows:
         ours, raw_row = _ours(table, row)
-        thesis_text = _thesis_rate_text(row.thesis)
+        thesis_text = thesis_rate_text(row.thesis)
         shown.append((row.label, ours, {"success": thesis_text} if thesis_text else {}))
         raw.append(raw_row)
     # A column no row fills (strict success of records without it; invalid actions where
@@ -358,7 +361,7 @@ def _notes(
         "the thesis' rates as printed.",
         "mean disturbed boxes: other boxes that moved beyond the threshold; mean "
         "disturbance: the summed displacement of the other boxes, per episode.",
-        f"trial scenes: {_grouped(used, lambda rs: 'stream ' + _values(rs, 'stream'))}; "
-        f"families: {_grouped(used, lambda rs: _values(rs, 'family'))}.",
-        f"perception (masks): {_grouped(used, lambda rs: _values(rs, 'perception'))}.",
+        f"trial scenes: {grouped(used, lambda rs: 'stream ' + values_text(rs, 'stream'))}; "
+        f"families: {grouped(used, lambda rs: values_text(rs, 'family'))}.",
+        f"perception (masks): {grouped(used, lambda rs: values_text(rs, 'perception'))}.",
     ]

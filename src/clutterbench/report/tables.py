@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +17,7 @@ import yaml
 
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_text
+from clutterbench.trials.stats import Rate
 
 
 def load_thesis_figures(path: Path) -> dict[str, Any]:
@@ -40,6 +41,35 @@ def thesis_row(figures: Mapping[str, Any], table: str, row: str) -> dict[str, An
         if r.get("row") == row:
             return r
     return {}
+
+
+def thesis_rate_text(row: Mapping[str, Any]) -> str | None:
+    """'k/n = x%': counts and the rate as printed in the thesis (not recomputed)."""
+    if "success" not in row or "trials" not in row:
+        return None
+    text = f"{row['success']}/{row['trials']}"
+    return f"{text} = {100 * row['success_rate']:.1f}%" if "success_rate" in row else text
+
+
+def rate_text(agg: Mapping[str, Any], prefix: str) -> str | None:
+    """'k/n = x% [lo, hi]' of the `<prefix>_k` / `<prefix>_n` columns of an aggregate row
+    (trials.stats.aggregate); None where the row lacks them."""
+    if f"{prefix}_k" not in agg or pd.isna(agg[f"{prefix}_k"]):
+        return None
+    return Rate(int(agg[f"{prefix}_k"]), int(agg[f"{prefix}_n"])).text()
+
+
+def grouped(used: Mapping[str, Sequence[Mapping[str, Any]]], describe: Callable) -> str:
+    """'a (cond, cond); b (cond)': conditions sharing a description named once."""
+    groups: dict[str, list[str]] = {}
+    for condition, records in used.items():
+        groups.setdefault(describe(records), []).append(condition)
+    return "; ".join(f"{d} ({', '.join(c)})" for d, c in groups.items())
+
+
+def values_text(records: Iterable[Mapping[str, Any]], key: str) -> str:
+    """'a, b': the distinct values of `key` over the records, as text, sorted."""
+    return ", ".join(sorted({str(r.get(key)) for r in records}))
 
 
 @dataclasses.dataclass(frozen=True)

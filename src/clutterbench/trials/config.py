@@ -71,6 +71,9 @@ class SupportEvalConfig:
     """Swept: each object's bounding box is grown by this many pixels (pseudo-direct contact)."""
     adjacency_ious: tuple[float, ...] = (0.0, 0.05)
     """Swept: grown boxes in pseudo-direct contact when their IoU exceeds this."""
+    max_gaps_m: tuple[float | None, ...] = (None,)
+    """Swept: ... and when their closest visible surface points (back-projected depth) are
+    nearer than this; null: no such test (the thesis' rule alone)."""
     figure_scenes: int = bounded(6, ge=1)
     """Test scenes drawn in the figure (thesis Fig. 6.8: six)."""
     workers: int = bounded(2, ge=1)

@@ -30,9 +30,11 @@ from clutterbench.planning.support import (
     edge_precision_recall,
     infer_support,
     oracle_heatmaps,
-    pseudo_contact,
+    support_contact,
+    surface_gaps,
     sweep_support,
 )
+from clutterbench.sim.config import CameraConfig
 
 SCENE_KEYS = ("scene_index", "n_objects", "family", "depth_m", "instance", "removal_m", "contact")
 PredictFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -54,6 +56,8 @@ class Scene:
     contact: np.ndarray
     """(K, K) bool: they touch in the settled scene."""
     n_objects: int
+    gaps_m: np.ndarray | None = None
+    """(K, K) `surface_gaps` of the visible objects (None: not computed)."""
 
     @property
     def true_edges(self) -> set[tuple[int, int]]:
@@ -61,8 +65,25 @@ class Scene:
         return {(self.ids[i], self.ids[j]) for i, j in zip(a, b) if i != j}
 
 
+def camera_points(depth_m: np.ndarray, camera: CameraConfig) -> np.ndarray:
+    """(H, W, 3) camera-frame points of a depth image rendered with `camera` (the pinhole
+    SAPIEN renders with: f = (H / 2) / tan(fovy / 2), principal point at the centre); NaN
+    where nothing was seen."""
+    h, w = depth_m.shape
+    f = (h / 2) / np.tan(np.deg2rad(camera.fovy_deg) / 2)
+    v, u = np.mgrid[0:h, 0:w].astype(np.float64) + 0.5
+    z = depth_m.astype(np.float64)
+    pts = np.stack([(u - w / 2) * z / f, (v - h / 2) * z / f, z], axis=-1)
+    pts[depth_m <= 0] = np.nan
+    return pts
+
+
 def scene_from_arrays(
-    arrays: dict[str, np.ndarray], row: int, threshold_m: float, min_pixels: int
+    arrays: dict[str, np.ndarray],
+    row: int,
+    threshold_m: float,
+    min_pixels: int,
+    camera: CameraConfig | None = None,
 ) -> Scene:
     n = int(arrays["n_objects"][row])
     instance = arrays["instance"][row]
@@ -74,20 +95,28 @@ def scene_from_arrays(
     removal = arrays["removal_m"][row][np.ix_(ids, ids)]
     moved = np.nan_to_num(removal, nan=0.0) > threshold_m
     np.fill_diagonal(moved, False)
+    depth_m = arrays["depth_m"][row].astype(np.float32)
     return Scene(
         index=int(arrays["scene_index"][row]),
         family=str(arrays["family"][row]),
-        depth_m=arrays["depth_m"][row].astype(np.float32),
+        depth_m=depth_m,
         ids=ids,
         masks=masks,
         moved=moved,
         contact=arrays["contact"][row][np.ix_(ids, ids)],
         n_objects=n,
+        gaps_m=None if camera is None else surface_gaps(camera_points(depth_m, camera), masks),
     )
 
 
 def split_scenes(
-    gen_dir: Path, split_file: Path, which: str, limit: int, threshold_m: float, min_pixels: int
+    gen_dir: Path,
+    split_file: Path,
+    which: str,
+    limit: int,
+    threshold_m: float,
+    min_pixels: int,
+    camera: CameraConfig | None = None,
 ) -> list[Scene]:
     """The first `limit` scenes of a split, in split order."""
     record = load_split(split_file, gen_dir)
@@ -99,18 +128,24 @@ def split_scenes(
         arrays = store.load(shard, SCENE_KEYS)
         for row, s in enumerate(arrays["scene_index"]):
             if int(s) in order:
-                found[int(s)] = scene_from_arrays(arrays, row, threshold_m, min_pixels)
+                found[int(s)] = scene_from_arrays(arrays, row, threshold_m, min_pixels, camera)
     return [found[s] for s in wanted if s in found]
 
 
-def all_scenes(gen_dir: Path, dataset: str, threshold_m: float, min_pixels: int) -> Iterator[Scene]:
+def all_scenes(
+    gen_dir: Path,
+    dataset: str,
+    threshold_m: float,
+    min_pixels: int,
+    camera: CameraConfig | None = None,
+) -> Iterator[Scene]:
     for arrays in iter_shards(gen_dir, dataset, SCENE_KEYS):
         for row in range(len(arrays["scene_index"])):
-            yield scene_from_arrays(arrays, row, threshold_m, min_pixels)
+            yield scene_from_arrays(arrays, row, threshold_m, min_pixels, camera)
 
 
 def evidence(scene: Scene, heatmaps: np.ndarray) -> SceneEvidence:
-    return SceneEvidence(heatmaps, scene.masks, scene.ids, scene.true_edges)
+    return SceneEvidence(heatmaps, scene.masks, scene.ids, scene.true_edges, scene.gaps_m)
 
 
 def predicted_heatmaps(scene: Scene, predict: PredictFn) -> np.ndarray:
@@ -133,6 +168,7 @@ def sweep_all(
                 grid.score_thresholds,
                 grid.bbox_margins_px,
                 grid.adjacency_ious,
+                grid.max_gaps_m,
             )
             df.insert(0, "method", rule if source == "cp" else f"oracle_{rule}")
             frames.append(df)
@@ -162,6 +198,7 @@ def val_metrics_at(sweep: pd.DataFrame, method: str, params: SupportParams) -> d
         & np.isclose(sweep["score_threshold"], params.score_threshold)
         & (sweep["bbox_margin_px"] == params.bbox_margin_px)
         & np.isclose(sweep["adjacency_iou"], params.adjacency_iou)
+        & np.isclose(sweep["max_gap_m"].fillna(np.inf), params.max_gap_m or np.inf)
     ]
     r = rows.iloc[0]
     return {k: float(r[k]) for k in ("precision", "recall", "f1")}
@@ -172,7 +209,7 @@ def random_edges(
 ) -> set[tuple[int, int]]:
     """The floor: each pseudo-contact pair is an edge with probability `p_edge`, in a random
     direction."""
-    contact = pseudo_contact(scene.masks, params.bbox_margin_px, params.adjacency_iou)
+    contact = support_contact(scene.masks, params, scene.gaps_m)
     out = set()
     for a, b in zip(*np.nonzero(np.triu(contact, 1))):
         if rng.random() < p_edge:
@@ -185,7 +222,7 @@ def contact_edge_rate(scenes: Sequence[Scene], params: SupportParams) -> float:
     """Share of pseudo-contact pairs that hold a true edge (either way) on validation scenes."""
     pairs = edges = 0
     for sc in scenes:
-        contact = np.triu(pseudo_contact(sc.masks, params.bbox_margin_px, params.adjacency_iou), 1)
+        contact = np.triu(support_contact(sc.masks, params, sc.gaps_m), 1)
         truth = sc.moved & sc.contact
         pairs += int(contact.sum())
         edges += int((contact & (truth | truth.T)).sum())
@@ -205,7 +242,11 @@ def evaluate_scene(
     edges: dict[str, set[tuple[int, int]]] = {}
     for method, params in chosen.items():
         maps = oracle if method.startswith("oracle_") else heatmaps
-        found = infer_support(maps, scene.masks, scene.ids, params) if len(scene.ids) > 1 else []
+        found = (
+            infer_support(maps, scene.masks, scene.ids, params, scene.gaps_m)
+            if len(scene.ids) > 1
+            else []
+        )
         edges[method] = {(e.supporter, e.supported) for e in found}
     edges["random"] = random_edges(scene, chosen["coverage"], p_edge, rng) if scene.ids else set()
     rows = []
