@@ -220,6 +220,12 @@ def test_support_table_names_a_method_without_rows(tmp_path, figures):
     assert thresholds_text(None) == "—"
 
 
+def test_thresholds_text_reads_the_gap_test():
+    base = {"rule": "iou", "prob_threshold": 0.4, "bbox_margin_px": 2}
+    assert thresholds_text(base | {"max_gap_m": 0.05}) == "p>0.40, margin 2 px, surface gap<50 mm"
+    assert thresholds_text(base | {"max_gap_m": None}).endswith("no gap test")
+
+
 def panel(k: int) -> SupportPanel:
     depth = np.full((32, 40), 0.6, dtype=np.float32)
     masks = np.zeros((3, 32, 40), dtype=bool)

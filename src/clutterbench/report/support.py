@@ -61,6 +61,7 @@ THRESHOLD_TEXT = {
     "score_threshold": lambda v: f"score>{v:.2f}",
     "bbox_margin_px": lambda v: f"margin {v} px",
     "adjacency_iou": lambda v: f"adj IoU>{v:.2f}",
+    "max_gap_m": lambda v: "no gap test" if v is None else f"surface gap<{1000 * v:.0f} mm",
 }
 
 
