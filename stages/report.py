@@ -60,6 +60,7 @@ def report(params: dict, base: BaseConfig) -> None:
         sources,
         Path("reports/tables"),
         base.scale,
+        {name: tuple(ds.n_objects) for name, ds in gen.datasets.items()},
     )
 
     support = Path("reports/support")

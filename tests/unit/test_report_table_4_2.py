@@ -87,3 +87,13 @@ def test_table_4_2_refuses_metrics_at_another_threshold(root, sources, tmp_path)
     thresholds = dict.fromkeys(RUN_MODELS, 0.4) | {"s_on_v": 0.5}
     with pytest.raises(ClutterbenchError, match="s_on_v/metrics.json is at threshold 0.4, not 0.5"):
         table_4_2(ROWS, RUN_MODELS, thresholds, figures, sources, tmp_path / "t", "default")
+
+
+def test_table_4_2_says_when_the_training_piles_differ_from_the_thesis(root, sources, tmp_path):
+    figures = load_thesis_figures(root / "reports/thesis_figures.yaml")
+    thresholds = dict.fromkeys(RUN_MODELS, 0.4)
+    piles = {"ch4_same": (5, 10), "ch4_various": (6, 6)}
+    table_4_2(ROWS, RUN_MODELS, thresholds, figures, sources, tmp_path / "t", "default", piles)
+    differs = pd.read_csv(tmp_path / "t/table_4_2.csv")["differs from thesis"]
+    assert "trained on scenes of 5-10 boxes (thesis 6)" in differs[0]
+    assert "boxes (thesis" not in differs[2]  # ch4_various: piles of 6, as the thesis'

@@ -46,6 +46,7 @@ SETTING_TEXT: dict[str, Callable[[Any, Any], str]] = {
     "lr_schedule": lambda o, t: f"{o} lr (thesis {t})",
     "batch_size": lambda o, t: f"batch {o} (thesis {t})",
     "loss": lambda o, t: f"{o} loss (thesis {t})",
+    "objects_per_scene": lambda o, t: f"trained on scenes of {o} boxes (thesis {t})",
 }
 TABLE_SETTINGS = ("test_images",)
 """Settings of the whole table (its test set), said in the notes rather than per row."""
@@ -110,10 +111,11 @@ def thesis_settings(figures: Mapping[str, Any], table: str, row: str) -> dict[st
 
 def settings_differences(ours: Mapping[str, Any], thesis: Mapping[str, Any]) -> str:
     """'<ours> px (thesis <theirs>); lr <ours> (thesis <theirs>)', for the settings the
-    thesis states and ours differ from; 'none' when none differ."""
+    thesis states and ours differ from (a setting we did not record is left out); 'none'
+    when none differ."""
     diffs = []
     for key, text in SETTING_TEXT.items():
-        if key not in thesis:
+        if key not in thesis or key not in ours:
             continue
         o, t = ours[key], thesis[key]
         same = math.isclose(o, t) if isinstance(o, float) or isinstance(t, float) else o == t

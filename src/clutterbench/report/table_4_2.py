@@ -63,11 +63,14 @@ def table_4_2(
     sources: RunSources,
     out_dir: Path,
     scale: str,
+    objects_per_scene: Mapping[str, tuple[int, int]] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """reports/tables/table_4_2.{md,csv}: thesis row -> our evaluate run (None: not run).
 
     run_models: evaluate run -> its model; run_thresholds: evaluate run -> its pixel
-    threshold (EvaluateConfig.for_run(run).threshold)."""
+    threshold (EvaluateConfig.for_run(run).threshold); objects_per_scene: dataset -> its
+    (min, max) boxes per scene (generate.datasets.<d>.n_objects), compared with the piles
+    the thesis trained on."""
     records, ours_all = [], {}
     for row, run in rows.items():
         thesis = thesis_row(figures, TABLE, row)
@@ -87,6 +90,9 @@ def table_4_2(
             )
         model = run_models[run]
         settings = model_settings(sources.model_dir, sources.train_dir, model)
+        if objects_per_scene and settings["dataset"] in objects_per_scene:
+            lo, hi = objects_per_scene[settings["dataset"]]
+            settings["objects_per_scene"] = str(lo) if lo == hi else f"{lo}-{hi}"
         ours = table_row(metrics) | {
             "run": run,
             "dataset": metrics["dataset"],
