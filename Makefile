@@ -9,7 +9,7 @@ export DVC_NO_ANALYTICS := 1
 export PYTHONUNBUFFERED := 1
 STAMP := $(VENV)/.installed-$(shell cat requirements.lock pyproject.toml 2>/dev/null | sha1sum | cut -c1-12)
 
-.PHONY: setup system venv repro test lint bench clean-venv
+.PHONY: setup system venv repro test lint bench learning-curve clean-venv
 
 setup: system venv .dvc/config
 
@@ -41,6 +41,11 @@ test: lint
 
 bench: setup
 	python -m clutterbench.bench
+
+# cp_focal retrained on 1/4 and 1/2 of its training scenes (after dvc repro; ~1.5x its
+# training time): reports/learning_curve/cp_focal.{md,csv,png}
+learning-curve: setup
+	python -m clutterbench.collapse.learning_curve cp_focal --fractions 0.25 0.5
 
 clean-venv:
 	rm -rf $(VENV)
