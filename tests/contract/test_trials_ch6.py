@@ -17,8 +17,9 @@ from clutterbench.planning.extraction import Decision, TargetFirstPlanner
 from clutterbench.planning.support import SupportParams
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.physics import BoxWorld
+from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.ch6 import ch6_jobs, pull_out, run_ch6_episode
+from clutterbench.trials.ch6 import OraclePlanner, ch6_jobs, pull_out, run_ch6_episode
 from clutterbench.trials.config import ConditionConfig, SceneStreamConfig, TrialsConfig
 from clutterbench.trials.harness import EpisodeLog, run_episodes, write_mcap
 from clutterbench.trials.records import read_records, write_records
@@ -76,6 +77,16 @@ def test_pull_consequences_match_the_judge(stack3, physics):
     disp = pull_consequences(stack3, physics, [0, 2])
     assert np.nanmax(disp[0]) > THR
     assert np.nanmax(disp[2]) <= THR
+
+
+def test_the_oracle_pulls_the_top_first_and_knows_it_is_the_only_safe_pull(stack3, physics):
+    world = BoxWorld.from_spec(stack3, physics, render=True)
+    params = TrialsConfig().ch6
+    decision = OraclePlanner(world, stack3, physics, params).decide(
+        observe(world, CAM), 0, frozenset()
+    )
+    assert decision.pull == 2 and decision.state["safe"] == [2]
+    assert [1, 2] in [e[:2] for e in decision.state["edges"]]
 
 
 @pytest.fixture(scope="module")

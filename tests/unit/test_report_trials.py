@@ -13,6 +13,7 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.report.extraction import (
     extraction_families_table,
     extraction_table,
+    safe_pull_notes,
     trial_params_note,
 )
 from clutterbench.report.support import support_table, thresholds_text
@@ -170,6 +171,32 @@ def test_trial_params_note_reads_the_ch6_params_in_mm():
     flat = Ch6TrialParams(grasp_lift_m=0.0, pull_increment_m=0.0125, max_steps=1)
     assert "without raising it in 12.5 mm increments" in trial_params_note(flat)
     assert trial_params_note(flat).endswith("after 1 attempt.")
+
+
+def oracle_trial(safe_pulls: list[int], family: str) -> dict:
+    rec = trial("or", "oracle", 5, [n > 0 for n in safe_pulls], True, family)
+    for step, n in zip(rec["steps"], safe_pulls):
+        step["safe_pulls"] = n
+    return rec
+
+
+def test_safe_pull_notes_bound_single_arm_success_by_the_scenes_without_a_safe_pull(
+    tmp_path, figures
+):
+    oracle = [
+        oracle_trial([0, 2], "random"),  # no safe pull at the start
+        oracle_trial([3, 0, 1], "random"),
+        oracle_trial([1], "stacked"),
+        oracle_trial([0], "stacked"),
+    ]
+    (note,) = safe_pull_notes({"or": oracle, "ms": RECORDS["ms"]})  # ms: no counts, no note
+    assert note.startswith("no safe pull [or]: at 2/4 episode starts every visible box")
+    assert "(each pull simulated; random 1/2, stacked 1/2)" in note
+    assert "in more than 50.0% of the episodes; at 3 of the 7 or steps" in note
+    extraction_table(
+        {**RECORDS, "or": oracle}, {**ROWS, "oracle/3-10": "or"}, figures, tmp_path, "t"
+    )
+    assert note in (tmp_path / "table_6_3.md").read_text()
 
 
 def scenes_frame() -> pd.DataFrame:

@@ -273,6 +273,44 @@ def trial_params_note(ch6: Ch6TrialParams) -> str:
     )
 
 
+def _no_safe_pull(records: Sequence[Mapping[str, Any]]) -> tuple[int, int, int, int]:
+    """(episodes whose start had no safe pull, episodes, steps with none, steps) over the
+    steps that say how many visible boxes could be pulled without moving another."""
+    counted = [[s["safe_pulls"] for s in r["steps"] if "safe_pulls" in s] for r in records]
+    counted = [c for c in counted if c]
+    return (
+        sum(c[0] == 0 for c in counted),
+        len(counted),
+        sum(n == 0 for c in counted for n in c),
+        sum(len(c) for c in counted),
+    )
+
+
+def safe_pull_notes(used: Mapping[str, Sequence[Mapping[str, Any]]]) -> list[str]:
+    """For each condition whose steps count the safe pulls (the oracle simulates every
+    visible box's pull): how often none was safe, and the bound that puts on every single-arm
+    planner run on the same scenes."""
+    notes = []
+    for condition, records in used.items():
+        starts, episodes, none, steps = _no_safe_pull(records)
+        if not episodes:
+            continue
+        stream = values_text(records, "stream")
+        families = sorted({str(r["family"]) for r in records})
+        by_family = ", ".join(
+            "{} {}/{}".format(f, *_no_safe_pull([r for r in records if r["family"] == f])[:2])
+            for f in families
+        )
+        notes.append(
+            f"no safe pull [{condition}]: at {starts}/{episodes} episode starts every visible box "
+            f"moved another box when pulled (each pull simulated; {by_family}), so on stream "
+            f"{stream} no single-arm planner can succeed in more than "
+            f"{100.0 * (episodes - starts) / episodes:.1f}% of the episodes; at {none} of the "
+            f"{steps} {condition} steps no visible box was safe to pull."
+        )
+    return notes
+
+
 def _notes(
     figures: Mapping[str, Any], used: Mapping[str, Sequence[Mapping[str, Any]]], scale: str
 ) -> list[str]:
@@ -289,4 +327,5 @@ def _notes(
         f"trial scenes: {grouped(used, lambda rs: 'stream ' + values_text(rs, 'stream'))}; "
         f"families: {grouped(used, lambda rs: values_text(rs, 'family'))}.",
         f"perception (masks): {grouped(used, lambda rs: values_text(rs, 'perception'))}.",
+        *safe_pull_notes(used),
     ]

@@ -12,6 +12,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from clutterbench.observation import Observation
 from clutterbench.planning.cpg import build_cpg, extraction_order, single_arm_plan
 from clutterbench.planning.extraction import (
@@ -54,8 +56,9 @@ class OraclePlanner:
     """The ceiling: Algorithm 1 on the true consequences of the action the trials execute.
     For every visible box X, pulling X out is simulated from the present state's canonical
     start; X -> Y when that moves Y beyond the threshold (support, but also a box in front
-    that X would push, or one it drags). Lives here, not in planning/, because it reads the
-    world."""
+    that X would push, or one it drags). Its state also lists the visible boxes whose pull
+    moves no other box ("safe"): where there is none, no single-arm planner can succeed.
+    Lives here, not in planning/, because it reads the world."""
 
     def __init__(
         self, world: BoxWorld, spec: SceneSpec, physics: PhysicsConfig, params: Ch6TrialParams
@@ -75,10 +78,15 @@ class OraclePlanner:
         ]
         graph = build_cpg(edges, target)
         plan = single_arm_plan(graph, target, blocked)
+        # The pulls that move no other box at all (hidden ones included): none means every
+        # single-arm action from this state disturbs the pile, whatever the planner.
+        thr = self.params.moved_threshold_m
+        safe = [index[a] for a in visible if not (np.nan_to_num(disp[a]) > thr).any()]
         state = {
             "edges": [[e.supporter, e.supported, round(e.score, 4)] for e in edges],
             "order": extraction_order(graph, target),
             "blocked": sorted(blocked),
+            "safe": sorted(safe),
         }
         return Decision(plan.pull, None, state)
 
@@ -196,6 +204,8 @@ def run_extraction(
             break
         log.json(t, DECISION_TOPIC, {"pull": decision.pull, "hold": decision.hold} | decision.state)
         step = pull_out(world, decision, planner, camera, params, job["cp_max"], log)
+        if "safe" in decision.state:  # the oracle saw how many visible boxes were safe to pull
+            step["safe_pulls"] = len(decision.state["safe"])
         steps.append(step)
         touched.add(decision.pull)
         if step["aborted"]:

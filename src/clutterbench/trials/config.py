@@ -10,8 +10,7 @@ from collections.abc import Mapping
 from typing import Literal
 
 from clutterbench.config import bounded
-from clutterbench.sim.catalog import CATALOGUES
-from clutterbench.sim.config import FAMILY_NAMES
+from clutterbench.data.config import DatasetConfig
 
 PLANNERS = ("single_step", "multi_step", "bimanual", "oracle", "random")
 """ch. 6 trial policies: pull the target at once; Algorithm 1 with one arm; Algorithm 1 with
@@ -31,16 +30,13 @@ class SceneStreamConfig:
     """Box catalogue the sizes are drawn from."""
 
     def __post_init__(self) -> None:
-        if not self.families:
-            raise ValueError("families: give at least one scene family")
-        for name, w in self.families.items():
-            if name not in FAMILY_NAMES:
-                raise ValueError(f"families.{name}: unknown family (known: {FAMILY_NAMES})")
-            if w <= 0:
-                raise ValueError(f"families.{name}: weight must be > 0")
-        if self.n_objects[0] > self.n_objects[1]:
-            raise ValueError("n_objects: the range must be [low, high] with low <= high")
-        assert self.catalogue in CATALOGUES
+        # A stream's scene mix obeys the rules of a dataset's: one validator for both.
+        DatasetConfig(
+            n_scenes=1,
+            families=dict(self.families),
+            catalogue=self.catalogue,
+            n_objects=self.n_objects,
+        )
 
 
 @dataclasses.dataclass(frozen=True)
