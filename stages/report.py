@@ -73,6 +73,7 @@ def report(params: dict, base: BaseConfig) -> None:
         figures,
         Path("reports/tables"),
         base.scale,
+        read_json(Path("data/support/truth.json"))["edges"],
     )
     records = {
         cond: read_records(Path(f"reports/trials/{cond}/records.jsonl"))

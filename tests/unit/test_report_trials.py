@@ -16,7 +16,7 @@ from clutterbench.report.extraction import (
     safe_pull_notes,
     trial_params_note,
 )
-from clutterbench.report.support import support_table, thresholds_text
+from clutterbench.report.support import mutual_support_note, support_table, thresholds_text
 from clutterbench.report.support_figure import SupportPanel, support_figure
 from clutterbench.report.tables import load_thesis_figures, thesis_row
 from clutterbench.trials.config import Ch6TrialParams
@@ -239,6 +239,18 @@ def test_support_table_means_over_defined_scenes_and_pools_counts(tmp_path, figu
     fam = (tmp_path / "table_6_2_families.md").read_text()
     assert "| CP + IoU rule (thesis) | stacked | 0.750 | 0.500 |" in fam
     assert "| CP + IoU rule (thesis) | random | — | 0.000 |" in fam
+
+
+def test_mutual_support_note_counts_pairs_once_per_scene_and_caps_recall(tmp_path, figures):
+    # scene 0: 0 <-> 1 mutual, 1 -> 2 not; scene 1: 1 -> 0 alone (no pair across scenes)
+    truth = {"0": [[0, 1], [1, 0], [1, 2]], "1": [[1, 0]], "2": []}
+    note = mutual_support_note(truth)
+    assert note.startswith("mutual support: 2 of the 4 true edges (50.0%) come in mutual pairs")
+    assert "pooled recall is at most 0.750," in note
+    methods = {"iou": "CP + IoU rule (thesis)"}
+    support_table(scenes_frame(), methods, {}, figures, tmp_path, "t", truth)
+    assert note in (tmp_path / "table_6_2.md").read_text()
+    assert "at most undefined" in mutual_support_note({"0": []})
 
 
 def test_support_table_names_a_method_without_rows(tmp_path, figures):
