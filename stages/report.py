@@ -26,6 +26,14 @@ from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.records import read_records
 
 
+def _json_key(path: Path, key: str):
+    """`key` of the JSON object in `path`, or one line naming the file and the support stage."""
+    data = read_json(path)
+    if not isinstance(data, dict) or key not in data:
+        raise ClutterbenchError(f"{path}: no '{key}' in it; rerun the support stage")
+    return data[key]
+
+
 def report(params: dict, base: BaseConfig) -> None:
     cfg = load_section(ReportConfig, "report", params)
     gen = load_section(GenerateConfig, "generate", params)
@@ -69,11 +77,11 @@ def report(params: dict, base: BaseConfig) -> None:
     support_table(
         pd.read_csv(support / "scenes.csv"),
         cfg.table_6_2_methods,
-        read_json(support / "thresholds.json")["chosen"],
+        _json_key(support / "thresholds.json", "chosen"),
         figures,
         Path("reports/tables"),
         base.scale,
-        read_json(Path("data/support/truth.json"))["edges"],
+        _json_key(Path("data/support/truth.json"), "edges"),
     )
     records = {
         cond: read_records(Path(f"reports/trials/{cond}/records.jsonl"))
