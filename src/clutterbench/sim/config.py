@@ -11,10 +11,12 @@ from clutterbench.config import bounded
 
 FAMILY_NAMES = ("shelved", "stacked", "random", "organized", "disorganized", "pile")
 """Names of the scene families in sim/families (checked equal to its registry by a test)."""
-REJECT_REASONS = ("moving", "fell", "no_room", "overlap")
+REJECT_REASONS = ("moving", "fell", "no_room", "overlap", "creeping")
 """Why a placement attempt is redrawn: still moving after sim.physics.settle_max_s, a box
-off the shelf, no room for every box, or boxes jammed into each other (> 1 mm, e.g. a
-stack pressed against the top board), which no spec may hold (sim/spec.py)."""
+off the shelf, no room for every box, boxes jammed into each other (> 1 mm, e.g. a stack
+pressed against the top board), which no spec may hold (sim/spec.py), or a canonical start
+that is not at rest: rebuilt from its spec and left alone for sim.physics.rest_check_s, a
+box moved more than sim.physics.rest_check_m (it would creep during every action)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,6 +45,11 @@ class PhysicsConfig:
     """... and it turned slower than this (rad/s); two windows in a row."""
     pull_speed_m_s: float = bounded(0.2, gt=0.0)
     """Speed of a horizontal pull toward the camera (thesis ch. 4 extraction)."""
+    rest_check_s: float = bounded(1.0, gt=0.0)
+    """A new scene's canonical start (rebuilt from its spec) is left alone this long ..."""
+    rest_check_m: float = bounded(0.001, gt=0.0)
+    """... and rejected as "creeping" when a box moved more than this (m): a start that is
+    not at rest would move boxes in every action with no cause (a user's spec: a warning)."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -101,6 +101,13 @@ def place_and_settle(
         return world, groups, "fell"
     if deepest_overlap(np.array(world.sizes_m), world.poses()) is not None:
         return world, groups, "overlap"
+    # The canonical start must be at rest too: rebuilt from the settled poses (what every
+    # action starts from), no box may creep when left alone.
+    fresh = BoxWorld(shelf, physics)
+    for size, pose in zip(world.sizes_m, world.poses()):
+        fresh.add_box(size, pose)
+    if np.nanmax(fresh.idle_creep_m()) > physics.rest_check_m:
+        return world, groups, "creeping"
     return world, groups, None
 
 

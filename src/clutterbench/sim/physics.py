@@ -344,6 +344,14 @@ class BoxWorld:
         idx = self.add_box(size_m, pose, density_kg_m3)
         return idx, self._settle_action(before)
 
+    def idle_creep_m(self) -> np.ndarray:
+        """(N,) how far each box moves in sim.physics.rest_check_s with no action at all, from
+        this (fresh) world's start. A canonical start is at rest when every value is below
+        sim.physics.rest_check_m; otherwise a box creeps during every action, with no cause."""
+        assert self.steps_taken == 0, "measured on a freshly built world"
+        self.step(int(round(self.cfg.rest_check_s / self.cfg.timestep_s)))
+        return self.displacements()
+
     # -- the labelled actions (thesis ch. 4-6) ----------------------------------------------
     def remove(self, target: int, support: int | None = None) -> np.ndarray:
         """Lift `target` out, settle, return each box's displacement (m); NaN for the target.

@@ -47,10 +47,12 @@ def draw_trial_spec(
     shelf = shelf or Shelf()
     key = stream_key(stream)
     family, n = draw_scene_setup(seed, key, index, dict(cfg.families), cfg.n_objects)
+    rejected: dict[str, int] = {}
     for attempt in range(max_attempts):
         rng = scene_rng(seed, key, index, attempt)
         world, _, reason = place_and_settle(family, cfg.catalogue, n, rng, physics, shelf)
         if reason is not None:
+            rejected[reason] = rejected.get(reason, 0) + 1
             continue
         sizes = np.array(world.sizes_m)
         return SceneSpec(
@@ -59,7 +61,13 @@ def draw_trial_spec(
             shelf=shelf,
             camera=camera,
             family=family,
-            meta={"stream": key, "index": index, "seed": seed, "attempt": attempt},
+            meta={
+                "stream": key,
+                "index": index,
+                "seed": seed,
+                "attempt": attempt,
+                "rejected": dict(sorted(rejected.items())),
+            },
             type_ids=catalogue_type_ids(sizes, cfg.catalogue),
         )
     raise ClutterbenchError(
