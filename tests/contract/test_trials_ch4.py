@@ -69,13 +69,14 @@ def test_class_map_of_a_hand_built_pull(stack3, physics):
     ensure_renderer()
     world = BoxWorld.from_spec(stack3, physics, render=True)
     inst = observe(world, CAM).instance
-    dragged = pull_outcome(stack3, physics, 0, 2, THR)["displacement_m"]
+    # the labels are the motion while the support is still held
+    dragged = pull_outcome(stack3, physics, 0, 2, THR)["displacement_held_m"]
     labels = ch4_class_map(inst, 0, 2, dragged, THR)
     assert np.array_equal(labels == CLASS_E, inst == 1)
     assert np.array_equal(labels == CLASS_S, inst == 3)
     assert np.array_equal(labels == CLASS_C, inst == 2) and (labels == CLASS_C).any()
     assert np.array_equal(labels == CLASS_B, inst == 0)
-    held = pull_outcome(stack3, physics, 0, 1, THR)["displacement_m"]
+    held = pull_outcome(stack3, physics, 0, 1, THR)["displacement_held_m"]
     assert not (ch4_class_map(inst, 0, 1, held, THR) == CLASS_C).any()
 
 
@@ -87,11 +88,18 @@ def test_a_pull_that_drags_a_neighbour_off_the_shelf_fails(stack3, physics):
     assert nothing_held["n_left_shelf"] == 2 and not nothing_held["success"]
 
 
-def test_a_clean_pull_succeeds(stack3, physics):
-    for x, s in ((0, 1), (2, 1), (1, 2)):
+def test_a_clean_pull_succeeds_and_is_judged_after_the_release(stack3, physics):
+    # Pulling the top box while holding the middle one: still once the middle is let go.
+    out = pull_outcome(stack3, physics, 2, 1, THR)
+    assert out["success"] and out["strict_success"] and out["strict_success_held"]
+    assert out["n_left_shelf"] == 0 and out["n_disturbed"] == 0
+    # Pulling a box from under the held one: clean while held; once released, what the held
+    # box carries drops onto what is left (on the shelf: success, but not strict success).
+    for x, s in ((0, 1), (1, 2)):
         out = pull_outcome(stack3, physics, x, s, THR)
-        assert out["success"] and out["strict_success"], (x, s)
-        assert out["n_left_shelf"] == 0 and out["n_disturbed"] == 0
+        assert out["success_held"] and out["strict_success_held"], (x, s)
+        assert out["success"] and not out["strict_success"], (x, s)
+        assert out["n_left_shelf"] == 0 and out["n_disturbed"] >= 1
 
 
 def test_oracle_keeps_a_strict_success(stack3, physics):

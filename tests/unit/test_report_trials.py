@@ -13,13 +13,14 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.report.extraction import (
     extraction_families_table,
     extraction_table,
-    safe_pull_notes,
+    oracle_gaps,
     trial_params_note,
 )
 from clutterbench.report.support import mutual_support_note, support_table, thresholds_text
 from clutterbench.report.support_figure import SupportPanel, support_figure
 from clutterbench.report.tables import load_thesis_figures, thesis_row
 from clutterbench.trials.config import Ch6TrialParams
+from clutterbench.trials.stats import cluster_bootstrap_interval
 
 
 @pytest.fixture(scope="module")
@@ -74,14 +75,16 @@ def test_extraction_table_puts_the_thesis_rates_beside_ours(tmp_path, figures):
     thesis_step = thesis_row(figures, "table_6_3", "multi_step/3-10")
     thesis_episode = thesis_row(figures, "table_6_3", "multi_step_single_arm/per_target")
     multi = line_of(md, "| multi-step extraction")
-    # ours: 5 of 6 steps, 1 of 3 episodes, 2 steps on average; the thesis as printed
-    assert "5/6 = 83.3% [43.6, 97.0]" in multi
+    # ours: 5 of 6 steps (interval: bootstrap over the 3 episodes), 1 of 3 episodes (Wilson),
+    # 2 steps on average; the thesis as printed
+    lo, hi = cluster_bootstrap_interval([(2, 2), (2, 3), (1, 1)])
+    assert f"5/6 = 83.3% [{100 * lo:.1f}, {100 * hi:.1f}]" in multi
     assert "1/3 = 33.3% [6.1, 79.2]" in multi
     assert f"{thesis_step['success']}/{thesis_step['trials']} = 91.2%" in multi
     assert f"{thesis_episode['success']}/{thesis_episode['trials']} = 80.0%" in multi
     assert "| 2 | 2.3 |" in multi  # mean steps: ours, thesis
     assert "| 3-10 | 3-10 |" in multi  # objects: ours (from the records), thesis
-    single = line_of(md, "| single-step extraction")
+    single = line_of(md, "| single-step:")
     assert "1/2 = 50.0%" in single and "= 85.0%" in single and "80.0%" not in single
     assert "| 4 | — |" in line_of(md, "| random (floor)")  # no thesis row
     assert "- extra note" in md and "tiny scale" in md and "real-robot" in md
@@ -147,7 +150,11 @@ def test_extraction_families_table_splits_each_row_by_scene_family(tmp_path):
     ]
     md = (tmp_path / "table_6_3_families.md").read_text()
     stacked = line_of(md, "| multi-step extraction (CPG order, one arm) [ms] | stacked |")
-    assert "| 3/4 = 75.0% [30.1, 95.4] | 1/2 = 50.0% [9.5, 90.5] | 2 | 2 |" in stacked
+    lo, hi = cluster_bootstrap_interval([(2, 2), (1, 2)])
+    assert (
+        f"| 3/4 = 75.0% [{100 * lo:.1f}, {100 * hi:.1f}] | 1/2 = 50.0% [9.5, 90.5] | 2 | 2 |"
+        in stacked
+    )
     assert "(thesis)" not in md and "- a note" in md and "tiny scale" in md
 
 
@@ -173,30 +180,28 @@ def test_trial_params_note_reads_the_ch6_params_in_mm():
     assert trial_params_note(flat).endswith("after 1 attempt.")
 
 
-def oracle_trial(safe_pulls: list[int], family: str) -> dict:
-    rec = trial("or", "oracle", 5, [n > 0 for n in safe_pulls], True, family)
-    for step, n in zip(rec["steps"], safe_pulls):
-        step["safe_pulls"] = n
-    return rec
+def _episode(condition: str, planner: str, episode: int, ok: bool) -> dict:
+    return trial(condition, planner, 5, [ok], ok) | {"episode": episode}
 
 
-def test_safe_pull_notes_bound_single_arm_success_by_the_scenes_without_a_safe_pull(
-    tmp_path, figures
-):
-    oracle = [
-        oracle_trial([0, 2], "random"),  # no safe pull at the start
-        oracle_trial([3, 0, 1], "random"),
-        oracle_trial([1], "stacked"),
-        oracle_trial([0], "stacked"),
-    ]
-    (note,) = safe_pull_notes({"or": oracle, "ms": RECORDS["ms"]})  # ms: no counts, no note
-    assert note.startswith("no safe pull [or]: at 2/4 episode starts every visible box")
-    assert "(each pull simulated; random 1/2, stacked 1/2)" in note
-    assert "in more than 50.0% of the episodes; at 3 of the 7 or steps" in note
-    extraction_table(
-        {**RECORDS, "or": oracle}, {**ROWS, "oracle/3-10": "or"}, figures, tmp_path, "t"
-    )
-    assert note in (tmp_path / "table_6_3.md").read_text()
+def test_oracle_gaps_match_each_planner_to_its_ceiling_on_the_same_scenes():
+    recs = {
+        "or": [_episode("or", "oracle", e, ok) for e, ok in enumerate([True, True, False, True])],
+        "oh": [_episode("oh", "oracle_hold", e, True) for e in range(4)],
+        "ms": [
+            _episode("ms", "multi_step", e, ok) for e, ok in enumerate([True, False, True, False])
+        ],
+        "bi": [_episode("bi", "bimanual", e, ok) for e, ok in enumerate([True, True, True, False])],
+    }
+    gaps = oracle_gaps(recs)
+    # multi-step: 2/4 against the one-arm oracle's 3/4, and it won episode 2 the oracle lost
+    assert gaps["ms"]["oracle"] == "or" and gaps["ms"]["points"] == pytest.approx(25.0)
+    assert gaps["ms"]["beat"] == [2]
+    # bimanual holds a box: its ceiling is the holding oracle
+    assert gaps["bi"]["oracle"] == "oh" and gaps["bi"]["points"] == pytest.approx(25.0)
+    assert gaps["bi"]["beat"] == []
+    other_stream = {"ms": [r | {"stream": "elsewhere"} for r in recs["ms"]], "or": recs["or"]}
+    assert "ms" not in oracle_gaps(other_stream)
 
 
 def scenes_frame() -> pd.DataFrame:

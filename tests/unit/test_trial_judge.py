@@ -1,11 +1,19 @@
-"""The physics judge of trials: named booleans and the disturbance, on hand-made motions."""
+"""The episode protocol's judge (trials/protocol.py) and the disturbance, on hand-made motions."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from clutterbench.trials.judge import Disturbance, disturbance, judge_episode, judge_step
+from clutterbench.trials.judge import disturbance
+from clutterbench.trials.protocol import (
+    STEP_FIELDS,
+    PullResult,
+    episode_end,
+    judge_episode,
+    judge_pull,
+    judged,
+)
 
 THR = 0.005
 
@@ -22,19 +30,87 @@ def test_disturbance_counts_only_other_boxes_beyond_the_threshold():
     assert d.disturbance_m == pytest.approx(0.024)
 
 
-def test_step_succeeds_only_when_extracted_and_nothing_else_moved():
-    still, moved = Disturbance(0, 0.001), Disturbance(1, 0.03)
-    assert judge_step(True, False, still)["success"] is True
-    assert judge_step(True, False, moved)["success"] is False
-    aborted = judge_step(False, True, still)
-    assert aborted["success"] is False and aborted["others_still"] is True
+def _result(held, released, increments=10, aborted=False, extracted=True, on_shelf=None):
+    n = len(released)
+    return PullResult(
+        increments,
+        aborted,
+        extracted,
+        np.array(held, float),
+        np.array(released, float),
+        np.ones(n, bool) if on_shelf is None else np.array(on_shelf),
+    )
 
 
-def test_episode_needs_the_target_out_and_every_step_still():
-    ok = judge_step(True, False, Disturbance(0, 0.0))
-    bad = judge_step(True, False, Disturbance(2, 0.1))
-    aborted = judge_step(False, True, Disturbance(0, 0.0))
-    assert judge_episode(True, [aborted, ok], Disturbance(0, 0.0))["success"] is True
-    assert judge_episode(True, [bad, ok], Disturbance(2, 0.1))["success"] is False
-    assert judge_episode(False, [ok], Disturbance(0, 0.0))["success"] is False
-    assert judge_episode(True, [aborted, ok], Disturbance(0, 0.0))["aborted_steps"] == 1
+def test_a_step_is_judged_after_the_release_and_also_as_while_held():
+    # box 0 pulled out, box 1 held: still while held, it drops 3 cm once released.
+    r = _result([np.nan, 0.0, 0.001], [np.nan, 0.03, 0.001])
+    step = judge_pull(r, box=0, hold=1, gone=frozenset(), threshold_m=THR)
+    assert set(STEP_FIELDS) <= set(step)
+    assert step["success_held"] is True and step["others_still_held"] is True
+    assert step["success"] is False and step["others_still"] is False
+    assert step["n_disturbed"] == 1
+
+
+def test_a_box_off_the_shelf_fails_the_step_even_below_the_threshold():
+    r = _result([np.nan, 0.001], [np.nan, 0.001], on_shelf=[False, False])
+    assert judge_pull(r, 0, None, frozenset(), THR)["success"] is False
+
+
+def test_an_abort_before_motion_is_not_a_collapse_and_is_not_judged():
+    for r in (None, _result([np.nan, 0.0], [np.nan, 0.0], increments=0, aborted=True)):
+        step = judge_pull(r, 0, None, frozenset(), THR)
+        assert step["aborted_before_motion"] is True and step["executed"] is False
+        assert step["others_still"] is True and step["success"] is False
+        assert not judged(step)
+        assert episode_end(step | {"box": 0}, False, True) is None
+
+
+def test_an_abort_after_motion_that_moved_nothing_is_an_abort():
+    r = _result([0.05, 0.0], [0.05, 0.0], increments=3, aborted=True, extracted=False)
+    step = judge_pull(r, 0, None, frozenset(), THR)
+    assert step["aborted_after_motion"] and step["executed"] and not step["extracted"]
+    assert step["others_still"] and not judged(step)
+    moved = judge_pull(
+        _result([0.05, 0.02], [0.05, 0.02], 3, True, False), 0, None, frozenset(), THR
+    )
+    assert judged(moved) and not moved["success"]
+
+
+def _step(box, success, others_still=None, **kw):
+    still = success if others_still is None else others_still
+    base = {
+        "box": box,
+        "executed": True,
+        "aborted_before_motion": False,
+        "aborted_after_motion": False,
+        "extracted": True,
+        "others_still": still,
+        "success": success,
+        "others_still_held": still,
+        "success_held": success,
+    }
+    return base | kw
+
+
+def test_the_episode_ends_at_its_first_failed_step():
+    assert episode_end(_step(3, False), target_out=False, target_on_shelf=True) == "collapse"
+    assert episode_end(_step(3, True), target_out=False, target_on_shelf=True) is None
+    assert episode_end(_step(0, True), target_out=True, target_on_shelf=True) == "target_out"
+    # the target pulled out but it disturbed the pile: a collapse, not a success
+    assert episode_end(_step(0, False), target_out=True, target_on_shelf=True) == "collapse"
+    assert episode_end(_step(3, True), target_out=False, target_on_shelf=False) == "target_fell"
+
+
+def test_the_episode_succeeds_only_when_it_ended_with_the_target_out():
+    ok = judge_episode([_step(2, True), _step(0, True)], "target_out", target=0)
+    assert ok["success"] and ok["target_out"] and ok["judged_steps"] == 2
+    bad = judge_episode([_step(2, True), _step(1, False)], "collapse", target=0)
+    assert not bad["success"] and not bad["success_held"]
+    # the target came out cleanly while held; its release disturbed the pile
+    held = _step(0, False) | {"success_held": True, "others_still_held": True}
+    released = judge_episode([held], "collapse", target=0)
+    assert not released["success"] and released["success_held"]
+    aborted = _step(1, False, True, executed=False, aborted_before_motion=True, extracted=False)
+    gave_up = judge_episode([aborted], "gave_up", target=0)
+    assert gave_up["aborted_before_motion"] == 1 and gave_up["judged_steps"] == 0

@@ -4,11 +4,19 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pandas as pd
 import pytest
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.trials.stats import Rate, aggregate, rate, step_rate, wilson_interval
+from clutterbench.trials.stats import (
+    Rate,
+    aggregate,
+    cluster_bootstrap_interval,
+    rate,
+    step_rate,
+    wilson_interval,
+)
 
 Z2 = 1.959963984540054**2
 
@@ -71,7 +79,10 @@ def test_aggregate_pools_steps_and_keeps_the_order_of_first_appearance():
     # steps pooled over episodes: 2 + 1 + 2 successes out of 3 + 1 + 2
     assert (b["step_success_k"], b["step_success_n"]) == (5, 6)
     assert b["step_success_rate"] == pytest.approx(5 / 6)
-    assert (b["step_success_lo"], b["step_success_hi"]) == pytest.approx(wilson_interval(5, 6))
+    # per step: the episode-cluster bootstrap, not Wilson (steps of an episode go together)
+    assert (b["step_success_lo"], b["step_success_hi"]) == pytest.approx(
+        cluster_bootstrap_interval([(2, 3), (1, 1), (2, 2)])
+    )
     assert b["mean_steps"] == pytest.approx(2.0)
     assert b["mean_n_disturbed"] == pytest.approx(4 / 3)
     assert b["mean_disturbance_m"] == pytest.approx(0.006)
@@ -118,3 +129,37 @@ def test_bad_records_fail_with_a_message_naming_the_record():
         aggregate(mixed)
     with pytest.raises(ClutterbenchError, match="has no 'condition'"):
         aggregate([{"success": True}])
+
+
+def test_cluster_bootstrap_resamples_whole_episodes():
+    # Every episode is all-success or all-failure: resampling episodes can only give rates
+    # that are shares of whole episodes' steps, never a step-level mix (10 of 20 steps in
+    # one episode move together).
+    per = [(10, 10), (0, 10)]
+    lo, hi = cluster_bootstrap_interval(per, resamples=500, seed=1)
+    assert lo == 0.0 and hi == 1.0
+    assert cluster_bootstrap_interval(per, 500, 1) == (lo, hi)  # seeded: reproducible
+    # With steps clustered in episodes the interval is wider than Wilson's on pooled steps.
+    many = [(3, 3)] * 30 + [(0, 3)] * 10
+    blo, bhi = cluster_bootstrap_interval(many)
+    wlo, whi = wilson_interval(90, 120)
+    assert bhi - blo > whi - wlo
+    assert blo < 0.75 < bhi
+    assert all(np.isnan(cluster_bootstrap_interval([(0, 0)])))
+
+
+def test_aborts_that_moved_nothing_are_not_judged_steps():
+    judged = {"executed": True, "aborted_before_motion": False, "aborted_after_motion": False}
+    ok = judged | {"success": True, "extracted": True, "others_still": True}
+    abort = {
+        "executed": False,
+        "aborted_before_motion": True,
+        "aborted_after_motion": False,
+        "success": False,
+        "extracted": False,
+        "others_still": True,
+    }
+    recs = [episode("c", True, [abort, ok], 0, 0.0)]
+    row = aggregate(recs).iloc[0]
+    assert (row["step_success_k"], row["step_success_n"]) == (1, 1)
+    assert row["aborts"] == 1 and row["aborts_before_motion"] == 1

@@ -83,13 +83,28 @@ class CollapseGraphPlanner:
         return surface_gaps(obs.camera.depth_to_points(obs.depth_m), masks)
 
     def decide(self, obs: Observation, target: int, blocked: frozenset[int]) -> Decision:
+        """Algorithm 1's next pull, under one decision rule: a candidate whose collapse score
+        (eq. 6.2, the abort test of the pull) already exceeds cp_max on this observation is
+        blocked here and the plan redrawn, so the pull executed never aborts before any
+        motion. Raises ValueError when every candidate is blocked (the planner gives up)."""
         edges = self.support_edges(obs)
         graph = build_cpg(edges, target)
-        plan = (bimanual_plan if self.bimanual else single_arm_plan)(graph, target, blocked)
+        plan_fn = bimanual_plan if self.bimanual else single_arm_plan
+        rejected: list[list[float]] = []
+        now = set(blocked)
+        while True:
+            plan = plan_fn(graph, target, frozenset(now))
+            cp = self.collapse_score(obs, plan.pull, plan.hold)
+            if cp <= self.cp_max:
+                break
+            rejected.append([plan.pull, -1 if plan.hold is None else plan.hold, round(cp, 4)])
+            now.add(plan.pull)
         state = {
             "edges": _edges_json(edges),
             "order": extraction_order(graph, target),
             "blocked": sorted(blocked),
+            "rejected": rejected,
+            "cp": round(cp, 4),
             "steps_to_target": plan.steps_to_target,
         }
         return Decision(plan.pull, plan.hold, state)

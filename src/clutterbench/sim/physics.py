@@ -4,7 +4,8 @@ Every action is measured against one reference: the box positions the world was 
 (`BoxWorld.from_spec`: the settled spec, fresh). Labels, CLI replays and trial judges all
 start from that canonical state, so the same action on the same scene gives the same bits
 everywhere (a world reused through `system.unpack` would keep PhysX's contact cache and
-drift by a few millimetres; shared/ARCHITECTURE.md "one canonical start").
+drift by a few millimetres). A later step of an episode starts the same way, from a fresh
+world built from the state the previous step left (`BoxWorld.from_state`).
 """
 
 from __future__ import annotations
@@ -95,9 +96,25 @@ class BoxWorld:
     def from_spec(cls, spec: SceneSpec, cfg: PhysicsConfig, render: bool = False) -> BoxWorld:
         """The canonical start: a fresh world holding the spec's boxes at their settled poses,
         at rest. Every label, replay and trial begins here."""
+        return cls.from_state(spec, spec.poses, (), cfg, render=render)
+
+    @classmethod
+    def from_state(
+        cls,
+        spec: SceneSpec,
+        poses: np.ndarray,
+        removed: Iterable[int],
+        cfg: PhysicsConfig,
+        render: bool = False,
+    ) -> BoxWorld:
+        """A fresh world holding the spec's boxes at `poses` ((N, 7)), at rest, with the boxes
+        in `removed` already taken out (parked): the canonical start of a later step of an
+        episode. Box k keeps index k (and instance id k + 1) whatever was removed."""
         world = cls(spec.shelf, cfg, render=render)
         for k in range(spec.n):
-            world.add_box(spec.sizes_m[k], spec.poses[k], spec.density(k, cfg.density_kg_m3))
+            world.add_box(spec.sizes_m[k], poses[k], spec.density(k, cfg.density_kg_m3))
+        for k in sorted(removed):
+            world.park(k)
         return world
 
     # -- building ---------------------------------------------------------------------------
@@ -260,13 +277,19 @@ class BoxWorld:
         """Take `target` out of the scene at once (a straight lift), then let the rest settle."""
         self._check(target)
         before = self.steps_taken
+        self.park(target)
+        return self._settle_action(before)
+
+    def park(self, target: int) -> None:
+        """Take `target` out of the scene at once (kinematic, far below the floor, touching
+        nothing); nothing is stepped."""
+        self._check(target)
         body = self.bodies[target]
         body.set_kinematic(True)
         body.set_kinematic_target(_PARK_POSE)
         self.entities[target].set_pose(_PARK_POSE)
         self.removed.add(target)
         self._pulls.pop(target, None)
-        return self._settle_action(before)
 
     def pull_travel_m(self, target: int) -> float:
         """How far `target` must be pulled toward the camera (-x) from where it is now to be

@@ -8,7 +8,10 @@ then execute the pull from the canonical start exactly as the ch. 4 labels were 
 (`act_on_spec(..., "pull", extract, support)`) and judge it from physics:
 
 - success (the thesis' definition): no box other than the pulled one left the shelf;
-- strict success: also no other box moved more than `moved_threshold_m`.
+- strict success: also no other box moved more than `moved_threshold_m`;
+
+both judged after the support was released and the scene settled (trials/protocol.py), and
+again as while the support is still held (`success_held`, `strict_success_held`).
 
 The risk planner sees only the depth image and the masks; the oracle reads the world.
 """
@@ -127,21 +130,42 @@ def pull_outcome(
     world: BoxWorld | None = None,
 ) -> dict[str, Any]:
     """Pull `extract` out toward the camera with `support` held, from the canonical start (the
-    code path of the ch. 4 labels), and judge it from the boxes' motion."""
+    code path of the ch. 4 labels), then release the support, let the scene settle and judge
+    from the boxes' motion (trials/protocol.py: release, then judge). The judgement while the
+    support is still held is kept beside it (`*_held`)."""
     world = world or BoxWorld.from_spec(spec, physics)
-    disp = act_on_spec(spec, physics, "pull", extract, support, world=world)
-    others = [k for k in range(spec.n) if k not in (extract, support)]
+    disp_held = act_on_spec(spec, physics, "pull", extract, support, world=world)
+    on_shelf_held = spec.shelf.contains(world.positions())
+    if support is not None:
+        world.release([support])
+        world.settle_action()
+    disp = world.displacements()
     on_shelf = spec.shelf.contains(world.positions())
-    left = [k for k in others if not on_shelf[k]]
-    moved = [k for k in others if disp[k] > threshold_m]
+    out = extract in world.removed
+
+    def judge(d: np.ndarray, shelf: np.ndarray, others: list[int]) -> tuple[int, int]:
+        return sum(not shelf[k] for k in others), sum(d[k] > threshold_m for k in others)
+
+    others = [k for k in range(spec.n) if k != extract]
+    left, moved = judge(disp, on_shelf, others)
+    held_others = [k for k in others if k != support]
+    left_held, moved_held = judge(disp_held, on_shelf_held, held_others)
     return {
-        "target_out": extract in world.removed,
-        "n_left_shelf": len(left),
-        "n_disturbed": len(moved),
+        "executed": True,
+        "aborted_before_motion": False,
+        "aborted_after_motion": False,
+        "extracted": out,
+        "target_out": out,
+        "others_still": not left and not moved,
+        "n_left_shelf": left,
+        "n_disturbed": moved,
         "disturbance_m": float(np.sum(disp[others])) if others else 0.0,
-        "success": extract in world.removed and not left,
-        "strict_success": extract in world.removed and not left and not moved,
+        "success": out and not left,
+        "strict_success": out and not left and not moved,
+        "success_held": out and not left_held,
+        "strict_success_held": out and not left_held and not moved_held,
         "displacement_m": disp,
+        "displacement_held_m": disp_held,
     }
 
 
@@ -226,7 +250,7 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
         target_k = target_segment(seg, obs.instance, target_box)
     decision: dict[str, Any] = {"candidates": 0}
     chosen: tuple[int | None, int | None] = (None, None)  # segment indices
-    risk = None
+    risk, ties = None, None
     if len(seg.ids) >= 2 and (cond.mode == "pair" or target_k is not None):
         pairs = (
             candidate_pairs(list(range(len(seg.ids))))
@@ -242,6 +266,8 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
                 predictor, obs, seg, target_k, params.pixel_threshold
             )
             chosen, risk = (choice.extract, choice.support), choice.risk
+            # How many candidates share the least risk: above 1, the tie-break decided.
+            ties = int(np.sum(risks == choice.risk))
             top = np.argsort(risks, kind="stable")[:RISKS_LOGGED]
             decision["least_risk"] = [
                 [*pairs[k], round(float(risks[k]), 4) if np.isfinite(risks[k]) else None]
@@ -275,24 +301,37 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
             params.moved_threshold_m,
             world=world,
         )
-    else:  # nothing graspable chosen (no pair, or a segment of no box): no box left the shelf
+    else:  # nothing graspable chosen (no pair, or a segment of no box): nothing was pulled
         out = {
+            "executed": False,
+            "aborted_before_motion": True,
+            "aborted_after_motion": False,
+            "extracted": False,
             "target_out": False,
+            "others_still": True,
             "n_left_shelf": 0,
             "n_disturbed": 0,
             "disturbance_m": 0.0,
             "success": False,
             "strict_success": False,
+            "success_held": False,
+            "strict_success_held": False,
         }
     t_end = world.steps_taken * physics.timestep_s
     log.poses(t_end, world.poses())
     out.pop("displacement_m", None)
+    out.pop("displacement_held_m", None)
     if target_box is not None:  # a predetermined target: the pull must take that box out
         hit = x_box == target_box
         out = out | {
-            "target_out": bool(out["target_out"] and hit),
-            "success": bool(out["success"] and hit),
-            "strict_success": bool(out["strict_success"] and hit),
+            k: bool(out[k] and hit)
+            for k in (
+                "target_out",
+                "success",
+                "strict_success",
+                "success_held",
+                "strict_success_held",
+            )
         }
     record = {
         "condition": job["condition"],
@@ -313,6 +352,7 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
         "support": s_box,
         # r_c is +inf where the network claims no region at all: no evidence, written null
         "risk": None if risk is None or not np.isfinite(risk) else round(risk, 6),
+        "risk_ties": ties,
         "valid": bool(valid and (target_box is None or x_box == target_box)),
     } | {k: _plain(v) for k, v in out.items()}
     return EpisodeResult(record, log)

@@ -2,20 +2,22 @@
 
 An episode: draw a scene from the condition's stream and settle it (the canonical start),
 observe, choose the target, then repeat (Algorithm 1) observe -> plan -> pull in increments
-(re-observing between them when the planner monitors the collapse score) -> judge the step
-from physics, until the target is out or `max_steps` attempts were made. This module is
-the one place that holds both the world and a planner.
+(re-observing between them when the planner monitors the collapse score) -> release -> judge
+the step from physics, under the episode protocol of trials/protocol.py (the episode ends
+at its first failed step). This module is the one place that holds both the world and a
+planner.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from clutterbench.errors import ClutterbenchError
 from clutterbench.observation import Observation
-from clutterbench.planning.cpg import build_cpg, extraction_order, single_arm_plan
 from clutterbench.planning.extraction import (
     CollapseGraphPlanner,
     Decision,
@@ -23,21 +25,23 @@ from clutterbench.planning.extraction import (
     TargetFirstPlanner,
     visible_objects,
 )
-from clutterbench.planning.support import SupportEdge, SupportParams
+from clutterbench.planning.support import SupportParams
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.config import Ch6TrialParams, SceneStreamConfig
 from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
-from clutterbench.trials.judge import disturbance, judge_episode, judge_step
-from clutterbench.trials.scenes import (
-    draw_target,
-    draw_trial_spec,
-    policy_rng,
-    pull_consequences,
-    spec_of_world,
+from clutterbench.trials.judge import disturbance
+from clutterbench.trials.protocol import (
+    SceneState,
+    episode_end,
+    execute_pull,
+    judge_episode,
+    judge_pull,
+    world_at,
 )
+from clutterbench.trials.scenes import draw_target, draw_trial_spec, policy_rng
 
 _PREDICTORS: dict[str, Any] = {}
 
@@ -52,109 +56,270 @@ def load_predictor(path: Path, image_size: int):
     return _PREDICTORS[key]
 
 
-class OraclePlanner:
-    """The ceiling: Algorithm 1 on the true consequences of the action the trials execute.
-    For every visible box X, pulling X out is simulated from the present state's canonical
-    start; X -> Y when that moves Y beyond the threshold (support, but also a box in front
-    that X would push, or one it drags). Its state also lists the visible boxes whose pull
-    moves no other box ("safe"): where there is none, no single-arm planner can succeed.
+Action = tuple[int, "int | None"]
+"""(box to pull, box the second arm holds or None)."""
+
+
+class SearchOracle:
+    """The ceiling: a depth-first search over sequences of pulls, each simulated from the
+    present state with the trials' own step (`protocol.execute_pull` in a world built by
+    `protocol.world_at`, released and judged as an executed step is), memoized over the set
+    of removed boxes, for a sequence of clean steps that ends with the target out.
+
+    Actions: every visible box (planners see no other) and the target; with `holding`, the
+    target may also be pulled while any other visible box is held (a superset of the
+    bimanual planner's and the ch. 4 planner's actions). As execution reproduces the
+    simulation bit for bit, the plan found is followed; no planner succeeds on an episode
+    where the search proved there is no such sequence, unless a node budget ran out
+    (counted) or a planner's aborted pull left a state outside the search's actions.
     Lives here, not in planning/, because it reads the world."""
 
     def __init__(
-        self, world: BoxWorld, spec: SceneSpec, physics: PhysicsConfig, params: Ch6TrialParams
+        self,
+        spec: SceneSpec,
+        physics: PhysicsConfig,
+        camera: CameraConfig,
+        params: Ch6TrialParams,
+        holding: bool,
     ):
-        self.world, self.spec, self.physics, self.params = world, spec, physics, params
+        self.spec, self.physics, self.camera, self.params = spec, physics, camera, params
+        self.holding = holding
+        self.state: SceneState | None = None  # set by the harness before each decision
+        self._plan: list[tuple[Action, SceneState]] = []
+        self._expected: SceneState | None = None
+        self.nodes = self.searches = self.exhausted = self.replanned = 0
+
+    # -- simulation -------------------------------------------------------------------------
+    def simulate(
+        self, state: SceneState, action: Action
+    ) -> tuple[dict[str, Any], SceneState, np.ndarray]:
+        """One step from `state` as the harness executes it -> (its judgement, the state it
+        leaves, (N,) displacements)."""
+        world = world_at(self.spec, state, self.physics)
+        p = self.params
+        result = execute_pull(world, action[0], action[1], p.pull_increment_m, p.grasp_lift_m)
+        step = judge_pull(result, action[0], action[1], state.removed, p.moved_threshold_m)
+        return step, SceneState.of(world), result.displacement_m
+
+    def candidates(self, state: SceneState, target: int) -> list[int]:
+        """What a planner could pull in `state`: the visible boxes and the target."""
+        obs = observe(world_at(self.spec, state, self.physics, render=True), self.camera)
+        ids, _ = visible_objects(obs, self.params.min_pixels)
+        return sorted(set(ids) | {target})
+
+    def search(self, state: SceneState, target: int) -> tuple[list | None, int, bool]:
+        """(plan: [(action, state after it)] or None, nodes expanded, budget exhausted)."""
+        visited: set[frozenset[int]] = {state.removed}
+        nodes = 0
+        budget = self.params.search_node_budget
+
+        class _Budget(Exception):
+            pass
+
+        def visit(now: SceneState) -> list | None:
+            nonlocal nodes
+            if nodes >= budget:
+                raise _Budget
+            nodes += 1
+            boxes = self.candidates(now, target)
+            first, after, disp = self.simulate(now, (target, None))
+            if first["success"]:
+                return [((target, None), after)]
+            if self.holding:
+                for h in boxes:
+                    if h != target:
+                        step, after, _ = self.simulate(now, (target, h))
+                        if step["success"]:
+                            return [((target, h), after)]
+            children = []
+            for x in boxes:
+                if x != target:
+                    step, after, _ = self.simulate(now, (x, None))
+                    if step["success"]:
+                        children.append((x, after))
+            # The boxes the target's pull disturbed first: they are what stands in its way.
+            in_way = np.nan_to_num(disp, nan=0.0) > self.params.moved_threshold_m
+            children.sort(key=lambda c: (not in_way[c[0]], c[0]))
+            for x, after in children:
+                if after.removed in visited:
+                    continue
+                visited.add(after.removed)
+                rest = visit(after)
+                if rest is not None:
+                    return [((x, None), after), *rest]
+            return None
+
+        try:
+            return visit(state), nodes, False
+        except _Budget:
+            return None, nodes, True
+
+    # -- the planner interface --------------------------------------------------------------
+    def decide(self, obs: Observation, target: int, blocked: frozenset[int]) -> Decision:
+        state = self.state
+        assert state is not None, "the harness sets the oracle's state before each decision"
+        info: dict[str, Any] = {"policy": "oracle_hold" if self.holding else "oracle"}
+        if self._plan and not _same_state(self._expected, state):
+            self.replanned += 1  # the world left the simulated path: search again
+            self._plan = []
+        if not self._plan:
+            plan, nodes, exhausted = self.search(state, target)
+            self.searches += 1
+            self.nodes += nodes
+            self.exhausted += exhausted
+            info |= {"search_nodes": nodes, "found": plan is not None, "exhausted": exhausted}
+            self._plan = list(plan or [])
+        if not self._plan:
+            # No clean sequence exists (or the budget ran out): pull the target; it fails.
+            return Decision(target, None, info | {"plan": None})
+        (pull, hold), self._expected = self._plan.pop(0)
+        info["plan"] = [[pull, hold], *[list(a) for a, _ in self._plan]]
+        return Decision(pull, hold, info)
+
+
+def _same_state(a: SceneState, b: SceneState) -> bool:
+    return a.removed == b.removed and np.array_equal(a.poses, b.poses)
+
+
+class SupportWhilePullPlanner:
+    """The thesis' previous method as the single-step rows of Table 6.3 (their counts equal
+    the various-size cells of Table 4.1): pull the target at once while the second arm holds
+    the support of least risk r_c chosen by the chapter 4 network (eqs. 4.1, 4.2)."""
+
+    def __init__(self, predictor: Any, params: Ch6TrialParams):
+        self.predictor, self.params = predictor, params
 
     def decide(self, obs: Observation, target: int, blocked: frozenset[int]) -> Decision:
-        now, index = spec_of_world(self.world, self.spec)
-        ids, _ = visible_objects(obs, self.params.min_pixels)
-        visible = [index.index(k) for k in ids if k in index]
-        disp = pull_consequences(now, self.physics, visible, self.params.grasp_lift_m)
-        edges = [
-            SupportEdge(index[a], index[b], float(disp[a][b]))
-            for a in visible
-            for b in visible
-            if a != b and disp[a][b] > self.params.moved_threshold_m
-        ]
-        graph = build_cpg(edges, target)
-        plan = single_arm_plan(graph, target, blocked)
-        # The pulls that move no other box at all (hidden ones included): none means every
-        # single-arm action from this state disturbs the pile, whatever the planner.
-        thr = self.params.moved_threshold_m
-        safe = [index[a] for a in visible if not (np.nan_to_num(disp[a]) > thr).any()]
+        from clutterbench.perception.masks import segment
+        from clutterbench.trials.ch4 import plan_risk
+
+        seg = segment(obs, "instance", min_pixels=self.params.min_pixels)
+        if target not in seg.ids or len(seg.ids) < 2:
+            return Decision(target, None, {"policy": "single_step", "support": None})
+        choice, pairs, risks, _ = plan_risk(
+            self.predictor, obs, seg, seg.ids.index(target), self.params.ch4_pixel_threshold
+        )
+        hold = seg.ids[choice.support] if choice.support is not None else None
+        finite = np.isfinite(choice.risk)
         state = {
-            "edges": [[e.supporter, e.supported, round(e.score, 4)] for e in edges],
-            "order": extraction_order(graph, target),
-            "blocked": sorted(blocked),
-            "safe": sorted(safe),
+            "policy": "single_step",
+            "support": hold,
+            "risk": round(float(choice.risk), 4) if finite else None,
         }
-        return Decision(plan.pull, None, state)
+        return Decision(target, hold, state)
 
 
-def make_planner(job: dict[str, Any], world: BoxWorld, spec: SceneSpec):
-    params: Ch6TrialParams = job["params"]
-    planner = job["planner"]
-    if planner == "single_step":
-        return TargetFirstPlanner()
-    if planner == "random":
-        rng = policy_rng(job["seed"], job["stream"], job["index"], planner)
-        return RandomOrderPlanner(rng, params.min_pixels)
-    if planner == "oracle":
-        return OraclePlanner(world, spec, job["physics"], params)
-    predictor = load_predictor(job["model_path"], job["camera"].image_size)
-    return CollapseGraphPlanner(
-        predictor,
-        job["support"],
-        job["cp_max"],
-        params.min_pixels,
-        bimanual=planner == "bimanual",
+PLANNERS: dict[str, Callable[[dict[str, Any], SceneSpec], Any]] = {}
+"""ch. 6 planner name -> factory(job, spec): the registry the conditions' `planner` names."""
+
+
+def register_planner(name: str):
+    """Register a ch. 6 planner factory under `name` (usable as a condition's planner)."""
+
+    def wrap(factory):
+        PLANNERS[name] = factory
+        return factory
+
+    return wrap
+
+
+@register_planner("pull_target")
+def _pull_target(job: dict[str, Any], spec: SceneSpec):
+    return TargetFirstPlanner()
+
+
+@register_planner("single_step")
+def _single_step(job: dict[str, Any], spec: SceneSpec):
+    return SupportWhilePullPlanner(
+        load_predictor(job["ch4_model_path"], job["camera"].image_size), job["params"]
     )
 
 
-def pull_out(
+@register_planner("random")
+def _random(job: dict[str, Any], spec: SceneSpec):
+    rng = policy_rng(job["seed"], job["stream"], job["index"], job["planner"])
+    return RandomOrderPlanner(rng, job["params"].min_pixels)
+
+
+@register_planner("oracle")
+def _oracle(job: dict[str, Any], spec: SceneSpec):
+    return SearchOracle(spec, job["physics"], job["camera"], job["params"], holding=False)
+
+
+@register_planner("oracle_hold")
+def _oracle_hold(job: dict[str, Any], spec: SceneSpec):
+    return SearchOracle(spec, job["physics"], job["camera"], job["params"], holding=True)
+
+
+def _cpg_planner(job: dict[str, Any], bimanual: bool):
+    predictor = load_predictor(job["model_path"], job["camera"].image_size)
+    params: Ch6TrialParams = job["params"]
+    return CollapseGraphPlanner(
+        predictor, job["support"], job["cp_max"], params.min_pixels, bimanual=bimanual
+    )
+
+
+@register_planner("multi_step")
+def _multi_step(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=False)
+
+
+@register_planner("bimanual")
+def _bimanual(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=True)
+
+
+def make_planner(job: dict[str, Any], spec: SceneSpec):
+    try:
+        factory = PLANNERS[job["planner"]]
+    except KeyError:
+        raise ClutterbenchError(
+            f"planner '{job['planner']}': not registered (known: {', '.join(PLANNERS)})"
+        ) from None
+    return factory(job, spec)
+
+
+def execute_decision(
     world: BoxWorld,
+    obs: Observation,
     decision: Decision,
     planner: Any,
     camera: CameraConfig,
     params: Ch6TrialParams,
     cp_max: float,
+    gone: frozenset[int],
     log: EpisodeLog,
+    t0: float = 0.0,
 ) -> dict[str, Any]:
-    """Pull `decision.pull` toward the camera in increments (holding `decision.hold`),
-    checking the collapse score before each increment when the planner has one; lift it out
-    once it has left the shelf, or release it where it is when the score exceeds cp_max."""
+    """Execute one decision from the step's canonical start (`world`, fresh) and judge it:
+    pull in increments, checking the planner's collapse score before each (the first check
+    reads the observation the planner decided on, so a box its own rule rejects is never
+    picked and then aborted before motion), release, settle, judge."""
     box, hold = decision.pull, decision.hold
     dt = world.cfg.timestep_s
-    gone = set(world.removed)
-    before = world.positions()
-    if hold is not None:
-        world.hold([hold])
     monitor = getattr(planner, "collapse_score", None)
-    travel = world.pull_travel_m(box)
-    pulled, increments, max_cp, aborted = 0.0, 0, 0.0, False
-    while pulled < travel - 1e-9:
-        if monitor is not None:
-            obs = observe(world, camera)
-            cp = float(monitor(obs, box, hold))
-            max_cp = max(max_cp, cp)
-            log.json(world.steps_taken * dt, DECISION_TOPIC, {"box": box, "cp": round(cp, 4)})
-            if cp > cp_max:
-                aborted = True
-                break
-        step = min(params.pull_increment_m, travel - pulled)
-        world.pull_step(box, step, params.grasp_lift_m)
-        pulled += step
-        increments += 1
-    if aborted:
-        world.release([box] + ([hold] if hold is not None else []))
-        world.settle_action()
-    else:
-        world.lift_out(box)
-    moved = disturbance(
-        before, world.positions(), {box, hold} - {None}, gone, params.moved_threshold_m
+    max_cp = 0.0
+
+    def go_on(done: int) -> bool:
+        nonlocal max_cp
+        if monitor is None:
+            return True
+        now = obs if done == 0 else observe(world, camera)
+        cp = float(monitor(now, box, hold))
+        max_cp = max(max_cp, cp)
+        log.json(t0 + world.steps_taken * dt, DECISION_TOPIC, {"box": box, "cp": round(cp, 4)})
+        return cp <= cp_max
+
+    result = execute_pull(
+        world, box, hold, params.pull_increment_m, params.grasp_lift_m, go_on=go_on
     )
-    out = {"box": box, "hold": hold, "increments": increments, "max_cp": round(max_cp, 4)}
-    return out | judge_step(extracted=not aborted, aborted=aborted, moved=moved)
+    step = judge_pull(result, box, hold, gone, params.moved_threshold_m)
+    return {
+        "box": box,
+        "hold": hold,
+        "increments": result.increments,
+        "max_cp": round(max_cp, 4),
+    } | step
 
 
 def run_ch6_episode(job: dict[str, Any]) -> EpisodeResult:
@@ -175,11 +340,13 @@ def run_extraction(
     spec: SceneSpec, job: dict[str, Any], target: int | None = None
 ) -> EpisodeResult:
     """Extract `target` (None: drawn from the stream's target stream) from the settled `spec`
-    with the job's planner -> the episode's record and MCAP events."""
+    with the job's planner under the episode protocol (trials/protocol.py) -> the episode's
+    record and MCAP events."""
     physics: PhysicsConfig = job["physics"]
     camera: CameraConfig = job["camera"]
     params: Ch6TrialParams = job["params"]
-    world = BoxWorld.from_spec(spec, physics, render=True)
+    state = SceneState.start(spec)
+    world = world_at(spec, state, physics, render=True)
     log = EpisodeLog(record_images=job["record_images"])
     dt = physics.timestep_s
     obs = observe(world, camera)
@@ -187,40 +354,47 @@ def run_extraction(
         target = draw_target(
             job["seed"], job["stream"], job["index"], obs, params.min_target_pixels
         )
-    planner = make_planner(job, world, spec)
-    start = world.positions()
+    planner = make_planner(job, spec)
     steps: list[dict[str, Any]] = []
     blocked: set[int] = set()
-    touched: set[int] = set()
-    end = "max_steps"
+    end, t = "max_steps", 0.0
     while len(steps) < params.max_steps:
-        t = world.steps_taken * dt
         log.observation(t, obs.depth_m, obs.instance)
-        log.poses(t, world.poses())
+        log.poses(t, state.poses)
+        if isinstance(planner, SearchOracle):
+            planner.state = state
         try:
             decision = planner.decide(obs, target, frozenset(blocked))
-        except ValueError:  # every extractable object was blocked
-            end = "stuck"
+        except ValueError:  # every action the planner would take is rejected by its own rule
+            end = "gave_up"
             break
         log.json(t, DECISION_TOPIC, {"pull": decision.pull, "hold": decision.hold} | decision.state)
-        step = pull_out(world, decision, planner, camera, params, job["cp_max"], log)
-        if "safe" in decision.state:  # the oracle saw how many visible boxes were safe to pull
-            step["safe_pulls"] = len(decision.state["safe"])
+        step = execute_decision(
+            world, obs, decision, planner, camera, params, job["cp_max"], state.removed, log, t
+        )
         steps.append(step)
-        touched.add(decision.pull)
-        if step["aborted"]:
+        t += world.steps_taken * dt
+        state = SceneState.of(world)
+        if step["aborted_before_motion"] or step["aborted_after_motion"]:
             blocked.add(decision.pull)
         else:
             blocked.clear()
-        if target in world.removed:
-            end = "target_out"
+        target_out = target in state.removed
+        on_shelf = bool(spec.shelf.contains(state.poses[target : target + 1])[0])
+        stop = episode_end(step, target_out, target_out or on_shelf)
+        if stop is not None:
+            end = stop
             break
+        world = world_at(spec, state, physics, render=True)  # the next step's canonical start
         obs = observe(world, camera)
-    t = world.steps_taken * dt
-    log.poses(t, world.poses())
-    held = {s["hold"] for s in steps if s["hold"] is not None}
+    log.poses(t, state.poses)
+    touched = {s["box"] for s in steps}
     overall = disturbance(
-        start, world.positions(), touched | held, set(world.removed), params.moved_threshold_m
+        np.asarray(spec.poses)[:, :3],
+        state.poses[:, :3],
+        touched,
+        set(state.removed) - touched,
+        params.moved_threshold_m,
     )
     record = {
         "condition": job["condition"],
@@ -233,10 +407,18 @@ def run_extraction(
         "planner": job["planner"],
         "perception": "instance",
         "rule": job["rule"] if job["planner"] in ("multi_step", "bimanual") else None,
+        "rejected_starts": dict(spec.meta.get("rejected", {})),
         "steps": [_rounded(s) for s in steps],
-        "end": end,
-    } | _rounded(judge_episode(target in world.removed, steps, overall))
-    return EpisodeResult(record, log)
+        "n_disturbed": overall.n_disturbed,
+        "disturbance_m": overall.disturbance_m,
+    } | judge_episode(steps, end, target)
+    if isinstance(planner, SearchOracle):
+        record |= {
+            "search_nodes": planner.nodes,
+            "search_exhausted": planner.exhausted,
+            "search_replanned": planner.replanned,
+        }
+    return EpisodeResult(_rounded(record), log)
 
 
 def _rounded(d: dict[str, Any]) -> dict[str, Any]:
@@ -271,6 +453,7 @@ def ch6_jobs(
             "support": support,
             "cp_max": cp_max,
             "model_path": model_path,
+            "ch4_model_path": Path(f"models/{trials.ch6.ch4_model}/best.pt"),
             "max_attempts": trials.max_attempts,
             "record_images": trials.mcap_images,
         }

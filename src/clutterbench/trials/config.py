@@ -12,10 +12,20 @@ from typing import Literal
 from clutterbench.config import bounded
 from clutterbench.data.config import DatasetConfig
 
-PLANNERS = ("single_step", "multi_step", "bimanual", "oracle", "random")
-"""ch. 6 trial policies: pull the target at once; Algorithm 1 with one arm; Algorithm 1 with
-the bimanual option (Fig. 6.7); Algorithm 1 on the true support graph from physics; a
-uniformly random visible box each step."""
+PLANNERS = (
+    "pull_target",
+    "single_step",
+    "multi_step",
+    "bimanual",
+    "oracle",
+    "oracle_hold",
+    "random",
+)
+"""ch. 6 trial policies (the registry trials.ch6.PLANNERS; a test keeps them equal): pull the
+target at once, nothing held; the thesis' single-step method (its previous work, ch. 4: pull
+the target while holding the support of least risk); Algorithm 1 with one arm; Algorithm 1
+with the bimanual option (Fig. 6.7); the search oracles with one arm and with a holding arm;
+a uniformly random visible box each step."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,17 +92,23 @@ class SupportEvalConfig:
 class ConditionConfig:
     """One trials condition -> stage trials@<name>."""
 
-    planner: Literal["single_step", "multi_step", "bimanual", "oracle", "random"]
-    """Policy (trials.config.PLANNERS)."""
+    planner: str
+    """Policy, a name in trials.config.PLANNERS."""
     stream: str
     """Scene stream (a key of trials.streams): conditions on one stream see the same scenes
     and the same targets."""
     episodes: int = bounded(200, ge=1)
     """Number of episodes."""
-    rule: Literal["iou", "coverage"] = "coverage"
-    """Support rule of the CP-based planners (thresholds from the support stage)."""
+    rule: Literal["iou", "coverage", "iou_gap", "coverage_gap"] = "coverage_gap"
+    """Support rule of the CP-based planners (thresholds chosen on val by the support stage):
+    the thesis' IoU rule, the coverage rule of eq. 6.2, or either with the surface-gap test on
+    pseudo-direct contact (`_gap`, ours)."""
     perception: Literal["instance"] = "instance"
     """Where object masks come from (the simulator's instance image)."""
+
+    def __post_init__(self) -> None:
+        if self.planner not in PLANNERS:
+            raise ValueError(f"planner: '{self.planner}' is not one of {', '.join(PLANNERS)}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,6 +135,14 @@ class Ch6TrialParams:
     """Planners see a box when at least this many pixels of it are visible."""
     max_steps: int = bounded(14, ge=1)
     """An episode stops (failed) after this many extraction attempts."""
+    search_node_budget: int = bounded(40, ge=1)
+    """The search oracles expand at most this many states per search (each simulates every
+    candidate pull from it); an episode whose search ran out is counted in Table 6.3."""
+    ch4_model: str = "ch4_various"
+    """The chapter 4 network (a key of train.models) of the single-step rows: the thesis'
+    previous method, extract while supporting (Table 6.3's single-step rows)."""
+    ch4_pixel_threshold: float = bounded(0.4, gt=0.0, le=1.0)
+    """Its pixel threshold of the risk index (thesis 4.4.1)."""
 
 
 CH4_PLANNERS = ("risk", "random", "oracle")

@@ -1,9 +1,9 @@
 """Success from physics: named booleans from box motion, never from a planner's prediction.
 
 As ManiSkill's `evaluate()`, a judge returns named booleans (`extracted`, `others_still`,
-`success`) and the disturbance beside them: how many boxes other than the manipulated ones
-moved beyond the threshold, and the sum of their centre displacements (SafePicking's
-translation measure).
+`success`; trials/protocol.py judges a step) and the disturbance beside them: how many boxes
+other than the manipulated ones moved beyond the threshold, and the sum of their centre
+displacements (SafePicking's translation measure).
 """
 
 from __future__ import annotations
@@ -38,32 +38,3 @@ def disturbance(
         return Disturbance(0, 0.0)
     disp = np.linalg.norm(after_m[others] - before_m[others], axis=1)
     return Disturbance(int(np.sum(disp > threshold_m)), float(np.sum(disp)))
-
-
-def judge_step(extracted: bool, aborted: bool, moved: Disturbance) -> dict[str, bool | int | float]:
-    """One extraction attempt: success when the pulled box left the shelf and no other box
-    moved beyond the threshold (thesis Table 6.3 counts per step)."""
-    others_still = moved.n_disturbed == 0
-    return {
-        "extracted": bool(extracted),
-        "aborted": bool(aborted),
-        "others_still": others_still,
-        "success": bool(extracted and others_still),
-        "n_disturbed": moved.n_disturbed,
-        "disturbance_m": moved.disturbance_m,
-    }
-
-
-def judge_episode(
-    target_out: bool, steps: list[dict], overall: Disturbance
-) -> dict[str, bool | int | float]:
-    """The episode: the target left the shelf and no step moved another box (collapse)."""
-    others_still = all(s["others_still"] for s in steps)
-    return {
-        "target_out": bool(target_out),
-        "others_still": others_still,
-        "success": bool(target_out and others_still),
-        "n_disturbed": overall.n_disturbed,
-        "disturbance_m": overall.disturbance_m,
-        "aborted_steps": sum(bool(s["aborted"]) for s in steps),
-    }

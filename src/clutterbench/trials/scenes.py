@@ -15,7 +15,6 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.observation import Observation
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.labelling import (
-    act_on_spec,
     catalogue_type_ids,
     draw_scene_setup,
     place_and_settle,
@@ -23,7 +22,6 @@ from clutterbench.sim.labelling import (
     scene_rng,
     settled_contacts,
 )
-from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.shelf import Shelf
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.config import SceneStreamConfig
@@ -105,30 +103,3 @@ def truth_moved_contact(
     for a, b in settled_contacts(spec, physics):
         contact[a, b] = contact[b, a] = True
     return moved, contact
-
-
-def pull_consequences(
-    spec: SceneSpec, physics: PhysicsConfig, boxes: list[int], lift_m: float = 0.0
-) -> dict[int, np.ndarray]:
-    """For each box x in `boxes`: (N,) displacement of every box when x alone is pulled out
-    toward the camera (raised by `lift_m` first) from the canonical start (NaN for x): what
-    the trials' action does."""
-    return {x: act_on_spec(spec, physics, "pull", x, lift_m=lift_m) for x in boxes}
-
-
-def spec_of_world(world: BoxWorld, spec: SceneSpec) -> tuple[SceneSpec, list[int]]:
-    """The world's present state as a spec of the boxes still in the scene (for the oracle's
-    truth mid-episode), and the world index of each spec box."""
-    keep = [k for k in range(world.n) if k not in world.removed]
-    poses = world.poses()[keep]
-    return (
-        SceneSpec(
-            sizes_m=np.array(world.sizes_m)[keep],
-            poses=poses,
-            shelf=spec.shelf,
-            camera=spec.camera,
-            family=spec.family,
-            meta=dict(spec.meta),
-        ),
-        keep,
-    )

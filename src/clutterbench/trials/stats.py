@@ -86,15 +86,71 @@ def _steps(record: Mapping[str, Any]) -> list[Mapping[str, Any]]:
     return steps
 
 
+def _judged(step: Mapping[str, Any]) -> bool:
+    """A step counts in per-step success when it is judged (trials/protocol.py): an executed
+    pull that took its box out or disturbed the pile. Records of the older schema (no
+    `executed`) count every step."""
+    if "executed" not in step:
+        return True
+    return bool(step["executed"] and (step["extracted"] or not step["others_still"]))
+
+
+def _episode_steps(record: Mapping[str, Any], key: str) -> tuple[int, int]:
+    k = n = 0
+    for i, step in enumerate(_steps(record)):
+        if _judged(step):
+            k += _flag(step.get(key), key, f"{_where(record)}, step {i}")
+            n += 1
+    return k, n
+
+
 def step_rate(records: Sequence[Mapping[str, Any]], key: str = "success") -> Rate:
-    """Steps whose boolean `key` is true, pooled over every episode's steps (thesis Table
-    6.3 rates are per extraction step)."""
+    """Judged steps whose boolean `key` is true, pooled over every episode's steps (thesis
+    Table 6.3 rates are per extraction step); aborts that moved nothing are left out."""
     k = n = 0
     for r in records:
-        for i, step in enumerate(_steps(r)):
-            k += _flag(step.get(key), key, f"{_where(r)}, step {i}")
-            n += 1
+        dk, dn = _episode_steps(r, key)
+        k, n = k + dk, n + dn
     return Rate(k, n)
+
+
+BOOTSTRAP_RESAMPLES = 2000
+BOOTSTRAP_SEED = 0
+
+
+def cluster_bootstrap_interval(
+    per_episode: Sequence[tuple[int, int]],
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    seed: int = BOOTSTRAP_SEED,
+) -> tuple[float, float]:
+    """95% percentile interval of a pooled rate sum(k) / sum(n) whose units (steps) cluster
+    in episodes: episodes are resampled with replacement, each keeping all its steps, so
+    the steps of one episode are not taken as independent. Seeded: the same records give the
+    same interval. (nan, nan) when there are no units."""
+    kn = np.asarray(per_episode, dtype=np.float64).reshape(-1, 2)
+    if kn[:, 1].sum() == 0:
+        return (math.nan, math.nan)
+    rng = np.random.default_rng(seed)
+    picks = rng.integers(0, len(kn), size=(resamples, len(kn)))
+    k, n = kn[picks, 0].sum(axis=1), kn[picks, 1].sum(axis=1)
+    rates = k[n > 0] / n[n > 0]
+    lo, hi = np.percentile(rates, [2.5, 97.5])
+    return (float(lo), float(hi))
+
+
+def _step_columns(records: Sequence[Mapping[str, Any]], key: str) -> dict[str, Any]:
+    """Per-step k/n and rate with the episode-cluster bootstrap interval (not Wilson: the
+    steps of one episode are not independent)."""
+    per = [_episode_steps(r, key) for r in records]
+    k, n = sum(p[0] for p in per), sum(p[1] for p in per)
+    lo, hi = cluster_bootstrap_interval(per)
+    return {
+        f"step_{key}_k": k,
+        f"step_{key}_n": n,
+        f"step_{key}_rate": k / n if n else math.nan,
+        f"step_{key}_lo": lo,
+        f"step_{key}_hi": hi,
+    }
 
 
 def _has(records: Sequence[Mapping[str, Any]], key: str, group: Any) -> bool:
@@ -130,7 +186,8 @@ def _mean(records: Sequence[Mapping[str, Any]], key: str) -> float:
 def aggregate(records: Sequence[Mapping[str, Any]], group_by: str = "condition") -> pd.DataFrame:
     """One row per value of `group_by` (in order of first appearance): episode success
     k/n, rate and Wilson 95% bounds; with per-episode `steps`, the pooled per-step success
-    and mean steps; the means of `n_disturbed` / `disturbance_m` and the `strict_success`
+    over judged steps with an episode-cluster bootstrap interval, the mean steps and the
+    aborts that moved nothing; the means of `n_disturbed` / `disturbance_m` and the `strict_success`
     rate where the records have them (columns absent where no record has the field)."""
     groups: dict[Any, list[Mapping[str, Any]]] = {}
     for r in records:
@@ -142,25 +199,46 @@ def aggregate(records: Sequence[Mapping[str, Any]], group_by: str = "condition")
         row: dict[str, Any] = {group_by: value, "episodes": len(recs)}
         row |= _rate_columns("success", rate(recs, "success"))
         if _has(recs, "steps", value):
-            row |= _rate_columns("step_success", step_rate(recs, "success"))
+            row |= _step_columns(recs, "success")
             row["mean_steps"] = float(np.mean([len(_steps(r)) for r in recs]))
+            if all("aborted_before_motion" in s for r in recs for s in _steps(r)):
+                row["aborts"] = sum(
+                    bool(s["aborted_before_motion"] or s["aborted_after_motion"]) and not _judged(s)
+                    for r in recs
+                    for s in _steps(r)
+                )
+                row["aborts_before_motion"] = sum(
+                    bool(s["aborted_before_motion"]) for r in recs for s in _steps(r)
+                )
         for key, column in OPTIONAL_MEANS.items():
             if _has(recs, key, value):
                 row[column] = _mean(recs, key)
         if _has(recs, "strict_success", value):
             row |= _rate_columns("strict_success", rate(recs, "strict_success"))
+        if _has(recs, "success_held", value):
+            row |= _rate_columns("success_held", rate(recs, "success_held"))
+        if _has(recs, "strict_success_held", value):
+            row |= _rate_columns("strict_success_held", rate(recs, "strict_success_held"))
         rows.append(row)
     always = [group_by, "episodes", *_rate_columns("success", Rate(0, 0))]
     order = [
         *always,
         *_rate_columns("step_success", Rate(0, 0)),
         "mean_steps",
+        "aborts",
+        "aborts_before_motion",
         *OPTIONAL_MEANS.values(),
         *_rate_columns("strict_success", Rate(0, 0)),
+        *_rate_columns("success_held", Rate(0, 0)),
+        *_rate_columns("strict_success_held", Rate(0, 0)),
     ]
     present = {c for row in rows for c in row}
     columns = [c for c in order if c in present or c in always]
     frame = pd.DataFrame.from_records(rows, columns=columns)
     # Counts stay integers where a group lacks a field (nullable, not float NaN).
-    counts = [c for c in columns if c == "episodes" or c.endswith(("_k", "_n"))]
+    counts = [
+        c
+        for c in columns
+        if c in ("episodes", "aborts", "aborts_before_motion") or c.endswith(("_k", "_n"))
+    ]
     return frame.astype(dict.fromkeys(counts, "Int64"))

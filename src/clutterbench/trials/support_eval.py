@@ -176,24 +176,31 @@ def sweep_all(
 
 
 def choose_all(sweep: pd.DataFrame) -> dict[str, SupportParams]:
-    """Each method's thresholds: the best f1 of mean precision and recall on val scenes.
+    """Each method's thresholds: the best f1 of mean precision and recall on val scenes, once
+    without the surface-gap test (the thesis' rule exactly) and once with it (`_gap`).
     Where no grid point has both means defined (a few val scenes without any true or any
     predicted edge), the pooled f1 decides, ranked below every defined one."""
     denom = 2 * sweep["tp"] + sweep["fp"] + sweep["fn"]
     pooled = np.where(denom > 0, 2 * sweep["tp"] / denom.where(denom > 0, 1), 1.0)
     ranked = sweep.assign(f1=sweep["f1"].fillna(pd.Series(pooled - 2.0, index=sweep.index)))
-    return {
-        method: choose_support_params(
-            ranked[ranked["method"] == method], method.removeprefix("oracle_")
-        )
-        for method in dict.fromkeys(sweep["method"])
-    }
+    no_gap = ranked["max_gap_m"].isna()
+    chosen: dict[str, SupportParams] = {}
+    for method in dict.fromkeys(sweep["method"]):
+        rows = ranked["method"] == method
+        rule = method.removeprefix("oracle_")
+        # `method`: exactly the thesis' rule (no surface-gap test); `<method>_gap`: the same
+        # rule with the surface-gap test on pseudo-direct contact (ours), where swept.
+        if (rows & no_gap).any():
+            chosen[method] = choose_support_params(ranked[rows & no_gap], rule)
+        if (rows & ~no_gap).any():
+            chosen[f"{method}_gap"] = choose_support_params(ranked[rows & ~no_gap], rule)
+    return chosen
 
 
 def val_metrics_at(sweep: pd.DataFrame, method: str, params: SupportParams) -> dict[str, float]:
     """Validation precision / recall / f1 of `method` at its chosen thresholds."""
     rows = sweep[
-        (sweep["method"] == method)
+        (sweep["method"] == method.removesuffix("_gap"))
         & np.isclose(sweep["prob_threshold"], params.prob_threshold)
         & np.isclose(sweep["score_threshold"], params.score_threshold)
         & (sweep["bbox_margin_px"] == params.bbox_margin_px)

@@ -1,0 +1,59 @@
+"""The CPG planner's one decision rule: it never picks a box its own abort test rejects."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from clutterbench.observation import CameraModel, Observation
+from clutterbench.planning.extraction import CollapseGraphPlanner
+from clutterbench.planning.support import SupportParams
+
+PARAMS = SupportParams("coverage", 0.5, 0.3, 2, 0.0)
+
+
+def _scene(extra_leaf: bool) -> tuple[Observation, dict[int, np.ndarray]]:
+    """Boxes 0 and 1 side by side (in pseudo-contact); optionally box 2 on top of box 1."""
+    inst = np.zeros((24, 24), np.uint8)
+    inst[8:20, 2:8] = 1
+    inst[8:20, 8:14] = 2
+    if extra_leaf:
+        inst[2:8, 8:14] = 3
+    obs = Observation(np.ones((24, 24), np.float32), inst, CameraModel(np.eye(3), np.eye(4)))
+    return obs, {k: inst == k + 1 for k in range(3)}
+
+
+def _predictor(boxes: dict[int, np.ndarray]):
+    """Removing 0 collapses all of 1; removing 1 collapses 60% of 0 (a mutual pair whose
+    weaker edge the graph drops); removing 2 collapses nothing."""
+
+    def predict(depth, masks):
+        out = np.zeros(masks.shape, np.float32)
+        for k, m in enumerate(masks.astype(bool)):
+            if (m & boxes[0]).any():
+                out[k] = boxes[1]
+            elif (m & boxes[1]).any():
+                rows = np.nonzero(boxes[0].any(axis=1))[0]
+                cut = rows[0] + int(round(0.6 * len(rows)))
+                out[k, rows[0] : cut] = boxes[0][rows[0] : cut]
+        return out
+
+    return predict
+
+
+def test_a_box_whose_collapse_score_exceeds_cp_max_is_never_picked():
+    obs, boxes = _scene(extra_leaf=False)
+    planner = CollapseGraphPlanner(_predictor(boxes), PARAMS, cp_max=0.5, min_pixels=1)
+    # The graph keeps 0 -> 1, so box 1 is the only leaf; its own abort test (0.6 of box 0
+    # in its collapse area) rejects it before any motion: the planner gives up instead.
+    assert planner.collapse_score(obs, 1) == pytest.approx(0.6, abs=0.1)
+    with pytest.raises(ValueError):
+        planner.decide(obs, 0, frozenset())
+
+
+def test_the_next_candidate_is_taken_when_one_is_rejected():
+    obs, boxes = _scene(extra_leaf=False)
+    lenient = CollapseGraphPlanner(_predictor(boxes), PARAMS, cp_max=0.9, min_pixels=1)
+    decision = lenient.decide(obs, 0, frozenset())
+    assert decision.pull == 1 and decision.state["rejected"] == []
+    assert decision.state["cp"] <= 0.9
