@@ -15,6 +15,7 @@ from clutterbench.report.datasets import dataset_stats, datasets_table
 from clutterbench.report.extraction import (
     extraction_families_table,
     extraction_table,
+    rule_note,
     trial_params_note,
 )
 from clutterbench.report.support import support_table
@@ -88,8 +89,10 @@ def report(params: dict, base: BaseConfig) -> None:
         for cond in cfg.table_6_3.values()
     }
     trial_note = trial_params_note(load_section(TrialsConfig, "trials", params).ch6)
+    chosen = _json_key(support / "thresholds.json", "chosen")
+    rules = rule_note(records, chosen, cfg.table_6_2_methods)
     extraction_table(
-        records, cfg.table_6_3, figures, Path("reports/tables"), base.scale, [trial_note]
+        records, cfg.table_6_3, figures, Path("reports/tables"), base.scale, [trial_note, *rules]
     )
     extraction_families_table(
         records, cfg.table_6_3, Path("reports/tables"), base.scale, [trial_note]

@@ -1,4 +1,10 @@
-"""Stage trials@<condition>: simulated robot trials of one condition -> records + MCAP."""
+"""Stage trials: the chapter 6 extraction trials of every condition (thesis Table 6.3) in one
+pool of workers -> per condition reports/trials/<condition>/records.jsonl (one record per
+episode) and summary.json, and data/trials/<condition>/episodes.mcap.
+
+One stage, not one per condition: an episode takes about a second, so starting the workers
+(torch, a renderer, the networks) once for all conditions saves most of the overhead, and
+one pool keeps both cores busy to the end."""
 
 import sys
 from pathlib import Path
@@ -16,6 +22,8 @@ from clutterbench.trials.records import write_records
 from clutterbench.trials.stats import aggregate
 
 THRESHOLDS = Path("reports/support/thresholds.json")
+OUT = Path("reports/trials")
+DATA = Path("data/trials")
 
 
 def support_params(rule: str) -> SupportParams:
@@ -29,47 +37,61 @@ def support_params(rule: str) -> SupportParams:
 
 
 def trials(params: dict, base: BaseConfig) -> None:
-    name = sys.argv[1] if len(sys.argv) > 1 else ""
     cfg = load_section(TrialsConfig, "trials", params)
-    if name not in cfg.conditions:
+    only = sys.argv[1:]  # optional: run only these conditions (debugging; dvc runs them all)
+    unknown = [n for n in only if n not in cfg.conditions]
+    if unknown:
         raise ClutterbenchError(
-            f"trials.conditions.{name}: no such condition (known: {', '.join(cfg.conditions)})"
+            f"trials.conditions.{unknown[0]}: no such condition "
+            f"(known: {', '.join(cfg.conditions)})"
         )
-    cond = cfg.conditions[name]
+    conditions = {n: c for n, c in cfg.conditions.items() if not only or n in only}
+    if not conditions:
+        raise ClutterbenchError("trials.conditions: no conditions to run")
     sim = load_section(SimConfig, "sim", params)
-    support = support_params(cond.rule)
-    cp_max = cfg.ch6.cp_max if cfg.ch6.cp_max is not None else support.score_threshold
-    jobs = ch6_jobs(
-        name,
-        cond,
-        cfg,
-        cfg.streams[cond.stream],
-        base.seed,
-        sim.physics,
-        sim.camera,
-        support,
-        cp_max,
-        Path(f"models/{cfg.ch6.model}/best.pt"),
-    )
-    results = run_episodes(f"trials {name}", run_ch6_episode, jobs, cfg.workers)
-    records = [r.record for r in results]
-    write_records(Path(f"reports/trials/{name}/records.jsonl"), records)
-    about = {"condition": name, "planner": cond.planner, "stream": cond.stream, "scale": base.scale}
-    write_mcap(
-        Path(f"data/trials/{name}/episodes.mcap"), results, about | {"cp_max": f"{cp_max:.3f}"}
-    )
-    row = aggregate(records).iloc[0].to_dict()
-    summary = (
-        about
-        | {"cp_max": cp_max, "support": as_dict(support)}
-        | {k: (v.item() if hasattr(v, "item") else v) for k, v in row.items()}
-    )
-    write_json(Path(f"reports/trials/{name}/summary.json"), summary)
-    print(
-        f"{name}: episodes {summary['success_k']}/{summary['success_n']} succeeded, "
-        f"steps {summary.get('step_success_k')}/{summary.get('step_success_n')}, "
-        f"mean steps {summary.get('mean_steps', float('nan')):.2f}"
-    )
+    for model in {cfg.ch6.model, cfg.ch6.ch4_model}:
+        if not Path(f"models/{model}/best.pt").exists():
+            raise ClutterbenchError(f"models/{model}/best.pt missing; run train@{model}")
+    jobs, about = [], {}
+    for name, cond in conditions.items():
+        support = support_params(cond.rule)
+        cp_max = cfg.ch6.cp_max if cfg.ch6.cp_max is not None else support.score_threshold
+        jobs += ch6_jobs(
+            name,
+            cond,
+            cfg,
+            cfg.streams[cond.stream],
+            base.seed,
+            sim.physics,
+            sim.camera,
+            support,
+            cp_max,
+            Path(f"models/{cfg.ch6.model}/best.pt"),
+        )
+        about[name] = {
+            "condition": name,
+            "planner": cond.planner,
+            "stream": cond.stream,
+            "rule": cond.rule,
+            "scale": base.scale,
+            "cp_max": cp_max,
+            "support": as_dict(support),
+        }
+    results = run_episodes("trials", run_ch6_episode, jobs, cfg.workers)
+    for name in conditions:
+        mine = [r for r in results if r.record["condition"] == name]
+        records = [r.record for r in mine]
+        write_records(OUT / name / "records.jsonl", records)
+        meta = {k: str(v) for k, v in about[name].items() if k != "support"}
+        write_mcap(DATA / name / "episodes.mcap", mine, meta)
+        row = aggregate(records).iloc[0].to_dict()
+        summary = about[name] | {k: (v.item() if hasattr(v, "item") else v) for k, v in row.items()}
+        write_json(OUT / name / "summary.json", summary)
+        print(
+            f"{name}: episodes {summary['success_k']}/{summary['success_n']} succeeded, "
+            f"steps {summary.get('step_success_k')}/{summary.get('step_success_n')}, "
+            f"mean steps {summary.get('mean_steps', float('nan')):.2f}"
+        )
 
 
 if __name__ == "__main__":

@@ -166,3 +166,18 @@ def test_camera_points_of_a_stored_depth_match_the_rendering_camera(stack3, phys
     d_ours = np.linalg.norm(ours[pick, None] - ours[None, pick], axis=-1)
     d_theirs = np.linalg.norm(theirs[pick, None] - theirs[None, pick], axis=-1)
     assert np.allclose(d_ours, d_theirs, atol=1e-5)
+
+
+def test_a_spec_not_at_rest_is_named_with_its_creeping_box(physics):
+    """A box floating 50 mm above the floor falls: the start is not at rest, and the warning
+    names that box and how far it moved; a resting spec gets none."""
+    from clutterbench.sim.labelling import creep_warning, start_creep
+
+    size = np.array([0.1, 0.1, 0.04])
+    resting = np.array([[0.14, 0.0, 0.0201, 1.0, 0.0, 0.0, 0.0]])
+    floating = np.array([[0.14, 0.0, 0.0201, 1.0, 0.0, 0.0, 0.0], [0.14, 0.12, 0.07, 1.0, 0, 0, 0]])
+    assert start_creep(SceneSpec(sizes_m=size[None], poses=resting), physics) is None
+    spec = SceneSpec(sizes_m=np.stack([size, size]), poses=floating)
+    box, dist = start_creep(spec, physics)
+    assert box == 1 and dist > 0.04
+    assert creep_warning(spec, physics, "s.json").startswith("warning: s.json: box 1 moves 5")

@@ -191,7 +191,7 @@ def test_table_4_1_validates_rows_conditions_and_records(tmp_path):
         table_4_1(RECORDS, {"same_model/huge_3": "s_same"}, FIGURES, tmp_path, "t")
     with pytest.raises(ClutterbenchError, match="same_model/total"):
         table_4_1(RECORDS, {"same_model/total": "s_same"}, FIGURES, tmp_path, "t")
-    with pytest.raises(ClutterbenchError, match=r"run trials_ch4@gone"):
+    with pytest.raises(ClutterbenchError, match=r"condition .gone.; run the trials_ch4 stage"):
         table_4_1(RECORDS, {"same_model/same_size_5": "gone"}, FIGURES, tmp_path, "t")
     with pytest.raises(ClutterbenchError, match="ran model ch4_various, not ch4_same"):
         table_4_1(RECORDS, {"same_model/same_size_5": "v_same"}, FIGURES, tmp_path, "t")
@@ -241,5 +241,21 @@ def test_table_4_1_target_checks_mode_and_method(tmp_path):
         table_4_1_target(TARGET_RECORDS, {"same_model_depth": "ts"}, FIGURES, tmp_path, "t")
     with pytest.raises(ClutterbenchError, match="ran model ch4_same, not ch4_various"):
         table_4_1_target(TARGET_RECORDS, {"various_model": "ts"}, FIGURES, tmp_path, "t")
-    with pytest.raises(ClutterbenchError, match=r"run trials_ch4@nope"):
+    with pytest.raises(ClutterbenchError, match=r"condition .nope.; run the trials_ch4 stage"):
         table_4_1_target(TARGET_RECORDS, {"random": "nope"}, FIGURES, tmp_path, "t")
+
+
+def test_tie_break_note_counts_choices_decided_among_equal_risks():
+    from clutterbench.report.table_4_1 import tie_break_notes
+
+    used = {
+        "a": [
+            {"planner": "risk", "risk_ties": 5, "risk": 0.0},
+            {"planner": "risk", "risk_ties": 1, "risk": 0.02},
+            {"planner": "risk", "risk_ties": 2, "risk": 0.01},
+        ],
+        "rnd": [{"planner": "random", "risk_ties": None, "risk": None}],
+    }
+    (note,) = tie_break_notes(used)
+    assert "in 2 of the 3 risk-planner choices" in note and "was 0 in 1." in note
+    assert tie_break_notes({"rnd": used["rnd"]}) == []

@@ -290,3 +290,23 @@ def test_support_figure_is_byte_identical_across_calls(tmp_path):
     assert (tmp_path / "c.png").read_bytes() != a
     with pytest.raises(ClutterbenchError, match="1 to 6 panels"):
         support_figure([panel(k) for k in range(7)], tmp_path / "d.png", "too many")
+
+
+def test_rule_note_names_the_trials_rule_and_its_val_thresholds():
+    from clutterbench.report.extraction import rule_note
+
+    used = {"ms": [{"rule": "coverage_gap"}], "or": [{"rule": None}]}
+    chosen = {
+        "coverage_gap": {
+            "rule": "coverage",
+            "prob_threshold": 0.3,
+            "score_threshold": 0.5,
+            "bbox_margin_px": 4,
+            "adjacency_iou": 0.05,
+            "max_gap_m": 0.05,
+        }
+    }
+    (note,) = rule_note(used, chosen, {"coverage_gap": "CP + coverage rule + gap"})
+    assert "coverage_gap (Table 6.2 row 'CP + coverage rule + gap'; p>0.30" in note
+    assert "surface gap<50 mm" in note
+    assert rule_note({"or": used["or"]}, chosen, {}) == []

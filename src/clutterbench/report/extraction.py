@@ -201,7 +201,7 @@ def _condition_records(
     if condition not in records_by_condition:
         raise ClutterbenchError(
             f"report.{TABLE}.{row}: no trial records for condition '{condition}'; "
-            f"run trials@{condition}"
+            f"run the trials stage"
         )
     records = records_by_condition[condition]
     if not records:
@@ -347,6 +347,28 @@ def trial_params_note(ch6: Ch6TrialParams) -> str:
         f"a box moved: its centre moved more than {_mm(ch6.moved_threshold_m)}; {lift} in "
         f"{_mm(ch6.pull_increment_m)} increments; an episode gives up after {attempts}."
     )
+
+
+def rule_note(
+    used: Mapping[str, Sequence[Mapping[str, Any]]],
+    chosen: Mapping[str, Mapping[str, Any]],
+    labels: Mapping[str, str],
+) -> list[str]:
+    """The support rule the CP planners ran with (their records' `rule`), its Table 6.2 row
+    and the thresholds the support stage chose for it on validation scenes."""
+    from clutterbench.report.support import thresholds_text
+
+    rules = sorted({str(r["rule"]) for recs in used.values() for r in recs if r.get("rule")})
+    if not rules:
+        return []
+    parts = [
+        f"{rule} (Table 6.2 row '{labels.get(rule, rule)}'; {thresholds_text(chosen.get(rule))})"
+        for rule in rules
+    ]
+    return [
+        "support rule of the CP planners (multi-step, bimanual), thresholds chosen on "
+        f"validation scenes: {'; '.join(parts)}."
+    ]
 
 
 def search_notes(used: Mapping[str, Sequence[Mapping[str, Any]]]) -> list[str]:

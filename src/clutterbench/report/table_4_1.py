@@ -92,6 +92,7 @@ COLUMNS = [
     Column("objects", "objects", "{}"),
     Column("success", "success (only the pulled box left the shelf)", "{}"),
     Column("strict_success", "strict success (no other box moved > 5 mm)", "{}"),
+    Column("success_held", "success, judged while the support is held", "{}"),
     Column("mean_n_disturbed", "mean disturbed boxes", "{:.2f}"),
     Column("mean_disturbance_mm", "mean disturbance (mm)", "{:.1f}"),
     Column("invalid", "invalid actions", "{:d}"),
@@ -128,7 +129,7 @@ def _condition_records(
 ) -> list[dict[str, Any]]:
     if condition not in records_by_condition:
         raise ClutterbenchError(
-            f"{where}: no trial records for condition '{condition}'; run trials_ch4@{condition}"
+            f"{where}: no trial records for condition '{condition}'; run the trials_ch4 stage"
         )
     records = records_by_condition[condition]
     if not records:
@@ -188,6 +189,7 @@ def _ours(table: str, row: _Row) -> tuple[dict[str, Any], dict[str, Any]]:
         "objects": objects,
         "success": rate_text(a, "success"),
         "strict_success": rate_text(a, "strict_success"),
+        "success_held": rate_text(a, "success_held"),
         "mean_n_disturbed": a.get("mean_n_disturbed"),
         "mean_disturbance_mm": 1000.0 * a["mean_disturbance_m"]
         if "mean_disturbance_m" in a
@@ -357,11 +359,30 @@ def _notes(
         f"{_thesis_trials_text(figures, table)} on a real dual-arm robot ({source}), a "
         "different robot, objects and scenes.",
         "success (the thesis' definition): only the pulled box left the shelf. strict "
-        "success: also no other box moved beyond 5 mm. k/n = rate [Wilson 95% interval]; "
-        "the thesis' rates as printed.",
+        "success: also no other box moved beyond 5 mm. Both judged after the support was "
+        "released and the scene settled; 'judged while the support is held': before the "
+        "release. k/n = rate [Wilson 95% interval]; the thesis' rates as printed.",
         "mean disturbed boxes: other boxes that moved beyond the threshold; mean "
         "disturbance: the summed displacement of the other boxes, per episode.",
         f"trial scenes: {grouped(used, lambda rs: 'stream ' + values_text(rs, 'stream'))}; "
         f"families: {grouped(used, lambda rs: values_text(rs, 'family'))}.",
         f"perception (masks): {grouped(used, lambda rs: values_text(rs, 'perception'))}.",
+        *tie_break_notes(used),
+    ]
+
+
+def tie_break_notes(used: Mapping[str, Sequence[Mapping[str, Any]]]) -> list[str]:
+    """How often the risk planner's choice was decided by its tie-break (several candidates
+    shared the least r_c, eq. 4.1: the least mean P(C) chose among them), and how often that
+    least r_c was 0 (no pixel of any candidate's C reached the threshold)."""
+    risk = [r for recs in used.values() for r in recs if r.get("planner") == "risk"]
+    counted = [r for r in risk if r.get("risk_ties") is not None]
+    if not counted:
+        return []
+    ties = sum(int(r["risk_ties"]) > 1 for r in counted)
+    zero = sum(r.get("risk") == 0 for r in counted)
+    return [
+        f"tie-break: in {ties} of the {len(counted)} risk-planner choices several candidates "
+        f"shared the least risk r_c and the least mean P(C) decided; the chosen r_c was 0 in "
+        f"{zero}."
     ]

@@ -111,6 +111,30 @@ def place_and_settle(
     return world, groups, None
 
 
+def start_creep(spec: SceneSpec, physics: PhysicsConfig) -> tuple[int, float] | None:
+    """(box, metres) of the box that moves most in sim.physics.rest_check_s with no action,
+    from the spec's canonical start, when it moves more than sim.physics.rest_check_m (the
+    generator's "creeping" test); None when the start is at rest. A floating box falls: it
+    is named here, before any action would report its fall as a consequence."""
+    creep = np.nan_to_num(BoxWorld.from_spec(spec, physics).idle_creep_m(), nan=0.0)
+    box = int(np.argmax(creep)) if creep.size else 0
+    if creep.size == 0 or creep[box] <= physics.rest_check_m:
+        return None
+    return box, float(creep[box])
+
+
+def creep_warning(spec: SceneSpec, physics: PhysicsConfig, name: str) -> str | None:
+    """The one-line warning for a spec whose start is not at rest, or None."""
+    found = start_creep(spec, physics)
+    if found is None:
+        return None
+    box, dist = found
+    return (
+        f"warning: {name}: box {box} moves {1000 * dist:.1f} mm in {physics.rest_check_s:g} s "
+        "with no action (not at rest; every action on this spec will include that motion)"
+    )
+
+
 def catalogue_type_ids(sizes_m: np.ndarray, catalogue: str) -> np.ndarray:
     """(N,) index of each box's size in the catalogue (-1 if it is none of them)."""
     types = box_extents_m(catalogue)

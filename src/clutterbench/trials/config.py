@@ -90,7 +90,7 @@ class SupportEvalConfig:
 
 @dataclasses.dataclass(frozen=True)
 class ConditionConfig:
-    """One trials condition -> stage trials@<name>."""
+    """One chapter 6 trials condition (run by stage trials with every other)."""
 
     planner: str
     """Policy, a name in trials.config.PLANNERS."""
@@ -204,7 +204,7 @@ class TrialsConfig:
     ch6: Ch6TrialParams = Ch6TrialParams()
     """Chapter 6 execution and judging."""
     conditions: Mapping[str, ConditionConfig] = dataclasses.field(default_factory=dict)
-    """Condition name -> planner on a stream; each becomes stage trials@<name>."""
+    """Condition name -> planner on a stream; stage trials runs them all in one pool."""
     ch4: Ch4TrialParams = Ch4TrialParams()
     """Chapter 4 judging."""
     ch4_conditions: Mapping[str, Ch4ConditionConfig] = dataclasses.field(default_factory=dict)
