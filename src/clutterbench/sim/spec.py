@@ -1,23 +1,27 @@
 """JSON scene specs: every box's size and pose, the shelf and the camera.
 
 Any scene can be saved and loaded alone, to regenerate, inspect or replay it. Poses are the
-settled poses, so a loaded spec is already at rest. A loaded spec is validated: a box that
-is not finite, has no size, a non-unit rotation, a centre outside the shelf or overlaps
-another box stops with one line naming it.
+settled poses, so a loaded spec is already at rest. A loaded spec is validated in two
+passes, each stopping with one line naming the key or the box: `check_spec_dict` checks the
+JSON's keys, types and shapes (the format: docs/spec-format.md), `validate_spec` what a
+world cannot hold (a box that is not finite, has no size, a non-unit rotation, a centre
+outside the shelf, or overlaps another box).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from clutterbench.config import parse
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_text
-from clutterbench.sim.config import CameraConfig
+from clutterbench.sim.config import FAMILY_NAMES, CameraConfig
 from clutterbench.sim.geometry import box_aabb_half_extents, obb_penetration_m
 from clutterbench.sim.shelf import Shelf
 
@@ -27,6 +31,15 @@ MAX_PENETRATION_M = 0.001
 QUAT_NORM_TOL = 1e-3
 """A quaternion within this of unit length is normalized; further off, the spec is refused."""
 _QUAT_EXACT_TOL = 1e-6  # float32 round-off: left untouched so replays stay bit-identical
+SPEC_KEYS = ("version", "family", "shelf", "camera", "boxes", "meta")
+"""Keys of a spec's JSON object (docs/spec-format.md) ..."""
+REQUIRED_KEYS = ("version", "shelf", "camera", "boxes")
+"""... of which `family` and `meta` may be left out."""
+BOX_KEYS = ("size_m", "pose", "type", "density_kg_m3")
+"""Keys of one box; `type` and `density_kg_m3` may be left out."""
+SPEC_FAMILIES = (*FAMILY_NAMES, "stack", "custom")
+"""A spec's `family`: a scene family of sim/families, `stack` (`clutterbench scene make
+--stack`) or `custom` (made by hand; the default)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,37 +95,32 @@ class SceneSpec:
         return json.dumps(self.to_dict(), sort_keys=True)
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any], where: str = "spec") -> SceneSpec:
-        try:
-            if d.get("version") != SPEC_VERSION:
-                raise ClutterbenchError(f"{where}: unsupported spec version {d.get('version')!r}")
-            boxes = d["boxes"]
-            sizes = np.array([b["size_m"] for b in boxes], dtype=np.float64).reshape(-1, 3)
-            poses = np.array([b["pose"] for b in boxes], dtype=np.float64).reshape(-1, 7)
-            types = np.array([int(b.get("type", -1)) for b in boxes], dtype=np.int64)
-            dens = np.array([float(b.get("density_kg_m3", np.nan)) for b in boxes])
-            spec = cls(
-                sizes_m=sizes,
-                poses=poses,
-                shelf=Shelf(**d.get("shelf", {})),
-                camera=CameraConfig(**d.get("camera", {})),
-                family=d.get("family", "custom"),
-                meta=d.get("meta", {}),
-                type_ids=types if np.any(types >= 0) else None,
-                densities_kg_m3=dens if not np.all(np.isnan(dens)) else None,
-            )
-        except ClutterbenchError:
-            raise
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ClutterbenchError(f"{where}: malformed scene spec ({exc!r})") from None
+    def from_dict(cls, d: Any, where: str = "spec") -> SceneSpec:
+        shelf, camera = check_spec_dict(d, where)
+        boxes = d["boxes"]
+        sizes = np.array([b["size_m"] for b in boxes], dtype=np.float64).reshape(-1, 3)
+        poses = np.array([b["pose"] for b in boxes], dtype=np.float64).reshape(-1, 7)
+        types = np.array([b.get("type", -1) for b in boxes], dtype=np.int64)
+        dens = np.array([float(b.get("density_kg_m3", np.nan)) for b in boxes])
+        spec = cls(
+            sizes_m=sizes,
+            poses=poses,
+            shelf=shelf,
+            camera=camera,
+            family=d.get("family", "custom"),
+            meta=d.get("meta", {}),
+            type_ids=types if np.any(types >= 0) else None,
+            densities_kg_m3=dens if not np.all(np.isnan(dens)) else None,
+        )
         return validate_spec(spec, where)
 
     @classmethod
     def from_json(cls, text: str, where: str = "spec") -> SceneSpec:
         try:
-            return cls.from_dict(json.loads(text), where)
+            d = json.loads(text)
         except json.JSONDecodeError as exc:
             raise ClutterbenchError(f"{where}: not valid JSON ({exc})") from None
+        return cls.from_dict(d, where)
 
     def save(self, path: Path) -> None:
         write_text(Path(path), json.dumps(self.to_dict(), indent=2, sort_keys=True) + "\n")
@@ -122,7 +130,99 @@ class SceneSpec:
         path = Path(path)
         if not path.exists():
             raise ClutterbenchError(f"scene spec not found: {path}")
-        return cls.from_json(path.read_text(), where=str(path))
+        if path.is_dir():
+            raise ClutterbenchError(f"{path}: is a directory, not a scene spec (.json) file")
+        try:
+            text = path.read_text()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ClutterbenchError(f"{path}: cannot read the scene spec ({exc})") from None
+        return cls.from_json(text, where=str(path))
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
+def _kind(v: Any) -> str:
+    """What a JSON value is, for an error message."""
+    if isinstance(v, bool):
+        return f"true/false ({str(v).lower()})"
+    if v is None:
+        return "null"
+    if isinstance(v, dict):
+        return "an object"
+    if isinstance(v, list):
+        return f"a list of {len(v)}"
+    return f"{'a string' if isinstance(v, str) else 'a number'} ({v!r})"
+
+
+def _check_vector(v: Any, n: int, what: str, where: str) -> None:
+    if not (isinstance(v, list) and len(v) == n and all(_is_number(x) for x in v)):
+        got = _kind(v)
+        if isinstance(v, list) and len(v) == n:
+            got = f"{_kind(next(x for x in v if not _is_number(x)))} in the list"
+        raise ClutterbenchError(f"{where}: expected a list of {n} numbers {what}, got {got}")
+
+
+def check_spec_dict(d: Any, where: str = "spec") -> tuple[Shelf, CameraConfig]:
+    """Check the JSON form of a spec key by key (docs/spec-format.md): one ClutterbenchError
+    naming the key (and the box) for a key that is unknown or missing, or of the wrong type or
+    shape; returns the parsed shelf and camera. What the boxes' values mean is
+    `validate_spec`'s to check."""
+    if not isinstance(d, dict):
+        raise ClutterbenchError(f"{where}: a scene spec must be a JSON object, got {_kind(d)}")
+    unknown = sorted(set(d) - set(SPEC_KEYS))
+    if unknown:
+        raise ClutterbenchError(
+            f"{where}: unknown key '{unknown[0]}' (allowed: {', '.join(SPEC_KEYS)})"
+        )
+    for key in REQUIRED_KEYS:
+        if key not in d:
+            raise ClutterbenchError(f"{where}: missing key '{key}'")
+    if d["version"] != SPEC_VERSION or isinstance(d["version"], bool):
+        raise ClutterbenchError(f"{where}: unsupported spec version {d['version']!r}")
+    family = d.get("family", "custom")
+    if not isinstance(family, str) or family not in SPEC_FAMILIES:
+        raise ClutterbenchError(
+            f"{where}: family: {family!r} is not one of {', '.join(SPEC_FAMILIES)}"
+        )
+    if not isinstance(d.get("meta", {}), dict):
+        raise ClutterbenchError(f"{where}: meta: expected an object, got {_kind(d['meta'])}")
+    shelf = parse(Shelf, d["shelf"], f"{where}: shelf")  # unknown keys, types
+    for f in dataclasses.fields(Shelf):
+        v = getattr(shelf, f.name)
+        if not (math.isfinite(v) and v > 0):
+            raise ClutterbenchError(f"{where}: shelf.{f.name}: {v!r} m must be positive")
+    camera = parse(CameraConfig, d["camera"], f"{where}: camera")  # unknown keys, types, ranges
+    boxes = d["boxes"]
+    if not isinstance(boxes, list):
+        raise ClutterbenchError(f"{where}: boxes: expected a list of boxes, got {_kind(boxes)}")
+    if not boxes:
+        raise ClutterbenchError(f"{where}: boxes: the list is empty (a scene needs a box)")
+    for k, box in enumerate(boxes):
+        at = f"{where}: box {k}"
+        if not isinstance(box, dict):
+            raise ClutterbenchError(f"{at}: expected an object, got {_kind(box)}")
+        unknown = sorted(set(box) - set(BOX_KEYS))
+        if unknown:
+            raise ClutterbenchError(
+                f"{at}: unknown key '{unknown[0]}' (allowed: {', '.join(BOX_KEYS)})"
+            )
+        for key in ("size_m", "pose"):
+            if key not in box:
+                raise ClutterbenchError(f"{at}: missing key '{key}'")
+        _check_vector(box["size_m"], 3, "[depth x, width y, height z] (m)", f"{at}: size_m")
+        _check_vector(box["pose"], 7, "[x, y, z, qw, qx, qy, qz]", f"{at}: pose")
+        t = box.get("type", 0)
+        if isinstance(t, bool) or not isinstance(t, int) or t < 0:
+            raise ClutterbenchError(
+                f"{at}: type: expected a catalogue index (an integer >= 0), got {_kind(t)}"
+            )
+        if not _is_number(box.get("density_kg_m3", 1.0)):
+            raise ClutterbenchError(
+                f"{at}: density_kg_m3: expected a number, got {_kind(box['density_kg_m3'])}"
+            )
+    return shelf, camera
 
 
 def validate_spec(spec: SceneSpec, where: str = "spec") -> SceneSpec:
