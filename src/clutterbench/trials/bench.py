@@ -17,6 +17,7 @@ from clutterbench.io import read_json, write_json, write_text
 from clutterbench.planning.cpg import build_cpg
 from clutterbench.planning.extraction import CollapseGraphPlanner
 from clutterbench.planning.support import SupportParams
+from clutterbench.platform_info import cpu_description
 from clutterbench.sim.config import SimConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import ensure_renderer, observe
@@ -132,9 +133,14 @@ def bench_trials(
             wall.append(time.perf_counter() - t0)
         result[f"trial_{planner_name}_s_median"] = float(np.median(wall))
     result |= bench_ch4(trials, sim, graphs)
+    result |= cpu_description()  # cpu_model, logical_cpus, torch_threads (1), machine
     write_json(out_dir / "trials.json", result)
     lines = ["# Trials benchmark (one core)", "", "| measure | value |", "|---|---|"]
-    lines += [f"| {k} | {v:.3f} |" for k, v in result.items() if k != "threads"]
+    lines += [
+        f"| {k} | {v:.3f} |" if isinstance(v, float) else f"| {k} | {v} |"
+        for k, v in result.items()
+        if k != "threads"
+    ]
     write_text(out_dir / "trials.md", "\n".join(lines) + "\n")
     for k, v in result.items():
         print(f"{k}: {v}")

@@ -67,8 +67,9 @@ class SearchOracle:
     of removed boxes, for a sequence of clean steps that ends with the target out.
 
     Actions: every visible box (planners see no other) and the target; with `holding`, the
-    target may also be pulled while any other visible box is held (a superset of the
-    bimanual planner's and the ch. 4 planner's actions). As execution reproduces the
+    target may also be pulled while any visible box its unheld pull disturbs is held (the
+    bimanual and ch. 4 planners hold one box while pulling the target; holding a box the
+    pull leaves in place cannot stop the others' motion). As execution reproduces the
     simulation bit for bit, the plan found is followed; no planner succeeds on an episode
     where the search proved there is no such sequence, unless a node budget ran out
     (counted) or a planner's aborted pull left a state outside the search's actions.
@@ -91,14 +92,31 @@ class SearchOracle:
 
     # -- simulation -------------------------------------------------------------------------
     def simulate(
-        self, state: SceneState, action: Action
-    ) -> tuple[dict[str, Any], SceneState, np.ndarray]:
+        self, state: SceneState, action: Action, cut_short: bool = True
+    ) -> tuple[dict[str, Any], SceneState | None, np.ndarray | None]:
         """One step from `state` as the harness executes it -> (its judgement, the state it
-        leaves, (N,) displacements)."""
+        leaves, (N,) displacements). With `cut_short`, a pull during which another box (not
+        held) has already moved more than `search_cut_m` is stopped there and judged a
+        failure (no state, no displacements): that box does not come back within the moved
+        threshold, and most simulated pulls in a pile fail, so this is most of the search's
+        saving."""
         world = world_at(self.spec, state, self.physics)
         p = self.params
-        result = execute_pull(world, action[0], action[1], p.pull_increment_m, p.grasp_lift_m)
-        step = judge_pull(result, action[0], action[1], state.removed, p.moved_threshold_m)
+        box, hold = action
+        watch = [k for k in range(self.spec.n) if k not in state.removed and k not in action]
+
+        def go_on(done: int) -> bool:
+            if done and watch and np.max(world.displacements()[watch]) > p.search_cut_m:
+                raise _CutShort
+            return True
+
+        try:
+            result = execute_pull(
+                world, box, hold, p.pull_increment_m, p.grasp_lift_m, go_on if cut_short else None
+            )
+        except _CutShort:
+            return {"success": False, "cut_short": True}, None, None
+        step = judge_pull(result, box, hold, state.removed, p.moved_threshold_m)
         return step, SceneState.of(world), result.displacement_m
 
     def candidates(self, state: SceneState, target: int) -> list[int]:
@@ -122,12 +140,16 @@ class SearchOracle:
                 raise _Budget
             nodes += 1
             boxes = self.candidates(now, target)
-            first, after, disp = self.simulate(now, (target, None))
+            first, after, disp = self.simulate(now, (target, None), cut_short=False)
             if first["success"]:
                 return [((target, None), after)]
+            # The boxes the target's pull disturbed: what stands in its way, and the only
+            # boxes whose holding can change its outcome (holding a box that stays put
+            # anyway leaves the others' motion as it was).
+            in_way = np.nan_to_num(disp, nan=0.0) > self.params.moved_threshold_m
             if self.holding:
                 for h in boxes:
-                    if h != target:
+                    if h != target and in_way[h]:
                         step, after, _ = self.simulate(now, (target, h))
                         if step["success"]:
                             return [((target, h), after)]
@@ -137,8 +159,6 @@ class SearchOracle:
                     step, after, _ = self.simulate(now, (x, None))
                     if step["success"]:
                         children.append((x, after))
-            # The boxes the target's pull disturbed first: they are what stands in its way.
-            in_way = np.nan_to_num(disp, nan=0.0) > self.params.moved_threshold_m
             children.sort(key=lambda c: (not in_way[c[0]], c[0]))
             for x, after in children:
                 if after.removed in visited:
@@ -175,6 +195,10 @@ class SearchOracle:
         (pull, hold), self._expected = self._plan.pop(0)
         info["plan"] = [[pull, hold], *[list(a) for a, _ in self._plan]]
         return Decision(pull, hold, info)
+
+
+class _CutShort(Exception):
+    """A simulated pull already disturbed another box beyond recovery."""
 
 
 def _same_state(a: SceneState, b: SceneState) -> bool:

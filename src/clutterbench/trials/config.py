@@ -138,6 +138,10 @@ class Ch6TrialParams:
     search_node_budget: int = bounded(40, ge=1)
     """The search oracles expand at most this many states per search (each simulates every
     candidate pull from it); an episode whose search ran out is counted in Table 6.3."""
+    search_cut_m: float = bounded(0.02, gt=0.0)
+    """A search oracle's simulated pull stops, judged failed, once another box moved more than
+    this (m) mid-pull (well past moved_threshold_m: it does not come back); most pulls in a
+    pile fail, so this is most of the search's saving."""
     ch4_model: str = "ch4_various"
     """The chapter 4 network (a key of train.models) of the single-step rows: the thesis'
     previous method, extract while supporting (Table 6.3's single-step rows)."""
