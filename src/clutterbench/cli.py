@@ -1,18 +1,27 @@
 """`clutterbench` command line: inspect, make and act on single scene specs.
 
+    clutterbench --version
     clutterbench scene show SPEC.json --out scene.png
     clutterbench scene act SPEC.json --remove K [--support J] [--pull] [--mcap out.mcap]
     clutterbench scene make OUT.json --stack N [--size-mm H W D]
+    clutterbench scene make OUT.json --family F --seed N [--n-objects K] [--catalogue C]
+    clutterbench scene get DATASET INDEX --out spec.json
     clutterbench plan SPEC.json --target K [--execute] [--mcap out.mcap]
 
 User-facing problems (ClutterbenchError) end a command with one red line on stderr,
 "error: <message>", and exit code 2. Heavy imports (SAPIEN, matplotlib) happen inside the
 commands so that `--help` stays fast.
+
+Default paths (params.yaml, models/, reports/, data/) are those of the project: the nearest
+directory at or above the working directory that holds dvc.yaml or params.yaml, else the
+repository this package was installed from (`pip install -e`), so the commands work from
+any directory. A path given on the command line is taken as it is.
 """
 
 from __future__ import annotations
 
 import contextlib
+import importlib.metadata
 import json
 import math
 import sys
@@ -29,7 +38,7 @@ from clutterbench.errors import ClutterbenchError
 if TYPE_CHECKING:
     import numpy as np
 
-    from clutterbench.sim.config import PhysicsConfig
+    from clutterbench.sim.config import CameraConfig, PhysicsConfig
 
 EXIT_USER_ERROR = 2
 STACK_GAP_M = 0.0005
@@ -45,6 +54,33 @@ scene_app = typer.Typer(
     help="Inspect, make and act on one scene spec (JSON).", no_args_is_help=True
 )
 app.add_typer(scene_app, name="scene")
+
+
+def _package_version() -> str:
+    try:
+        return importlib.metadata.version("clutterbench")
+    except importlib.metadata.PackageNotFoundError:  # run from a source tree, not installed
+        from clutterbench import __version__
+
+        return __version__
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        typer.echo(f"clutterbench {_package_version()}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main_options(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_print_version, is_eager=True, help="Print the version and exit."
+        ),
+    ] = False,
+) -> None:
+    """clutterbench: box-clutter scenes on a shelf."""
 
 
 # -- errors -------------------------------------------------------------------------------------
@@ -73,15 +109,79 @@ def main() -> None:
 
 
 # -- shared helpers ---------------------------------------------------------------------------
+PACKAGE_REPO = Path(__file__).resolve().parents[2]
+"""The repository the package lives in when installed editable (src/clutterbench/cli.py)."""
+
+
+def project_root() -> Path | None:
+    """The project the command works in: the nearest directory at or above the working
+    directory holding dvc.yaml or params.yaml, else the package's own repository (if it is
+    one), else None."""
+    cwd = Path.cwd().resolve()
+    for d in (cwd, *cwd.parents):
+        if (d / "dvc.yaml").is_file() or (d / "params.yaml").is_file():
+            return d
+    if (PACKAGE_REPO / "dvc.yaml").is_file():
+        return PACKAGE_REPO
+    return None
+
+
+def _default_path(given: Path | None, relative: str) -> Path:
+    """`given` as it is; if None, `relative` inside the project (or the working directory)."""
+    if given is not None:
+        return given
+    root = project_root()
+    return root / relative if root is not None else Path(relative)
+
+
+def _require_file(path: Path, flag: str, made_by: str) -> Path:
+    """`path` if it is a file; else one line naming the flag that sets it."""
+    if path.is_dir():
+        raise ClutterbenchError(f"{flag} {path}: is a directory, not a file")
+    if not path.exists():
+        raise ClutterbenchError(f"{flag} {path}: not found; pass {flag} PATH ({made_by})")
+    return path
+
+
+def _check_out_file(path: Path, flag: str, example: str) -> Path:
+    """Refuse an output path that is a directory before any work is done."""
+    if path.is_dir():
+        raise ClutterbenchError(
+            f"{flag} {path}: is a directory; give a file name, e.g. {path / example}"
+        )
+    return path
+
+
+def _project_params() -> dict[str, Any]:
+    """The project's params.yaml ({} when there is none)."""
+    from clutterbench.config import load_params
+
+    root = project_root()
+    if root is None or not (root / "params.yaml").is_file():
+        return {}
+    return load_params(root / "params.yaml")
+
+
 def _physics_config() -> PhysicsConfig:
-    """Physics parameters: `sim.physics` of ./params.yaml if there is one, else defaults."""
-    from clutterbench.config import load_params, load_section
+    """Physics parameters: `sim.physics` of the project's params.yaml, else defaults."""
+    from clutterbench.config import load_section
     from clutterbench.sim.config import PhysicsConfig, SimConfig
 
-    path = Path("params.yaml")
-    if path.exists() and "sim" in load_params(path):
-        return load_section(SimConfig, "sim", path=path).physics
+    params = _project_params()
+    if "sim" in params:
+        return load_section(SimConfig, "sim", params).physics
     return PhysicsConfig()
+
+
+def _camera_config() -> CameraConfig:
+    """The camera of the project's params.yaml (`sim.camera`), else defaults."""
+    from clutterbench.config import load_section
+    from clutterbench.sim.config import CameraConfig, SimConfig
+
+    params = _project_params()
+    if "sim" in params:
+        return load_section(SimConfig, "sim", params).camera
+    return CameraConfig()
 
 
 def _box_names(n: int) -> list[str]:
@@ -163,6 +263,7 @@ def scene_show(
         from clutterbench.sim.render import render_depth_instance
         from clutterbench.sim.spec import SceneSpec
 
+        _check_out_file(out, "--out", "scene.png")
         spec = SceneSpec.load(spec_path)
         world = BoxWorld.from_spec(spec, _physics_config(), render=True)
         depth_m, instance = render_depth_instance(world, spec.camera)
@@ -226,6 +327,8 @@ def scene_act(
 
         if not (math.isfinite(threshold_m) and threshold_m >= 0):
             raise ClutterbenchError(f"--threshold-m {threshold_m}: must be a number >= 0")
+        if mcap is not None:
+            _check_out_file(mcap, "--mcap", "episode.mcap")
         spec = SceneSpec.load(spec_path)
         _check_indices(spec.n, remove, support)
         cfg = _physics_config()
@@ -290,60 +393,242 @@ def _log_snapshot(ep: Any, world: Any, spec: Any, t_s: float) -> None:
 @scene_app.command("make")
 def scene_make(
     out: Annotated[Path, typer.Argument(metavar="OUT.json", help="Spec to write.")],
-    stack: Annotated[int, typer.Option("--stack", metavar="N", help="Boxes in the stack.")],
+    stack: Annotated[
+        int | None, typer.Option("--stack", metavar="N", help="A straight stack of N boxes.")
+    ] = None,
     size_mm: Annotated[
         tuple[float, float, float],
-        typer.Option("--size-mm", metavar="H W D", help="Box height, width, depth (mm)."),
+        typer.Option(
+            "--size-mm", metavar="H W D", help="With --stack: box height, width, depth (mm)."
+        ),
     ] = (20.0, 100.0, 100.0),
+    family: Annotated[
+        str | None,
+        typer.Option(
+            "--family", metavar="F", help="A scene of this family (as the datasets draw them)."
+        ),
+    ] = None,
+    seed: Annotated[
+        int, typer.Option("--seed", metavar="N", help="With --family: the scene's seed.")
+    ] = 0,
+    n_objects: Annotated[
+        int | None,
+        typer.Option(
+            "--n-objects", metavar="K", help="With --family: number of boxes (default: 3-10)."
+        ),
+    ] = None,
+    catalogue: Annotated[
+        str,
+        typer.Option("--catalogue", help="With --family: box catalogue (same | various | new)."),
+    ] = "various",
 ) -> None:
-    """Write a settled spec of N identical boxes stacked straight up at the shelf's centre."""
+    """Write a settled spec: N identical boxes stacked straight up at the shelf's centre
+    (--stack), or a scene of a family drawn from a seed (--family)."""
     with _user_errors():
-        import numpy as np
+        _check_out_file(out, "OUT.json", "scene.json")
+        if (stack is None) == (family is None):
+            raise ClutterbenchError("give one of --stack N or --family F")
+        if family is not None:
+            _make_family_scene(out, family, seed, n_objects, catalogue)
+        else:
+            assert stack is not None
+            _make_stack(out, stack, size_mm)
 
-        from clutterbench.sim.physics import BoxWorld
-        from clutterbench.sim.shelf import Shelf
-        from clutterbench.sim.spec import SceneSpec
 
-        h, w, d = (v / 1000.0 for v in size_mm)
-        shelf = Shelf()
-        if stack < 1:
-            raise ClutterbenchError(f"--stack {stack}: need at least one box")
-        if min(h, w, d) <= 0:
-            raise ClutterbenchError(f"--size-mm {size_mm}: sizes must be positive")
-        if w > shelf.width_m or d > shelf.depth_m:
-            raise ClutterbenchError(
-                f"--size-mm {size_mm}: footprint does not fit the shelf "
-                f"({shelf.width_m * 1000:g} x {shelf.depth_m * 1000:g} mm)"
-            )
-        if stack * (h + STACK_GAP_M) > shelf.height_m:
-            raise ClutterbenchError(
-                f"--stack {stack}: a stack of {stack} x {size_mm[0]:g} mm "
-                f"does not fit under the shelf top ({shelf.height_m * 1000:g} mm)"
-            )
-        size = np.array([d, w, h])  # local extents (x, y, z)
-        world = BoxWorld(shelf, _physics_config(), render=False)
-        for k in range(stack):
-            z = (k + 1) * STACK_GAP_M + (k + 0.5) * h
-            world.add_box(size, np.array([shelf.depth_m / 2, 0.0, z, 1.0, 0.0, 0.0, 0.0]))
-        result = world.settle()
-        if not result.at_rest:
-            raise ClutterbenchError(f"the stack of {stack} did not come to rest")
-        if not np.all(shelf.contains(world.positions())):
-            raise ClutterbenchError(f"a box of the stack of {stack} fell off the shelf")
+def _make_stack(out: Path, stack: int, size_mm: tuple[float, float, float]) -> None:
+    import numpy as np
+
+    from clutterbench.sim.physics import BoxWorld
+    from clutterbench.sim.shelf import Shelf
+    from clutterbench.sim.spec import SceneSpec
+
+    h, w, d = (v / 1000.0 for v in size_mm)
+    shelf = Shelf()
+    if stack < 1:
+        raise ClutterbenchError(f"--stack {stack}: need at least one box")
+    if min(h, w, d) <= 0:
+        raise ClutterbenchError(f"--size-mm {size_mm}: sizes must be positive")
+    if w > shelf.width_m or d > shelf.depth_m:
+        raise ClutterbenchError(
+            f"--size-mm {size_mm}: footprint does not fit the shelf "
+            f"({shelf.width_m * 1000:g} x {shelf.depth_m * 1000:g} mm)"
+        )
+    if stack * (h + STACK_GAP_M) > shelf.height_m:
+        raise ClutterbenchError(
+            f"--stack {stack}: a stack of {stack} x {size_mm[0]:g} mm "
+            f"does not fit under the shelf top ({shelf.height_m * 1000:g} mm)"
+        )
+    size = np.array([d, w, h])  # local extents (x, y, z)
+    world = BoxWorld(shelf, _physics_config(), render=False)
+    for k in range(stack):
+        z = (k + 1) * STACK_GAP_M + (k + 0.5) * h
+        world.add_box(size, np.array([shelf.depth_m / 2, 0.0, z, 1.0, 0.0, 0.0, 0.0]))
+    result = world.settle()
+    if not result.at_rest:
+        raise ClutterbenchError(f"the stack of {stack} did not come to rest")
+    if not np.all(shelf.contains(world.positions())):
+        raise ClutterbenchError(f"a box of the stack of {stack} fell off the shelf")
+    spec = SceneSpec(
+        sizes_m=np.array(world.sizes_m),
+        poses=world.poses(),
+        shelf=shelf,
+        family="stack",
+        meta={
+            "stack": stack,
+            "size_mm": list(size_mm),
+            "gap_mm": STACK_GAP_M * 1000,
+            "settle_steps": result.steps,
+        },
+    )
+    spec.save(out)
+    typer.echo(f"wrote {out} ({stack} boxes, settled in {result.steps} steps)")
+
+
+FAMILY_N_OBJECTS = (3, 10)
+"""`scene make --family`: the range the number of boxes is drawn from without --n-objects."""
+FAMILY_MAX_ATTEMPTS = 30
+"""`scene make --family`: placements tried before giving up (as generate.max_attempts)."""
+
+
+def _make_family_scene(
+    out: Path, family: str, seed: int, n_objects: int | None, catalogue: str
+) -> None:
+    """A settled scene of `family`, drawn as the datasets and trial streams draw theirs: the
+    box count once from the seed, then placements until one comes to rest on the shelf."""
+    import numpy as np
+
+    from clutterbench.sim.catalog import CATALOGUES
+    from clutterbench.sim.config import FAMILY_NAMES
+    from clutterbench.sim.labelling import (
+        catalogue_type_ids,
+        draw_scene_setup,
+        place_and_settle,
+        scene_rng,
+    )
+    from clutterbench.sim.shelf import Shelf
+    from clutterbench.sim.spec import SceneSpec
+
+    if family not in FAMILY_NAMES:
+        raise ClutterbenchError(f"--family {family}: not one of {', '.join(FAMILY_NAMES)}")
+    if catalogue not in CATALOGUES:
+        raise ClutterbenchError(f"--catalogue {catalogue}: not one of {', '.join(CATALOGUES)}")
+    if seed < 0:
+        raise ClutterbenchError(f"--seed {seed}: must be >= 0")
+    if n_objects is not None and not 1 <= n_objects <= 30:
+        raise ClutterbenchError(f"--n-objects {n_objects}: must be between 1 and 30")
+    n_range = (n_objects, n_objects) if n_objects is not None else FAMILY_N_OBJECTS
+    stream = f"cli/{family}"
+    physics, shelf = _physics_config(), Shelf()
+    _, n = draw_scene_setup(seed, stream, 0, {family: 1.0}, n_range)
+    rejected: dict[str, int] = {}
+    for attempt in range(FAMILY_MAX_ATTEMPTS):
+        rng = scene_rng(seed, stream, 0, attempt)
+        world, _, reason = place_and_settle(family, catalogue, n, rng, physics, shelf)
+        if reason is not None:
+            rejected[reason] = rejected.get(reason, 0) + 1
+            continue
+        sizes = np.array(world.sizes_m)
         spec = SceneSpec(
-            sizes_m=np.array(world.sizes_m),
+            sizes_m=sizes,
             poses=world.poses(),
             shelf=shelf,
-            family="stack",
+            camera=_camera_config(),
+            family=family,
             meta={
-                "stack": stack,
-                "size_mm": list(size_mm),
-                "gap_mm": STACK_GAP_M * 1000,
-                "settle_steps": result.steps,
+                "stream": stream,
+                "seed": seed,
+                "catalogue": catalogue,
+                "attempt": attempt,
+                "rejected": dict(sorted(rejected.items())),
             },
+            type_ids=catalogue_type_ids(sizes, catalogue),
         )
         spec.save(out)
-        typer.echo(f"wrote {out} ({stack} boxes, settled in {result.steps} steps)")
+        typer.echo(f"wrote {out} ({family}, {n} boxes, seed {seed}, attempt {attempt})")
+        return
+    raise ClutterbenchError(
+        f"--family {family}: no settled scene of {n} boxes in {FAMILY_MAX_ATTEMPTS} attempts "
+        f"(rejected: {rejected}); try another --seed or fewer --n-objects"
+    )
+
+
+# -- scene get ----------------------------------------------------------------------------------
+@scene_app.command("get")
+def scene_get(
+    dataset: Annotated[str, typer.Argument(metavar="DATASET", help="generate.datasets entry.")],
+    index: Annotated[int, typer.Argument(metavar="INDEX", help="Scene index in the dataset.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Spec (JSON) to write.")],
+) -> None:
+    """Write the spec of a dataset's scene: from its shard in data/generate/DATASET/ when
+    there is one, else regenerated alone from (base.seed, DATASET, INDEX) and params.yaml."""
+    with _user_errors():
+        from clutterbench.sim.spec import SceneSpec
+
+        _check_out_file(out, "--out", f"{dataset}_{index}.json")
+        root = project_root()
+        data_dir = (root or Path(".")) / "data" / "generate" / dataset
+        stored = _spec_from_shards(data_dir, index)
+        if stored is not None:
+            text, shard = stored
+            spec, source = (
+                SceneSpec.from_json(text, where=f"{shard} scene {index}"),
+                f"from {shard}",
+            )
+        else:
+            spec, source = _regenerate_spec(root, dataset, index)
+        spec.save(out)
+        typer.echo(
+            f"wrote {out} ({dataset} scene {index}: {spec.n} boxes, {spec.family}, {source})"
+        )
+
+
+def _spec_from_shards(data_dir: Path, index: int) -> tuple[str, Path] | None:
+    """(spec JSON, shard) of scene `index` if a shard in `data_dir` holds it."""
+    from clutterbench.io import load_npz
+
+    for shard in sorted(data_dir.glob("shard-*.npz")):
+        indices = load_npz(shard, ["scene_index"])["scene_index"]
+        rows = [r for r, i in enumerate(indices.tolist()) if i == index]
+        if rows:
+            return str(load_npz(shard, ["spec_json"])["spec_json"][rows[0]]), shard
+    return None
+
+
+def _regenerate_spec(root: Path | None, dataset: str, index: int) -> tuple[Any, str]:
+    """Scene `index` of `dataset` regenerated as the generate stage makes it."""
+    import dataclasses
+
+    from clutterbench.config import load_base, load_section
+    from clutterbench.data.config import GenerateConfig
+    from clutterbench.data.generate import label_scene
+    from clutterbench.sim.config import SimConfig
+
+    params = _project_params()
+    if "generate" not in params:
+        where = root / "params.yaml" if root is not None else "params.yaml"
+        raise ClutterbenchError(
+            f"{where}: not found or without a generate section; run this in the project "
+            "(the directory holding dvc.yaml and params.yaml)"
+        )
+    gen = load_section(GenerateConfig, "generate", params)
+    if dataset not in gen.datasets:
+        raise ClutterbenchError(
+            f"DATASET {dataset}: no such dataset (known: {', '.join(gen.datasets)})"
+        )
+    ds = gen.datasets[dataset]
+    if not 0 <= index < ds.n_scenes:
+        raise ClutterbenchError(f"INDEX {index}: dataset {dataset} has scenes 0..{ds.n_scenes - 1}")
+    seed = load_base(params).seed
+    # The spec is settled before any label is simulated: leave out the (slow) pull labels.
+    scene = label_scene(
+        dataset,
+        dataclasses.replace(ds, pulls=False),
+        load_section(SimConfig, "sim", params),
+        seed,
+        index,
+        gen.max_attempts,
+    )
+    return scene.spec, f"regenerated from seed {seed}: no shard holds it"
 
 
 # -- plan ---------------------------------------------------------------------------------------
@@ -358,12 +643,20 @@ def plan(
         str, typer.Option("--planner", help="multi_step | bimanual | single_step | oracle | random")
     ] = "multi_step",
     rule: Annotated[str, typer.Option("--rule", help="Support rule: coverage | iou.")] = "coverage",
-    model: Annotated[Path, typer.Option("--model", help="Collapse predictor checkpoint.")] = Path(
-        "models/cp_focal/best.pt"
-    ),
+    model: Annotated[
+        Path | None,
+        typer.Option(
+            "--model", help="Collapse predictor checkpoint [default: models/cp_focal/best.pt]."
+        ),
+    ] = None,
     thresholds: Annotated[
-        Path, typer.Option("--thresholds", help="Val-chosen thresholds (support stage).")
-    ] = Path("reports/support/thresholds.json"),
+        Path | None,
+        typer.Option(
+            "--thresholds",
+            help="Val-chosen thresholds of the support stage "
+            "[default: reports/support/thresholds.json].",
+        ),
+    ] = None,
     mcap: Annotated[
         Path | None, typer.Option("--mcap", help="With --execute: write the episode as MCAP.")
     ] = None,
@@ -373,7 +666,7 @@ def plan(
     with _user_errors():
         import numpy as np
 
-        from clutterbench.config import load_params, load_section
+        from clutterbench.config import load_section
         from clutterbench.io import read_json
         from clutterbench.planning.cpg import bimanual_plan, build_cpg, extraction_order
         from clutterbench.planning.extraction import CollapseGraphPlanner
@@ -390,12 +683,24 @@ def plan(
             raise ClutterbenchError(f"--planner {planner}: not one of {', '.join(PLANNERS)}")
         if rule not in ("coverage", "iou"):
             raise ClutterbenchError(f"--rule {rule}: not one of coverage, iou")
+        if mcap is not None:
+            _check_out_file(mcap, "--mcap", "episode.mcap")
         spec = SceneSpec.load(spec_path)
         _check_indices(spec.n, target, None, "--target")
         physics = _physics_config()
-        params = load_params("params.yaml") if Path("params.yaml").exists() else {}
+        params = _project_params()
         trials = (
             load_section(TrialsConfig, "trials", params) if "trials" in params else TrialsConfig()
+        )
+        model = _require_file(
+            _default_path(model, "models/cp_focal/best.pt"),
+            "--model",
+            "a checkpoint; `dvc repro train@cp_focal` makes the default",
+        )
+        thresholds = _require_file(
+            _default_path(thresholds, "reports/support/thresholds.json"),
+            "--thresholds",
+            "`dvc repro support` makes the default",
         )
         chosen = read_json(thresholds)
         if not isinstance(chosen, dict) or rule not in chosen.get("chosen", {}):

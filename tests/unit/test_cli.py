@@ -9,6 +9,7 @@ import cv2
 import pytest
 from typer.testing import CliRunner
 
+from clutterbench import cli
 from clutterbench.cli import _physics_config, app
 from clutterbench.logs.mcap_episode import read_episode
 from clutterbench.sim.config import PhysicsConfig
@@ -24,6 +25,7 @@ runner = CliRunner()
 def _isolated_cwd(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # No params.yaml from the repository: physics defaults, as stack3.json was made with.
     monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(cli, "PACKAGE_REPO", tmp_path / "no-repo")
 
 
 def _act(*args: str) -> dict:
@@ -198,3 +200,160 @@ def test_plan_prints_inferred_and_true_support_and_executes(tmp_path):
     assert out["execute"]["success"] is True
     bad = CliRunner().invoke(app, [*args[:3], "7", *args[4:]])
     assert bad.exit_code == 2 and "--target 7" in bad.output
+
+
+# -- entering from anywhere: version, default paths, outputs ---------------------------------------
+def _one_error_line(result) -> str:
+    assert result.exit_code == 2, result.output
+    assert result.stdout == ""
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), lines
+    return lines[0]
+
+
+def test_version_is_the_installed_package_version() -> None:
+    import importlib.metadata
+
+    result = runner.invoke(app, ["--version"])
+    assert result.exit_code == 0, result.output
+    assert result.stdout.strip() == f"clutterbench {importlib.metadata.version('clutterbench')}"
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["scene", "show", str(STACK3), "--out", "{dir}"],
+        ["scene", "act", str(STACK3), "--remove", "0", "--mcap", "{dir}"],
+        ["scene", "make", "{dir}", "--stack", "2"],
+        ["scene", "get", "ch6", "0", "--out", "{dir}"],
+        ["plan", str(STACK3), "--target", "0", "--execute", "--mcap", "{dir}"],
+    ],
+)
+def test_an_output_path_that_is_a_directory_is_refused_up_front(tmp_path: Path, args) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    line = _one_error_line(runner.invoke(app, [a.format(dir=out) for a in args]))
+    assert f"{out}: is a directory; give a file name" in line
+    assert list(out.iterdir()) == []
+
+
+def test_project_root_is_found_from_a_subdirectory(tmp_path: Path, monkeypatch) -> None:
+    (tmp_path / "params.yaml").write_text(
+        "base: {scale: tiny}\nsim:\n  physics:\n    timestep_s: 0.002\n"
+    )
+    sub = tmp_path / "a" / "b"
+    sub.mkdir(parents=True)
+    monkeypatch.chdir(sub)
+    assert cli.project_root() == tmp_path.resolve()
+    assert _physics_config().timestep_s == 0.002
+
+
+def test_project_root_falls_back_to_the_package_repository(tmp_path: Path, monkeypatch) -> None:
+    repo = tmp_path / "repo"
+    repo.mkdir()
+    (repo / "dvc.yaml").write_text("stages: {}\n")
+    monkeypatch.setattr(cli, "PACKAGE_REPO", repo)
+    assert cli.project_root() == repo
+    monkeypatch.setattr(cli, "PACKAGE_REPO", tmp_path / "not-a-repo")
+    assert cli.project_root() is None
+
+
+def test_plan_names_the_flag_of_a_missing_default_file(tmp_path: Path) -> None:
+    (tmp_path / "dvc.yaml").write_text("stages: {}\n")
+    line = _one_error_line(runner.invoke(app, ["plan", str(STACK3), "--target", "0"]))
+    model = tmp_path.resolve() / "models" / "cp_focal" / "best.pt"
+    assert line.startswith(f"error: --model {model}: not found; pass --model PATH")
+    model.parent.mkdir(parents=True)
+    model.write_bytes(b"")
+    line = _one_error_line(runner.invoke(app, ["plan", str(STACK3), "--target", "0"]))
+    assert line.startswith("error: --thresholds ")
+    assert "reports/support/thresholds.json: not found; pass --thresholds PATH" in line
+    args = ["plan", str(STACK3), "--target", "0", "--thresholds", str(tmp_path)]
+    line = _one_error_line(runner.invoke(app, args))
+    assert line == f"error: --thresholds {tmp_path}: is a directory, not a file"
+
+
+# -- scene make --family, scene get ---------------------------------------------------------------
+def test_make_family_writes_a_settled_scene_of_that_family(tmp_path: Path) -> None:
+    args = ["--family", "pile", "--seed", "3", "--n-objects", "5", "--catalogue", "same"]
+    for name in ("a.json", "b.json"):
+        result = runner.invoke(app, ["scene", "make", str(tmp_path / name), *args])
+        assert result.exit_code == 0, result.output
+    spec = SceneSpec.load(tmp_path / "a.json")
+    assert (spec.family, spec.n) == ("pile", 5)
+    assert spec.meta["seed"] == 3 and spec.meta["catalogue"] == "same"
+    assert spec.type_ids is not None and (spec.type_ids == 0).all()  # the one 'same' size
+    assert (tmp_path / "a.json").read_text() == (tmp_path / "b.json").read_text()  # seeded
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--family", "heap"], "--family heap: not one of shelved, stacked, random"),
+        (["--family", "pile", "--catalogue", "odd"], "--catalogue odd: not one of same"),
+        (["--family", "pile", "--n-objects", "0"], "--n-objects 0: must be between 1 and 30"),
+        (["--family", "pile", "--seed", "-1"], "--seed -1: must be >= 0"),
+        (["--family", "pile", "--stack", "2"], "give one of --stack N or --family F"),
+        ([], "give one of --stack N or --family F"),
+    ],
+)
+def test_make_refuses_bad_options_with_one_line(tmp_path: Path, args, message) -> None:
+    line = _one_error_line(runner.invoke(app, ["scene", "make", str(tmp_path / "x.json"), *args]))
+    assert message in line
+    assert not (tmp_path / "x.json").exists()
+
+
+MINI_PARAMS = """\
+base: {seed: 0, scale: tiny}
+sim: {}
+generate:
+  shard_size: 1
+  workers: 1
+  max_attempts: 30
+  datasets:
+    mini: {n_scenes: 2, families: {stacked: 1}, n_objects: [2, 3], catalogue: various}
+"""
+
+
+def test_scene_get_reads_the_shard_or_regenerates_the_same_scene(
+    tmp_path: Path, monkeypatch
+) -> None:
+    from clutterbench.config import load_base, load_params, load_section
+    from clutterbench.data.config import GenerateConfig
+    from clutterbench.data.generate import generate_dataset
+    from clutterbench.sim.config import SimConfig
+
+    (tmp_path / "params.yaml").write_text(MINI_PARAMS)
+    (tmp_path / "dvc.yaml").write_text("stages: {}\n")
+    params = load_params(tmp_path / "params.yaml")
+    gen = load_section(GenerateConfig, "generate", params)
+    data = tmp_path / "data" / "generate" / "mini"
+    generate_dataset(
+        "mini",
+        gen.datasets["mini"],
+        gen,
+        load_section(SimConfig, "sim", params),
+        load_base(params).seed,
+        data,
+    )
+    sub = tmp_path / "elsewhere"
+    sub.mkdir()
+    monkeypatch.chdir(sub)  # the project is found above the working directory
+
+    stored = runner.invoke(app, ["scene", "get", "mini", "1", "--out", "stored.json"])
+    assert stored.exit_code == 0, stored.output
+    assert "from " in stored.stdout and "shard-00001.npz" in stored.stdout
+    (data / "shard-00001.npz").unlink()
+    again = runner.invoke(app, ["scene", "get", "mini", "1", "--out", "again.json"])
+    assert again.exit_code == 0, again.output
+    assert "regenerated from seed 0" in again.stdout
+    assert (sub / "stored.json").read_text() == (sub / "again.json").read_text()
+    spec = SceneSpec.load(sub / "again.json")
+    assert spec.meta == {"attempt": spec.meta["attempt"], "dataset": "mini", "index": 1, "seed": 0}
+
+    for args, message in (
+        (["nope", "0"], "DATASET nope: no such dataset (known: mini)"),
+        (["mini", "2"], "INDEX 2: dataset mini has scenes 0..1"),
+    ):
+        line = _one_error_line(runner.invoke(app, ["scene", "get", *args, "--out", "x.json"]))
+        assert message in line
