@@ -1,15 +1,25 @@
 # Two commands do everything on a fresh machine (idempotent; a second run skips what is done):
 #   make repro   set up, then run the whole pipeline (dvc repro) at the scale in params.yaml
 #   make test    set up, then lint and run the test suite
+#   make shell   set up, then a bash with .venv activated (dvc, clutterbench, stages/*.py)
+# torch: the pinned CPU build by default; a CUDA build for paper scale on a GPU, e.g.
+#   make TORCH_SPEC=torch==2.13.0+cu128 TORCH_INDEX_URL=https://download.pytorch.org/whl/cu128 repro
+# (docs/platform.md)
 SHELL := /bin/bash
 VENV := .venv
 BIN := $(abspath $(VENV))/bin
 export PATH := $(BIN):$(PATH)
 export DVC_NO_ANALYTICS := 1
 export PYTHONUNBUFFERED := 1
-STAMP := $(VENV)/.installed-$(shell cat requirements.lock pyproject.toml 2>/dev/null | sha1sum | cut -c1-12)
+# torch is installed first, alone: TORCH_SPEC from TORCH_INDEX_URL (default: the pinned CPU
+# build from the ordinary index). Another choice gives another stamp, so `make` reinstalls.
+TORCH_SPEC ?= torch==2.13.0
+TORCH_INDEX_URL ?=
+TORCH_PIP_ARGS := $(if $(TORCH_INDEX_URL),--index-url $(TORCH_INDEX_URL))
+TORCH_CHOICE := $(if $(filter-out torch==2.13.0,$(TORCH_SPEC))$(TORCH_INDEX_URL),echo '$(TORCH_SPEC) $(TORCH_INDEX_URL)';)
+STAMP := $(VENV)/.installed-$(shell ($(TORCH_CHOICE) cat requirements.lock pyproject.toml) 2>/dev/null | sha1sum | cut -c1-12)
 
-.PHONY: setup system venv repro test lint bench learning-curve clean-venv
+.PHONY: setup system venv repro test lint bench learning-curve clean-venv shell
 
 setup: system venv .dvc/config
 
@@ -20,8 +30,8 @@ venv: $(STAMP)
 
 $(STAMP): requirements.lock pyproject.toml
 	@test -x $(BIN)/python || python3 -m venv $(VENV)
-	# torch first and pinned: a looser spec pulls the multi-GB CUDA build (shared/PLATFORM.md)
-	$(BIN)/python -m pip install -q --disable-pip-version-check torch==2.13.0
+	# torch first and pinned: a looser spec pulls the multi-GB CUDA build (docs/platform.md)
+	$(BIN)/python -m pip install -q --disable-pip-version-check $(TORCH_PIP_ARGS) '$(TORCH_SPEC)'
 	$(BIN)/python -m pip install -q --disable-pip-version-check -c requirements.lock -e '.[dev]'
 	@rm -f $(VENV)/.installed-*
 	@touch $@
@@ -31,6 +41,12 @@ $(STAMP): requirements.lock pyproject.toml
 
 repro: setup
 	dvc repro
+
+# An interactive bash inside the environment (exit to leave); the same as
+# `source .venv/bin/activate` in the shell you are in.
+shell: setup
+	@echo "clutterbench environment: $(abspath $(VENV)) (exit to leave)"
+	@bash --rcfile <(cat ~/.bashrc 2>/dev/null; echo 'source $(abspath $(VENV))/bin/activate') -i
 
 lint: setup
 	ruff check src stages tests

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Debian packages SAPIEN needs to render on the CPU (see shared/PLATFORM.md):
+# Debian packages SAPIEN needs to render on the CPU (see docs/platform.md):
 # Mesa >= 25 lavapipe from bookworm-backports (Debian 12's 22.3 lacks
 # descriptorBindingPartiallyBound), the Vulkan loader, and libusb for open3d.
 # Idempotent: does nothing when the packages are already installed.

@@ -1,7 +1,7 @@
 """Depth + instance rendering of a BoxWorld with one SAPIEN renderer kept alive per process.
 
 The first picture a process renders compiles shaders (~3 s on lavapipe); keeping the
-renderer alive makes every later scene cost milliseconds (shared/PLATFORM.md).
+renderer alive makes every later scene cost milliseconds (docs/platform.md).
 """
 
 from __future__ import annotations
