@@ -1,5 +1,6 @@
 """Figure like thesis Fig. 6.8: depth images with the true support relations (pink) and the
-inferred ones (white) drawn as arrows from supporter to supported box."""
+inferred ones (white) drawn as arrows from supporter to supported box; every box outlined
+and numbered with its index, and a legend of both."""
 
 from __future__ import annotations
 
@@ -14,7 +15,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib import patheffects  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
 
 from clutterbench.errors import ClutterbenchError  # noqa: E402
 from clutterbench.io import atomic_path  # noqa: E402
@@ -117,15 +120,14 @@ def _draw(ax, panel: SupportPanel) -> None:
     ax.set_yticks([])
 
 
-def support_figure(panels: Sequence[SupportPanel], out_path: Path, title: str) -> None:
-    """Up to six scenes in two rows of three, written atomically as a PNG whose bytes
-    depend only on the panels (fixed dpi, no software or time stamp)."""
+def support_figure_fig(panels: Sequence[SupportPanel], title: str) -> Figure:
+    """The figure of `support_figure`, not yet written."""
     if not 0 < len(panels) <= MAX_PANELS:
         raise ClutterbenchError(f"support figure: 1 to {MAX_PANELS} panels, got {len(panels)}")
     cols = min(COLS, len(panels))
     rows = math.ceil(len(panels) / COLS)
     fig, axes = plt.subplots(
-        rows, cols, figsize=(3.2 * cols, 3.5 * rows + 0.6), squeeze=False, layout="constrained"
+        rows, cols, figsize=(3.2 * cols, 3.5 * rows + 0.8), squeeze=False, layout="constrained"
     )
     for ax in axes.flat[len(panels) :]:
         ax.axis("off")
@@ -134,9 +136,26 @@ def support_figure(panels: Sequence[SupportPanel], out_path: Path, title: str) -
     legend = [
         Line2D([], [], **TRUE_STYLE, label="true (physics)"),
         Line2D([], [], **INFERRED_STYLE, label="inferred"),
+        Line2D([], [], color=plt.get_cmap("tab10")(0), lw=1, label="box outline"),
+        Patch(facecolor="black", alpha=0.6, label="n: box index"),
     ]
-    fig.legend(handles=legend, loc="outside lower center", ncol=2, fontsize=8, facecolor="0.55")
+    fig.legend(
+        handles=legend,
+        loc="outside lower center",
+        ncol=len(legend),
+        fontsize=8,
+        facecolor="0.55",
+        title="support X -> Y: the arrow points from supporter X to supported Y",
+        title_fontsize=8,
+    )
     fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def support_figure(panels: Sequence[SupportPanel], out_path: Path, title: str) -> None:
+    """Up to six scenes in two rows of three, written atomically as a PNG whose bytes
+    depend only on the panels (fixed dpi, no software or time stamp)."""
+    fig = support_figure_fig(panels, title)
     with atomic_path(Path(out_path)) as tmp:
         fig.savefig(tmp, format="png", dpi=DPI, metadata={"Software": None})
     plt.close(fig)
