@@ -681,8 +681,10 @@ def plan(
 
         if planner not in PLANNERS:
             raise ClutterbenchError(f"--planner {planner}: not one of {', '.join(PLANNERS)}")
-        if rule not in ("coverage", "iou"):
-            raise ClutterbenchError(f"--rule {rule}: not one of coverage, iou")
+        if rule not in ("coverage", "iou", "coverage_gap", "iou_gap"):
+            raise ClutterbenchError(
+                f"--rule {rule}: not one of coverage, iou, coverage_gap, iou_gap"
+            )
         if mcap is not None:
             _check_out_file(mcap, "--mcap", "episode.mcap")
         spec = SceneSpec.load(spec_path)
@@ -764,7 +766,8 @@ def plan(
                     "end",
                     "n_disturbed",
                     "disturbance_m",
-                    "aborted_steps",
+                    "aborted_before_motion",
+                    "aborted_after_motion",
                     "steps",
                 )
             }

@@ -9,6 +9,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
 import numpy as np  # noqa: E402
 
 from clutterbench.io import atomic_path  # noqa: E402
@@ -35,7 +36,7 @@ def masks_image(masks: np.ndarray) -> np.ndarray:
 def collapse_figure(samples: dict[str, np.ndarray], title: str, path: Path) -> None:
     """One column per sample; rows: depth, input masks, heatmap in [0, 1], ground truth."""
     n = len(samples["depth_m"])
-    fig, axes = plt.subplots(4, n, figsize=(1.6 * n + 0.8, 7.0), squeeze=False)
+    fig, axes = plt.subplots(4, n, figsize=(1.6 * n + 0.8, 7.4), squeeze=False)
     n_masks = samples["target"].shape[1] if samples["target"].ndim == 4 else 1
     masks = "target mask" if n_masks == 1 else "extract / support"
     rows = ("depth (m)", masks, "collapse map", "ground truth")
@@ -52,7 +53,13 @@ def collapse_figure(samples: dict[str, np.ndarray], title: str, path: Path) -> N
         ax.set_yticks([])
     for i, label in enumerate(rows):
         axes[i, 0].set_ylabel(label)
-    fig.colorbar(heat, ax=axes[2, :].tolist(), fraction=0.02, pad=0.01)
+    fig.colorbar(heat, ax=axes[2, :].tolist(), fraction=0.02, pad=0.01, label="P(collapse)")
+    legend = [
+        Patch(facecolor=(0, 1, 0), label="target (extracted)"),
+        *([Patch(facecolor=(0, 0, 1), label="supported (held)")] if n_masks > 1 else []),
+        Patch(facecolor=(1, 0, 0), label="collapsing (moved)"),
+    ]
+    fig.legend(handles=legend, loc="lower center", ncol=len(legend), fontsize=8, frameon=False)
     fig.suptitle(title)
     with atomic_path(Path(path)) as tmp:
         fig.savefig(tmp, format="png", dpi=80, metadata={"Software": None})

@@ -280,7 +280,10 @@ def extraction_table(
     frame = comparison_frame(shown, columns, "method [our condition]")
     caption = figures[TABLE].get("caption", TABLE)
     notes = [*_notes(figures, used, scale), *notes_extra]
-    title = f"Table 6.3 (simulated): {caption}"
+    title = (
+        "Table 6.3 (simulated): extraction performance of different approaches and "
+        f"conditions (the thesis' table: {caption})"
+    )
     write_table(frame, columns, out_dir, TABLE, title, notes)
     return write_raw_csv(raw, out_dir / f"{TABLE}.csv")
 

@@ -285,7 +285,11 @@ def table_4_1(
         table_rows.append(_Row(total, method, TOTAL, label, conditions, pooled, thesis))
     caption = figures[TABLE].get("caption") or TABLE
     return _write(
-        TABLE, f"Table 4.1: {caption}", table_rows, out_dir, _notes(figures, TABLE, used, scale)
+        TABLE,
+        f"Table 4.1 (simulated): {caption}",
+        table_rows,
+        out_dir,
+        _notes(figures, TABLE, used, scale),
     )
 
 
@@ -327,7 +331,8 @@ def table_4_1_target(
         "chooses only its support; the thesis ran it with the various-size model only, the "
         "same target object in every trial.",
     ]
-    return _write(TARGET_TABLE, "Predetermined target (thesis 4.3.3)", table_rows, out_dir, notes)
+    title = "Predetermined target (simulated; thesis 4.3.3)"
+    return _write(TARGET_TABLE, title, table_rows, out_dir, notes)
 
 
 def _thesis_trials_text(figures: Mapping[str, Any], table: str) -> str:

@@ -147,9 +147,9 @@ def pull_outcome(
         return sum(not shelf[k] for k in others), sum(d[k] > threshold_m for k in others)
 
     others = [k for k in range(spec.n) if k != extract]
-    left, moved = judge(disp, on_shelf, others)
+    left, moved = (int(v) for v in judge(disp, on_shelf, others))
     held_others = [k for k in others if k != support]
-    left_held, moved_held = judge(disp_held, on_shelf_held, held_others)
+    left_held, moved_held = (int(v) for v in judge(disp_held, on_shelf_held, held_others))
     return {
         "executed": True,
         "aborted_before_motion": False,
@@ -397,6 +397,10 @@ def draw_figure(job: dict[str, Any], out_path: Path) -> None:
         risks,
         f"{job['condition']}, episode {job['index']}: extract box {box} (model {cond.model})",
         params.pixel_threshold,
+        box_masks=seg.masks,
+        box_labels=[str(s) for s in range(len(seg.ids))]
+        if cond.perception == "depth"
+        else [str(b) for b in seg.ids],
     )
 
 
