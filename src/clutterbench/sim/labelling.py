@@ -1,6 +1,7 @@
 """Generate one labelled scene: place, settle, render, then simulate every action.
 
-The removal matrix D[x, y] is the displacement (m) of box y when box x is removed (docs/simulation.md).
+The removal matrix D[x, y] is the displacement (m) of box y when box x is removed
+(docs/simulation.md).
 With pulls, P[x, s, y] is the displacement of y when x is pulled out toward the camera while
 box s is held (s == N: no support), as thesis ch. 4 labels its (extract, support) pairs.
 
