@@ -27,6 +27,7 @@ from clutterbench.logs.mcap_episode import read_episode
 from clutterbench.models.checkpoint import load_checkpoint, save_checkpoint
 from clutterbench.models.collapse_map import CollapseMapConfig, CollapseMapNet
 from clutterbench.models.vgg import VGGConfig
+from clutterbench.report.config import ReportConfig
 from clutterbench.sim.config import SimConfig
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.records import read_records
@@ -126,9 +127,20 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
             == trials.ch4_conditions[name].episodes
         )
     for name, cond in trials.conditions.items():
-        assert len(read_records(a / "reports/trials" / name / "records.jsonl")) == cond.episodes
+        records = read_records(a / "reports/trials" / name / "records.jsonl")
+        assert len(records) == cond.episodes
+        for rec in records:  # the episode protocol's named outcome on every step
+            assert rec["end"] in ("target_out", "collapse", "target_fell", "gave_up", "max_steps")
+            for step in rec["steps"]:
+                assert {"executed", "aborted_before_motion", "aborted_after_motion"} <= set(step)
+                assert {"extracted", "others_still", "success", "success_held"} <= set(step)
+        topics = read_episode(a / "data/trials" / name / "episodes.mcap")["topics"]
+        assert topics["/trial/outcome"] == cond.episodes
+    for rec in ch4:
+        assert {"executed", "aborted_before_motion", "success_held", "risk_ties"} <= set(rec)
     assert (a / "reports/trials_ch4/fig_4_8.png").stat().st_size > 1000
-    for table, rows in (("table_4_1", 24 + 6), ("table_4_1_target", 3), ("table_6_3", 7)):
+    n63 = len(load_section(ReportConfig, "report", params).table_6_3)
+    for table, rows in (("table_4_1", 24 + 6), ("table_4_1_target", 3), ("table_6_3", n63)):
         frame = pd.read_csv(a / "reports/tables" / f"{table}.csv")
         assert len(frame) == rows and frame["success_rate"].between(0, 1).all(), table
     t42 = pd.read_csv(a / "reports/tables/table_4_2.csv")
