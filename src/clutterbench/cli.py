@@ -109,6 +109,17 @@ def main() -> None:
 
 
 # -- shared helpers ---------------------------------------------------------------------------
+def _warn_if_not_at_rest(spec: Any, spec_path: Path, cfg: PhysicsConfig | None = None) -> None:
+    """One yellow line when the spec's start is not at rest (a box creeps, or floats and
+    falls), naming the box and how far it moved with no action; checked on a world of its own,
+    so every action still starts from the canonical state, as every label does."""
+    from clutterbench.sim.labelling import creep_warning
+
+    warning = creep_warning(spec, cfg or _physics_config(), str(spec_path))
+    if warning is not None:
+        Console(stderr=True).print(Text(warning, style="yellow"), soft_wrap=True)
+
+
 PACKAGE_REPO = Path(__file__).resolve().parents[2]
 """The repository the package lives in when installed editable (src/clutterbench/cli.py)."""
 
@@ -265,6 +276,7 @@ def scene_show(
 
         _check_out_file(out, "--out", "scene.png")
         spec = SceneSpec.load(spec_path)
+        _warn_if_not_at_rest(spec, spec_path)
         world = BoxWorld.from_spec(spec, _physics_config(), render=True)
         depth_m, instance = render_depth_instance(world, spec.camera)
         _write_scene_png(
@@ -332,16 +344,7 @@ def scene_act(
         spec = SceneSpec.load(spec_path)
         _check_indices(spec.n, remove, support)
         cfg = _physics_config()
-        # A loaded spec should be at rest already; this is checked on a world of its own, so
-        # that the action starts from the canonical state, as every label does.
-        if not BoxWorld.from_spec(spec, cfg).settle().at_rest:
-            Console(stderr=True).print(
-                Text(
-                    f"warning: {spec_path} is not at rest after {cfg.settle_max_s} s",
-                    style="yellow",
-                ),
-                soft_wrap=True,
-            )
+        _warn_if_not_at_rest(spec, spec_path, cfg)
         world = BoxWorld.from_spec(spec, cfg, render=mcap is not None)
         action = "pull" if pull else "remove"
         decision = {"action": action, "target": remove, "support": support}
@@ -690,6 +693,7 @@ def plan(
         spec = SceneSpec.load(spec_path)
         _check_indices(spec.n, target, None, "--target")
         physics = _physics_config()
+        _warn_if_not_at_rest(spec, spec_path, physics)
         params = _project_params()
         trials = (
             load_section(TrialsConfig, "trials", params) if "trials" in params else TrialsConfig()

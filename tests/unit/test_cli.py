@@ -357,3 +357,18 @@ def test_scene_get_reads_the_shard_or_regenerates_the_same_scene(
     ):
         line = _one_error_line(runner.invoke(app, ["scene", "get", *args, "--out", "x.json"]))
         assert message in line
+
+
+def test_a_spec_not_at_rest_gets_one_warning_naming_the_box(tmp_path):
+    """The top box of the stack lifted 50 mm: it falls with no action. `scene act` warns once,
+    naming box 2 and how far it moved, and still runs (exit 0); the resting stack gets none."""
+    raw = json.loads(STACK3.read_text())
+    raw["boxes"][2]["pose"][2] += 0.05
+    floating = tmp_path / "floating.json"
+    floating.write_text(json.dumps(raw))
+    result = runner.invoke(app, ["scene", "act", str(floating), "--remove", "0"])
+    assert result.exit_code == 0, result.output
+    (line,) = [ln for ln in result.output.splitlines() if ln.startswith("warning:")]
+    assert "box 2 moves 5" in line and "not at rest" in line
+    calm = runner.invoke(app, ["scene", "act", str(STACK3), "--remove", "0"])
+    assert "warning:" not in calm.output
