@@ -643,9 +643,16 @@ def plan(
         bool, typer.Option("--execute", help="Run the plan in simulation and judge it.")
     ] = False,
     planner: Annotated[
-        str, typer.Option("--planner", help="multi_step | bimanual | single_step | oracle | random")
+        str,
+        typer.Option(
+            "--planner",
+            help="multi_step | bimanual | single_step | pull_target | oracle | oracle_hold | "
+            "random (only multi_step and bimanual need the collapse predictor)",
+        ),
     ] = "multi_step",
-    rule: Annotated[str, typer.Option("--rule", help="Support rule: coverage | iou.")] = "coverage",
+    rule: Annotated[
+        str, typer.Option("--rule", help="Support rule: coverage_gap | coverage | iou | iou_gap.")
+    ] = "coverage_gap",
     model: Annotated[
         Path | None,
         typer.Option(
@@ -698,49 +705,58 @@ def plan(
         trials = (
             load_section(TrialsConfig, "trials", params) if "trials" in params else TrialsConfig()
         )
-        model = _require_file(
-            _default_path(model, "models/cp_focal/best.pt"),
-            "--model",
-            "a checkpoint; `dvc repro train@cp_focal` makes the default",
+        # The collapse predictor and the support thresholds are needed by the CP planners
+        # (and to print the inferred graph); oracle, random and pull_target run without them.
+        model_path = _default_path(model, f"models/{trials.ch6.model}/best.pt")
+        thresholds_path = _default_path(thresholds, "reports/support/thresholds.json")
+        use_cp = planner in ("multi_step", "bimanual") or (
+            model is not None or (model_path.exists() and thresholds_path.exists())
         )
-        thresholds = _require_file(
-            _default_path(thresholds, "reports/support/thresholds.json"),
-            "--thresholds",
-            "`dvc repro support` makes the default",
-        )
-        chosen = read_json(thresholds)
-        if not isinstance(chosen, dict) or rule not in chosen.get("chosen", {}):
-            raise ClutterbenchError(f"{thresholds}: no thresholds for rule '{rule}'")
-        support = SupportParams(**chosen["chosen"][rule])
-        cp_max = trials.ch6.cp_max if trials.ch6.cp_max is not None else support.score_threshold
-        predict = load_predictor(model, spec.camera.image_size)
-        cp = CollapseGraphPlanner(predict, support, cp_max, trials.ch6.min_pixels)
         obs = observe(BoxWorld.from_spec(spec, physics, render=True), spec.camera)
         if target not in obs.visible_boxes(trials.ch6.min_pixels):
             raise ClutterbenchError(f"--target {target}: the camera does not see that box")
-        edges = cp.support_edges(obs)
-        graph = build_cpg(edges, target)
         moved, contact = truth_moved_contact(spec, physics, trials.ch6.moved_threshold_m)
-        bim = bimanual_plan(graph, target)
         out: dict[str, Any] = {
             "target": target,
             "visible": obs.visible_boxes(trials.ch6.min_pixels),
-            "thresholds": chosen["chosen"][rule],
-            "inferred_edges": [
-                {"supporter": e.supporter, "supported": e.supported, "score": round(e.score, 4)}
-                for e in edges
-            ],
             "true_edges": [
                 {"supporter": int(a), "supported": int(b)}
                 for a, b in zip(*np.nonzero(moved & contact))
             ],
-            "extraction_order": extraction_order(graph, target),
-            "bimanual": {
-                "hold": bim.hold,
-                "pull": bim.pull,
-                "steps_to_target": bim.steps_to_target,
-            },
         }
+        support, cp_max = None, 0.0
+        if use_cp:
+            model_path = _require_file(
+                model_path, "--model", "a checkpoint; `dvc repro train@cp_focal` makes the default"
+            )
+            thresholds_path = _require_file(
+                thresholds_path, "--thresholds", "`dvc repro support` makes the default"
+            )
+            chosen = read_json(thresholds_path)
+            if not isinstance(chosen, dict) or rule not in chosen.get("chosen", {}):
+                raise ClutterbenchError(f"{thresholds_path}: no thresholds for rule '{rule}'")
+            support = SupportParams(**chosen["chosen"][rule])
+            cp_max = trials.ch6.cp_max if trials.ch6.cp_max is not None else support.score_threshold
+            predict = load_predictor(model_path, spec.camera.image_size)
+            cp = CollapseGraphPlanner(predict, support, cp_max, trials.ch6.min_pixels)
+            edges = cp.support_edges(obs)
+            graph = build_cpg(edges, target)
+            bim = bimanual_plan(graph, target)
+            out |= {
+                "thresholds": chosen["chosen"][rule],
+                "inferred_edges": [
+                    {"supporter": e.supporter, "supported": e.supported, "score": round(e.score, 4)}
+                    for e in edges
+                ],
+                "extraction_order": extraction_order(graph, target),
+                "bimanual": {
+                    "hold": bim.hold,
+                    "pull": bim.pull,
+                    "steps_to_target": bim.steps_to_target,
+                },
+            }
+        else:
+            out["inferred_edges"] = None  # no collapse predictor: pass --model to infer them
         if execute:
             cond = ConditionConfig(planner=planner, stream=next(iter(trials.streams), "cli"))
             streams = trials.streams or {}
@@ -754,8 +770,17 @@ def plan(
                 spec.camera,
                 support,
                 cp_max,
-                model,
+                model_path,
             )[0]
+            job["ch4_model_path"] = (
+                _require_file(
+                    _default_path(None, str(job["ch4_model_path"])),
+                    "ch4 model",
+                    f"`dvc repro train@{trials.ch6.ch4_model}` makes it",
+                )
+                if planner == "single_step"
+                else job["ch4_model_path"]
+            )
             result = run_extraction(spec, job, target)
             if mcap is not None:
                 write_mcap(mcap, [result], {"spec": spec_path.name, "planner": planner})

@@ -372,3 +372,14 @@ def test_a_spec_not_at_rest_gets_one_warning_naming_the_box(tmp_path):
     assert "box 2 moves 5" in line and "not at rest" in line
     calm = runner.invoke(app, ["scene", "act", str(STACK3), "--remove", "0"])
     assert "warning:" not in calm.output
+
+
+@pytest.mark.parametrize("planner", ["oracle", "random"])
+def test_plan_runs_the_oracle_and_random_planners_without_a_checkpoint(tmp_path, planner):
+    (tmp_path / "dvc.yaml").write_text("stages: {}\n")  # a project without models or reports
+    args = ["plan", str(STACK3), "--target", "2", "--execute", "--planner", planner]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.output.strip().splitlines()[-1])
+    assert out["inferred_edges"] is None and out["true_edges"]
+    assert out["execute"]["planner"] == planner and out["execute"]["steps"]
