@@ -181,6 +181,8 @@ def test_plan_prints_inferred_and_true_support_and_executes(tmp_path):
         str(model),
         "--thresholds",
         str(thresholds),
+        "--rule",
+        "coverage",
         "--execute",
         "--planner",
         "oracle",
