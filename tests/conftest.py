@@ -24,3 +24,26 @@ def physics() -> PhysicsConfig:
 @pytest.fixture(scope="session")
 def camera() -> CameraConfig:
     return CameraConfig(image_size=64)
+
+
+@pytest.fixture(scope="session")
+def tiny_ch4(tmp_path_factory) -> Path:
+    """An untrained 4-class ch. 4 network (2 masks in): the planners' plumbing, not skill."""
+    import torch
+
+    from clutterbench.models import build_model
+    from clutterbench.models.checkpoint import save_checkpoint
+    from clutterbench.models.collapse_map import CollapseMapConfig
+    from clutterbench.models.vgg import VGGConfig
+
+    torch.manual_seed(0)
+    cfg = CollapseMapConfig(
+        input_size=64,
+        encoder=VGGConfig(width=0.125),
+        decoder_channels=(32, 16, 16, 8, 8),
+        n_masks=2,
+        n_classes=4,
+    )
+    path = tmp_path_factory.mktemp("ch4") / "best.pt"
+    save_checkpoint(path, "collapse_map", build_model("collapse_map", cfg), {"epoch": 0})
+    return path

@@ -10,10 +10,6 @@ import pytest
 import torch
 
 from clutterbench.data.labels import CLASS_B, CLASS_C, CLASS_E, CLASS_S, ch4_class_map
-from clutterbench.models import build_model
-from clutterbench.models.checkpoint import save_checkpoint
-from clutterbench.models.collapse_map import CollapseMapConfig
-from clutterbench.models.vgg import VGGConfig
 from clutterbench.observation import Observation
 from clutterbench.perception.masks import masks_from_instance
 from clutterbench.planning.risk import risk_index, soft_collapse
@@ -45,22 +41,6 @@ THR = 0.005
 @pytest.fixture(scope="module")
 def stack3() -> SceneSpec:
     return SceneSpec.load(STACK3)
-
-
-@pytest.fixture(scope="module")
-def tiny_ch4(tmp_path_factory) -> Path:
-    """An untrained 4-class ch. 4 network (2 masks in): the planners' plumbing, not skill."""
-    torch.manual_seed(0)
-    cfg = CollapseMapConfig(
-        input_size=64,
-        encoder=VGGConfig(width=0.125),
-        decoder_channels=(32, 16, 16, 8, 8),
-        n_masks=2,
-        n_classes=4,
-    )
-    path = tmp_path_factory.mktemp("ch4") / "best.pt"
-    save_checkpoint(path, "collapse_map", build_model("collapse_map", cfg), {"epoch": 0})
-    return path
 
 
 def test_class_map_of_a_hand_built_pull(stack3, physics):

@@ -172,22 +172,6 @@ def test_the_registry_covers_every_planner_name():
 
 
 @pytest.fixture(scope="module")
-def tiny_ch4(tmp_path_factory) -> Path:
-    """An untrained 4-class ch. 4 network: the single-step planner's plumbing, not skill."""
-    torch.manual_seed(0)
-    cfg = CollapseMapConfig(
-        input_size=64,
-        encoder=VGGConfig(width=0.125),
-        decoder_channels=(32, 16, 16, 8, 8),
-        n_masks=2,
-        n_classes=4,
-    )
-    path = tmp_path_factory.mktemp("ch4") / "best.pt"
-    save_checkpoint(path, "collapse_map", build_model("collapse_map", cfg), {"epoch": 0})
-    return path
-
-
-@pytest.fixture(scope="module")
 def tiny_cp(tmp_path_factory) -> Path:
     torch.manual_seed(0)
     cfg = CollapseMapConfig(
