@@ -365,13 +365,18 @@ def scene_act(
             )
         with episode as ep:
             if ep is not None:
+                ep.write_scene(0.0, spec.sizes_m, spec.shelf.boards(), _box_names(spec.n))
                 _log_snapshot(ep, world, spec, 0.0)
                 ep.write_json(0.0, DECISION_TOPIC, decision)
             disp = act_on_spec(spec, cfg, action, remove, support, world=world)
             objects = _outcome_objects(disp, remove, threshold_m)
             moved = [o["index"] for o in objects if o["moved"]]
             if ep is not None:
-                _log_snapshot(ep, world, spec, world.steps_taken * cfg.timestep_s)
+                t_end = world.steps_taken * cfg.timestep_s
+                if world.removed:
+                    names = _box_names(world.n)
+                    ep.delete_scene_entities(t_end, [names[k] for k in sorted(world.removed)])
+                _log_snapshot(ep, world, spec, t_end)
                 ep.set_outcome(
                     {
                         **{k: str(v) for k, v in decision.items()},
@@ -384,9 +389,11 @@ def scene_act(
 
 
 def _log_snapshot(ep: Any, world: Any, spec: Any, t_s: float) -> None:
-    from clutterbench.sim.render import render_depth_instance
+    from clutterbench.sim.render import camera_model, render_depth_instance
 
     depth_m, instance = render_depth_instance(world, spec.camera)
+    cam = camera_model(world, spec.camera)
+    ep.write_camera(t_s, cam.K, cam.T_world_from_cam, depth_m.shape[1], depth_m.shape[0])
     ep.write_depth(t_s, depth_m)
     ep.write_instance(t_s, instance)
     ep.write_poses(t_s, _box_names(world.n), world.poses())
@@ -498,18 +505,10 @@ def _make_family_scene(
 ) -> None:
     """A settled scene of `family`, drawn as the datasets and trial streams draw theirs: the
     box count once from the seed, then placements until one comes to rest on the shelf."""
-    import numpy as np
-
     from clutterbench.sim.catalog import CATALOGUES
     from clutterbench.sim.config import FAMILY_NAMES
-    from clutterbench.sim.labelling import (
-        catalogue_type_ids,
-        draw_scene_setup,
-        place_and_settle,
-        scene_rng,
-    )
+    from clutterbench.sim.labelling import draw_settled_spec
     from clutterbench.sim.shelf import Shelf
-    from clutterbench.sim.spec import SceneSpec
 
     if family not in FAMILY_NAMES:
         raise ClutterbenchError(f"--family {family}: not one of {', '.join(FAMILY_NAMES)}")
@@ -520,38 +519,27 @@ def _make_family_scene(
     if n_objects is not None and not 1 <= n_objects <= 30:
         raise ClutterbenchError(f"--n-objects {n_objects}: must be between 1 and 30")
     n_range = (n_objects, n_objects) if n_objects is not None else FAMILY_N_OBJECTS
-    stream = f"cli/{family}"
-    physics, shelf = _physics_config(), Shelf()
-    _, n = draw_scene_setup(seed, stream, 0, {family: 1.0}, n_range)
-    rejected: dict[str, int] = {}
-    for attempt in range(FAMILY_MAX_ATTEMPTS):
-        rng = scene_rng(seed, stream, 0, attempt)
-        world, _, reason = place_and_settle(family, catalogue, n, rng, physics, shelf)
-        if reason is not None:
-            rejected[reason] = rejected.get(reason, 0) + 1
-            continue
-        sizes = np.array(world.sizes_m)
-        spec = SceneSpec(
-            sizes_m=sizes,
-            poses=world.poses(),
-            shelf=shelf,
+    try:
+        spec = draw_settled_spec(
+            seed=seed,
+            key=f"cli/{family}",
+            index=0,
+            families={family: 1.0},
+            n_objects=n_range,
+            catalogue=catalogue,
+            physics=_physics_config(),
             camera=_camera_config(),
-            family=family,
-            meta={
-                "stream": stream,
-                "seed": seed,
-                "catalogue": catalogue,
-                "attempt": attempt,
-                "rejected": dict(sorted(rejected.items())),
-            },
-            type_ids=catalogue_type_ids(sizes, catalogue),
+            max_attempts=FAMILY_MAX_ATTEMPTS,
+            shelf=Shelf(),
+            meta={"catalogue": catalogue},
         )
-        spec.save(out)
-        typer.echo(f"wrote {out} ({family}, {n} boxes, seed {seed}, attempt {attempt})")
-        return
-    raise ClutterbenchError(
-        f"--family {family}: no settled scene of {n} boxes in {FAMILY_MAX_ATTEMPTS} attempts "
-        f"(rejected: {rejected}); try another --seed or fewer --n-objects"
+    except ClutterbenchError as exc:
+        raise ClutterbenchError(
+            f"--family {family}: no settled scene ({exc}); try another --seed or fewer --n-objects"
+        ) from None
+    spec.save(out)
+    typer.echo(
+        f"wrote {out} ({family}, {spec.n} boxes, seed {seed}, attempt {spec.meta['attempt']})"
     )
 
 

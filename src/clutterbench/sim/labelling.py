@@ -136,6 +136,54 @@ def creep_warning(spec: SceneSpec, physics: PhysicsConfig, name: str) -> str | N
     )
 
 
+def draw_settled_spec(
+    *,
+    seed: int,
+    key: str,
+    index: int,
+    families: Mapping[str, float],
+    n_objects: Sequence[int],
+    catalogue: str,
+    physics: PhysicsConfig,
+    camera: CameraConfig,
+    max_attempts: int,
+    shelf: Shelf,
+    meta: Mapping[str, object] | None = None,
+) -> SceneSpec:
+    """Scene `index` of the seed stream `key`, placed and settled (no labels): the canonical
+    start of a trial, or a single scene for the CLI; its meta records the attempt and the
+    rejections before it."""
+    family, n = draw_scene_setup(seed, key, index, families, n_objects)
+    rejected: dict[str, int] = {}
+    for attempt in range(max_attempts):
+        rng = scene_rng(seed, key, index, attempt)
+        world, _, reason = place_and_settle(family, catalogue, n, rng, physics, shelf)
+        if reason is not None:
+            rejected[reason] = rejected.get(reason, 0) + 1
+            continue
+        sizes = np.array(world.sizes_m)
+        return SceneSpec(
+            sizes_m=sizes,
+            poses=world.poses(),
+            shelf=shelf,
+            camera=camera,
+            family=family,
+            meta={
+                "stream": key,
+                "index": index,
+                "seed": seed,
+                **dict(meta or {}),
+                "attempt": attempt,
+                "rejected": dict(sorted(rejected.items())),
+            },
+            type_ids=catalogue_type_ids(sizes, catalogue),
+        )
+    raise ClutterbenchError(
+        f"{key} scene {index}: rejected {max_attempts} times ({rejected}); "
+        f"the {family} family cannot fit {n} boxes"
+    )
+
+
 def catalogue_type_ids(sizes_m: np.ndarray, catalogue: str) -> np.ndarray:
     """(N,) index of each box's size in the catalogue (-1 if it is none of them)."""
     types = box_extents_m(catalogue)

@@ -11,17 +11,9 @@ import zlib
 
 import numpy as np
 
-from clutterbench.errors import ClutterbenchError
 from clutterbench.observation import Observation
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
-from clutterbench.sim.labelling import (
-    catalogue_type_ids,
-    draw_scene_setup,
-    place_and_settle,
-    removal_matrix,
-    scene_rng,
-    settled_contacts,
-)
+from clutterbench.sim.labelling import draw_settled_spec, removal_matrix, settled_contacts
 from clutterbench.sim.shelf import Shelf
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.config import SceneStreamConfig
@@ -42,35 +34,17 @@ def draw_trial_spec(
     shelf: Shelf | None = None,
 ) -> SceneSpec:
     """Scene `index` of a trials stream, settled (the canonical start of its episode)."""
-    shelf = shelf or Shelf()
-    key = stream_key(stream)
-    family, n = draw_scene_setup(seed, key, index, dict(cfg.families), cfg.n_objects)
-    rejected: dict[str, int] = {}
-    for attempt in range(max_attempts):
-        rng = scene_rng(seed, key, index, attempt)
-        world, _, reason = place_and_settle(family, cfg.catalogue, n, rng, physics, shelf)
-        if reason is not None:
-            rejected[reason] = rejected.get(reason, 0) + 1
-            continue
-        sizes = np.array(world.sizes_m)
-        return SceneSpec(
-            sizes_m=sizes,
-            poses=world.poses(),
-            shelf=shelf,
-            camera=camera,
-            family=family,
-            meta={
-                "stream": key,
-                "index": index,
-                "seed": seed,
-                "attempt": attempt,
-                "rejected": dict(sorted(rejected.items())),
-            },
-            type_ids=catalogue_type_ids(sizes, cfg.catalogue),
-        )
-    raise ClutterbenchError(
-        f"trials stream {stream} scene {index}: rejected {max_attempts} times; "
-        f"the {family} family cannot fit {n} boxes"
+    return draw_settled_spec(
+        seed=seed,
+        key=stream_key(stream),
+        index=index,
+        families=dict(cfg.families),
+        n_objects=cfg.n_objects,
+        catalogue=cfg.catalogue,
+        physics=physics,
+        camera=camera,
+        max_attempts=max_attempts,
+        shelf=shelf or Shelf(),
     )
 
 
