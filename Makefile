@@ -58,6 +58,13 @@ test: lint
 bench: setup
 	python -m clutterbench.bench
 
+# Does this machine reproduce the recorded results? A tiny pipeline with 400 test scenes and
+# 300 episodes each of multi_step and oracle in a temporary copy, compared statistically
+# with reports/crosscheck/expected.json (README: Determinism); exit 1 when a rate differs.
+.PHONY: crosscheck
+crosscheck: setup
+	python -m clutterbench.crosscheck
+
 # cp_focal retrained on 1/4 and 1/2 of its training scenes (after dvc repro; ~1.5x its
 # training time): reports/learning_curve/cp_focal.{md,csv,png}
 learning-curve: setup

@@ -8,7 +8,6 @@ overhead is a ratio.
 
 from __future__ import annotations
 
-import platform
 import time
 from pathlib import Path
 
@@ -18,6 +17,7 @@ from clutterbench.config import load_params, load_section
 from clutterbench.data.config import GenerateConfig
 from clutterbench.data.generate import label_scene
 from clutterbench.io import load_npz, write_json, write_text
+from clutterbench.platform_info import cpu_description
 from clutterbench.progress import progress_bar
 from clutterbench.sim.config import SimConfig
 from clutterbench.sim.labelling import act_on_spec, build_world
@@ -86,7 +86,8 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
         "raw_render_ms_per_picture": 1e3 * raw_picture_s,
         "sapien_step_render_ms_per_scene": 1e3 * sapien_s / n_scenes,
         "overhead_ratio": pipeline_s / sapien_s,
-        "machine": f"{platform.processor() or platform.machine()}, 1 process",
+        "processes": 1,
+        **cpu_description(),  # cpu_model, logical_cpus, torch_threads, machine
     }
     write_json(out_dir / "sim.json", result)
     lines = ["# Simulation benchmark (one core)", "", "| measure | value |", "|---|---|"]
@@ -135,6 +136,7 @@ def bench_replay(
                     same += int(np.array_equal(got, want, equal_nan=True))
         result[name] = {"labels_replayed": rows, "bit_identical": same, "agreement": same / rows}
         print(f"replay {name}: {same}/{rows} labels bit-identical")
+    result["machine"] = cpu_description()
     write_json(out_dir / "replay.json", result)
     return result
 

@@ -220,7 +220,15 @@ def test_checkpoint_round_trip_keeps_masks_and_classes(arch, tmp_path):
 
 
 def test_cross_entropy_training_step_drives_loss_down(arch):
-    """The training loop's step with the ce loss on a fixed batch of class maps."""
+    """The training loop's step with the ce loss on a fixed batch of class maps.
+
+    Adam at lr 1e-2 on one batch is chaotic in its details: float32 sums whose order depends
+    on the CPU's vector width and torch's thread count moved the pixel accuracy after 60
+    steps between 0.93 and 0.99, and a class's hit rate after 100 steps down to 0.59 (as do
+    other seeds). After 150 steps every run (seeds 0-2 x 1 and 2 threads x both networks)
+    had loss ratio <= 0.025, accuracy >= 0.986 and every class >= 0.88 found; the bounds
+    below leave wide margins, while an untrained network stays at its initial loss and at
+    best at the all-background accuracy (0.83 of the pixels)."""
     torch.manual_seed(0)
     net = tiny_config(arch, **CH4)
     mcfg = TrainModelConfig(
@@ -232,13 +240,14 @@ def test_cross_entropy_training_step_drives_loss_down(arch):
     depth, masks, classes = pull_batch()
     batch = {"depth_m": depth, "target": masks, "classes": classes}
     loss = loss_fn(cfg, mcfg)
-    losses = [float(train_step(model, batch, opt, loss, cfg)) for _ in range(60)]
+    losses = [float(train_step(model, batch, opt, loss, cfg)) for _ in range(150)]
     assert losses[0] == pytest.approx(float(torch.log(torch.tensor(4.0))), rel=0.5)
     assert losses[-1] < 0.25 * losses[0], losses[::10]
     model.eval()
     with torch.no_grad():
         pred = model(depth, masks).argmax(dim=1)
-    assert (pred == classes).float().mean() > 0.95
+    background = float((classes == CLASS_B).float().mean())
+    assert (pred == classes).float().mean() > 0.9 > background + 0.05
     for c in (CLASS_E, CLASS_S, CLASS_C):
         hit = (pred == c) & (classes == c)
         assert hit.sum() > 0.5 * (classes == c).sum(), PULL_CLASSES[c]
