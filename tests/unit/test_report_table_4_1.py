@@ -111,7 +111,7 @@ def cells(line: str) -> list[str]:
 def test_table_4_1_rates_totals_and_thesis_beside(tmp_path):
     raw = table_4_1(RECORDS, ROWS, FIGURES, tmp_path, "tiny")
     md = (tmp_path / "table_4_1.md").read_text()
-    assert md.startswith("# Table 4.1: Made-up result\n")
+    assert md.startswith("# Table 4.1 (simulated): Made-up result\n")
     header = cells(line_of(md, "| method [our condition]"))
     assert header == [
         "method [our condition]",
@@ -220,7 +220,7 @@ def test_table_4_1_target_thesis_only_beside_the_various_model(tmp_path):
     rows = {"various_model": "tv", "same_model": "ts", "oracle": "to"}
     raw = table_4_1_target(TARGET_RECORDS, rows, FIGURES, tmp_path, "tiny")
     md = (tmp_path / "table_4_1_target.md").read_text()
-    assert md.startswith("# Predetermined target (thesis 4.3.3)\n")
+    assert md.startswith("# Predetermined target (simulated; thesis 4.3.3)\n")
     various = cells(line_of(md, "| trained with various-size boxes [tv]"))
     assert various[2] == "2/3 = 66.7% [20.8, 93.9]" and various[3] == "7/9 = 70.0%"
     same = cells(line_of(md, "| trained with same-size boxes [ts]"))

@@ -27,6 +27,7 @@ from clutterbench.config import load_params, load_section
 from clutterbench.data.dataset import CollapseDataset
 from clutterbench.io import write_json, write_text
 from clutterbench.models import build_model
+from clutterbench.platform_info import cpu_description
 
 BATCH = 16
 STEPS = 3
@@ -147,6 +148,7 @@ def bench_models(out_dir: Path = Path("reports/bench")) -> dict:
         "inference": inference,
         "threads": 2,
         "machine": f"{platform.processor() or platform.machine()}, torch {torch.__version__}",
+        **{k: v for k, v in cpu_description().items() if k != "machine"},
     }
     gen = params["generate"]["datasets"]
     m = default.models[cp]

@@ -28,6 +28,7 @@ from clutterbench.data.dataset import CollapseDataset
 from clutterbench.data.split import SplitConfig, split_dataset
 from clutterbench.io import load_npz
 from clutterbench.models import build_model
+from clutterbench.platform_info import cpu_description
 from clutterbench.sim.config import SimConfig
 
 DATASET = "ch6"
@@ -85,6 +86,7 @@ def epoch_peak_rss(
         "index_seconds": round(index_s, 1),
         "epoch_seconds": round(time.perf_counter() - t0, 1),
         "peak_rss_mb": round(peak_rss_mb(), 1),
+        **cpu_description(),
     }
 
 
