@@ -170,9 +170,10 @@ def _env() -> dict[str, str]:
     }
 
 
-def prepare_copy(root: Path, dst: Path, scenes: int, episodes: int) -> Path:
-    """A copy of the repository's pipeline at base.scale=tiny with `scenes` ch6_test scenes
-    and `episodes` episodes per compared condition, dvc-initialised without git."""
+def copy_pipeline(root: Path, dst: Path, scale: str = "tiny") -> Path:
+    """A copy of the repository's pipeline (dvc.yaml, params.yaml, stages, src, the thesis
+    figures) at base.scale=`scale`, dvc-initialised without git: what the smoke test and the
+    crosscheck reproduce."""
     dst.mkdir(parents=True)
     for item in COPY:
         src = root / item
@@ -182,12 +183,21 @@ def prepare_copy(root: Path, dst: Path, scenes: int, episodes: int) -> Path:
         else:
             shutil.copy(src, dst / item)
     params = yaml.safe_load((dst / "params.yaml").read_text())
-    params["base"]["scale"] = "tiny"
+    params["base"]["scale"] = scale
+    (dst / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
+    subprocess.run(["dvc", "init", "--no-scm", "-q"], cwd=dst, env=_env(), check=True)
+    return dst
+
+
+def prepare_copy(root: Path, dst: Path, scenes: int, episodes: int) -> Path:
+    """A tiny copy with `scenes` ch6_test scenes and `episodes` episodes per compared
+    condition."""
+    copy_pipeline(root, dst)
+    params = yaml.safe_load((dst / "params.yaml").read_text())
     params["generate"]["datasets"][DATASET]["n_scenes"] = scenes
     for cond in CONDITIONS:
         params["trials"]["conditions"][cond]["episodes"] = episodes
     (dst / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
-    subprocess.run(["dvc", "init", "--no-scm", "-q"], cwd=dst, env=_env(), check=True)
     return dst
 
 

@@ -20,6 +20,7 @@ import yaml
 from clutterbench.collapse.config import EvaluateConfig, TrainConfig
 from clutterbench.collapse.evaluate import SplitRef, evaluate_sets
 from clutterbench.config import load_params, load_section
+from clutterbench.crosscheck import copy_pipeline
 from clutterbench.data.config import GenerateConfig
 from clutterbench.data.dataset import CollapseDataset
 from clutterbench.data.generate import generate_dataset
@@ -33,23 +34,10 @@ from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.records import read_records
 
 pytestmark = pytest.mark.slow
-COPY = ["dvc.yaml", "params.yaml", "stages", "src", "reports/thesis_figures.yaml"]
 
 
 def tiny_copy(root: Path, dst: Path) -> Path:
-    dst.mkdir(parents=True)
-    for item in COPY:
-        src = root / item
-        (dst / item).parent.mkdir(parents=True, exist_ok=True)
-        if src.is_dir():
-            shutil.copytree(src, dst / item, ignore=shutil.ignore_patterns("__pycache__"))
-        else:
-            shutil.copy(src, dst / item)
-    params = yaml.safe_load((dst / "params.yaml").read_text())
-    params["base"]["scale"] = "tiny"
-    (dst / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
-    run(["dvc", "init", "--no-scm", "-q"], dst)
-    return dst
+    return copy_pipeline(root, dst, "tiny")
 
 
 def run(cmd: list[str], cwd: Path, check: bool = True) -> subprocess.CompletedProcess:
