@@ -215,3 +215,45 @@ def test_a_condition_needs_a_model_exactly_for_the_risk_planner():
         Ch4ConditionConfig(planner="risk", stream="s")
     with pytest.raises(ValueError, match="takes no network"):
         Ch4ConditionConfig(planner="oracle", stream="s", model="ch4_same")
+
+
+def test_the_mcap_shows_the_scene_and_the_camera(tmp_path):
+    """A ch. 4 trial's MCAP: the pile's boxes at their sizes on /scene, the camera's
+    calibration beside the depth image, the pulled box taken off /scene once it is out."""
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+
+    from clutterbench.trials.harness import write_mcap
+    from clutterbench.trials.scenes import draw_trial_spec
+
+    job = _jobs(Path("unused"), planner="random")[1]
+    result = run_ch4_episode(job)
+    path = tmp_path / "episodes.mcap"
+    write_mcap(path, [result], {"condition": "c"})
+    spec = draw_trial_spec(
+        job["cond"].stream,
+        job["stream_cfg"],
+        job["seed"],
+        job["index"],
+        job["physics"],
+        job["camera"],
+        job["max_attempts"],
+    )
+    topics = ["/scene", "/camera/calibration", "/camera/depth"]
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        msgs: dict[str, list] = {}
+        for _, channel, message, proto in reader.iter_decoded_messages(topics=topics):
+            msgs.setdefault(channel.topic, []).append((message.log_time, proto))
+    (_, start), *removals = msgs["/scene"]
+    boxes = [e for e in start.entities if e.frame_id != "world"]
+    assert [e.id for e in boxes] == [f"box_{k}" for k in range(spec.n)]
+    sizes = [[e.cubes[0].size.x, e.cubes[0].size.y, e.cubes[0].size.z] for e in boxes]
+    np.testing.assert_array_equal(sizes, spec.sizes_m)
+    rec = result.record
+    out = [f"box_{rec['extract']}"] if rec["extracted"] else []
+    assert [d.id for _, u in removals for d in u.deletions] == out
+    K = observe(BoxWorld.from_spec(spec, PhysicsConfig(), render=True), CAM).camera.K
+    assert [t for t, _ in msgs["/camera/calibration"]] == [t for t, _ in msgs["/camera/depth"]]
+    for _, cal in msgs["/camera/calibration"]:
+        np.testing.assert_array_equal(np.reshape(cal.K, (3, 3)), K)

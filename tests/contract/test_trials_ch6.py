@@ -167,6 +167,42 @@ def test_no_planner_beats_the_search_oracle_on_a_hand_built_stack(stack3):
             assert ceiling or not rec["success"], (planner, target)
 
 
+def test_the_mcap_shows_the_scene_and_the_camera(stack3, tmp_path):
+    """The oracle takes the stack down (2, 1, 0): the MCAP draws the shelf and each box at
+    its size in its own /tf frame, puts the camera's calibration beside every depth image,
+    and takes each box off /scene when it is out."""
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+
+    from clutterbench.sim.render import observe
+
+    result = run_extraction(stack3, _job("oracle")[0], target=0)
+    path = tmp_path / "episodes.mcap"
+    write_mcap(path, [result], {"condition": "c"})
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        msgs: dict[str, list] = {}
+        topics = ["/scene", "/camera/calibration", "/camera/depth", "/camera/tf"]
+        for _, channel, message, proto in reader.iter_decoded_messages(topics=topics):
+            msgs.setdefault(channel.topic, []).append((message.log_time, proto))
+    (t0, start), *removals = msgs["/scene"]
+    boxes = [e for e in start.entities if e.frame_id != "world"]
+    assert t0 == 0 and [e.frame_id for e in boxes] == ["box_0", "box_1", "box_2"]
+    sizes = [[e.cubes[0].size.x, e.cubes[0].size.y, e.cubes[0].size.z] for e in boxes]
+    np.testing.assert_array_equal(sizes, stack3.sizes_m)
+    assert len(start.entities) == len(boxes) + len(stack3.shelf.boards())
+    assert [d.id for _, u in removals for d in u.deletions] == ["box_2", "box_1", "box_0"]
+    camera = observe(world_at(stack3, SceneState.start(stack3), PhysicsConfig(), True), CAM)
+    cals = msgs["/camera/calibration"]
+    assert [t for t, _ in cals] == [t for t, _ in msgs["/camera/depth"]]
+    for _, cal in cals:
+        np.testing.assert_array_equal(np.reshape(cal.K, (3, 3)), camera.camera.K)
+        assert (cal.frame_id, cal.width, cal.height) == ("camera", 64, 64)
+    tf = msgs["/camera/tf"][0][1].transforms[0]
+    t = camera.camera.T_world_from_cam[:3, 3]
+    assert (tf.translation.x, tf.translation.y, tf.translation.z) == tuple(t)
+
+
 def test_the_registry_covers_every_planner_name():
     assert set(PLANNER_NAMES) <= set(PLANNERS)
 
@@ -221,3 +257,4 @@ def test_records_and_mcap_are_byte_identical_across_worker_counts(tiny_cp, tmp_p
     topics = read_episode(tmp_path / "one" / "episodes.mcap")["topics"]
     assert topics["/trial/episode"] == 2 and topics["/trial/outcome"] == 2
     assert topics["/camera/depth"] >= 2 and topics["/planner/decision"] >= 2
+    assert topics["/scene"] >= 2 and topics["/camera/calibration"] == topics["/camera/depth"]

@@ -10,14 +10,15 @@ from clutterbench.collapse.losses import FocalConfig
 from clutterbench.config import bounded
 from clutterbench.data.labels import OUTPUT_CHANNELS
 from clutterbench.errors import ClutterbenchError
-from clutterbench.models import parse_net_config
+from clutterbench.models import ARCHS, parse_net_config
 from clutterbench.sim.noise import DepthNoiseConfig
 
 
 @dataclasses.dataclass(frozen=True)
 class TrainModelConfig:
-    arch: Literal["collapse_map", "fcn8s"]
-    """Network (clutterbench.models.ARCHS)."""
+    arch: str
+    """Network: a name in the registry clutterbench.models.ARCHS (built in: collapse_map,
+    fcn8s; more with models.register_arch, docs/extending.md)."""
     dataset: str
     """Generated + split dataset to train on (its train / val splits)."""
     # No defaults for the settings the report compares with the thesis: params.yaml says
@@ -80,6 +81,10 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         for name, m in self.models.items():
+            if m.arch not in ARCHS:
+                raise ClutterbenchError(
+                    f"train.models.{name}.arch: {m.arch!r} is not one of {', '.join(ARCHS)}"
+                )
             if isinstance(m.net, Mapping):
                 net = parse_net_config(m.arch, m.net, f"train.models.{name}.net")
                 object.__setattr__(m, "net", net)

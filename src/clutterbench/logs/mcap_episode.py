@@ -2,8 +2,12 @@
 
 One episode = one `.mcap` file holding depth and instance images (foxglove.RawImage), object
 poses (foxglove.FrameTransforms on /tf), planner decisions (JSON) and two metadata records:
-"episode" (run parameters) and "outcome" (result). Every timestamp is simulation time, so the
-same episode always gives a byte-identical file.
+"episode" (run parameters) and "outcome" (result). Trial episodes also carry the scene
+(foxglove.SceneUpdate on /scene: the shelf boards and one cube per box, each in its own frame
+so /tf moves it) and the camera (foxglove.CameraCalibration on /camera/calibration, its pose
+as a FrameTransform world -> "camera" on /camera/tf), so Foxglove's 3D panel draws the scene
+and projects the images into it (docs/foxglove.md). Every timestamp is simulation time, so
+the same episode always gives a byte-identical file.
 """
 
 from __future__ import annotations
@@ -11,14 +15,18 @@ from __future__ import annotations
 import functools
 import json
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
 
 import numpy as np
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from foxglove_schemas_protobuf.SceneEntityDeletion_pb2 import SceneEntityDeletion
+from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 from google.protobuf.descriptor import FileDescriptor
 from google.protobuf.descriptor_pb2 import FileDescriptorSet
 from google.protobuf.message import Message as ProtoMessage
@@ -30,7 +38,29 @@ from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 DEPTH_TOPIC = "/camera/depth"
 INSTANCE_TOPIC = "/camera/instance"
 TF_TOPIC = "/tf"
+SCENE_TOPIC = "/scene"
+CALIBRATION_TOPIC = "/camera/calibration"
+CAMERA_TF_TOPIC = "/camera/tf"
+"""The camera's pose: a topic of its own, so /tf holds the box poses only (Foxglove builds its
+transform tree from every FrameTransforms topic)."""
 WORLD_FRAME = "world"
+CAMERA_FRAME = "camera"
+
+SHELF_RGBA = (0.80, 0.66, 0.48, 0.35)
+"""Plywood, translucent so that the boxes inside show through the side and top boards."""
+BOX_PALETTE = (
+    (0.122, 0.467, 0.706),
+    (1.000, 0.498, 0.055),
+    (0.173, 0.627, 0.173),
+    (0.839, 0.153, 0.157),
+    (0.580, 0.404, 0.741),
+    (0.549, 0.337, 0.294),
+    (0.890, 0.467, 0.761),
+    (0.498, 0.498, 0.498),
+    (0.737, 0.741, 0.133),
+    (0.090, 0.745, 0.812),
+)
+"""Box k's colour is BOX_PALETTE[k % 10] (matplotlib's tab10), opaque."""
 
 # zstd (mcap's default, read by Foxglove). zstandard.compress at its fixed default level is
 # deterministic for a given zstd build; a zstd upgrade may change the bytes, not the content.
@@ -83,6 +113,45 @@ def _str_map(name: str, data: dict[str, Any]) -> dict[str, str]:
         if not isinstance(key, str):
             raise TypeError(f"{name} metadata keys must be str, got {key!r}")
     return {key: str(data[key]) for key in sorted(data)}
+
+
+def _add_cube(
+    entity: Any,
+    size: Sequence[float] | np.ndarray,
+    rgba: Sequence[float],
+    centre: Sequence[float] | np.ndarray | None = None,
+) -> None:
+    cube = entity.cubes.add()
+    if centre is not None:
+        cx, cy, cz = np.asarray(centre, dtype=np.float64).tolist()
+        cube.pose.position.x, cube.pose.position.y, cube.pose.position.z = cx, cy, cz
+    cube.pose.orientation.w = 1.0
+    sx, sy, sz = np.asarray(size, dtype=np.float64).tolist()
+    cube.size.x, cube.size.y, cube.size.z = sx, sy, sz
+    cube.color.r, cube.color.g, cube.color.b, cube.color.a = (float(c) for c in rgba)
+
+
+def _quaternion_wxyz(R: np.ndarray) -> tuple[float, float, float, float]:
+    """Unit quaternion (w, x, y, z), w >= 0, of a rotation matrix (Shepperd's method)."""
+    m = np.asarray(R, dtype=np.float64)
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0:
+        s = 2.0 * np.sqrt(1.0 + trace)
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
+    else:
+        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
+    quat = np.asarray(q) / np.linalg.norm(q)
+    if quat[0] < 0:
+        quat = -quat
+    w, x, y, z = (float(v) for v in quat)
+    return w, x, y, z
 
 
 class EpisodeWriter:
@@ -170,7 +239,9 @@ class EpisodeWriter:
         self._channels[topic] = (channel_id, encoding)
         return channel_id
 
-    def _write_proto(self, topic: str, t_s: float, message: ProtoMessage) -> None:
+    def write_proto(self, topic: str, t_s: float, message: ProtoMessage) -> None:
+        """Any protobuf message (e.g. a foxglove_schemas_protobuf one) on `topic` at `t_s`;
+        the channel's schema is the message's .proto file set, registered on first use."""
         descriptor = message.DESCRIPTOR
         channel_id = self._channel(
             topic,
@@ -202,7 +273,7 @@ class EpisodeWriter:
             # 32FC1 in Foxglove is little-endian, rows packed with no padding.
             data=np.ascontiguousarray(depth_m, dtype="<f4").tobytes(),
         )
-        self._write_proto(DEPTH_TOPIC, t_s, image)
+        self.write_proto(DEPTH_TOPIC, t_s, image)
 
     def write_instance(self, t_s: float, instance: np.ndarray, frame_id: str = "camera") -> None:
         """Per-pixel instance ids (0 = background), same camera as the depth image."""
@@ -226,7 +297,7 @@ class EpisodeWriter:
             step=width,
             data=np.ascontiguousarray(image).tobytes(),
         )
-        self._write_proto(topic, t_s, message)
+        self.write_proto(topic, t_s, message)
 
     def write_poses(self, t_s: float, names: list[str], poses: np.ndarray) -> None:
         """Object poses as rows [x, y, z, qw, qx, qy, qz]: SAPIEN order, world frame, metres."""
@@ -246,7 +317,106 @@ class EpisodeWriter:
             transform.rotation.y = qy
             transform.rotation.z = qz
             transform.rotation.w = qw
-        self._write_proto(TF_TOPIC, t_s, message)
+        self.write_proto(TF_TOPIC, t_s, message)
+
+    def write_scene(
+        self,
+        t_s: float,
+        sizes_m: np.ndarray,
+        boards: Sequence[tuple[str, np.ndarray, np.ndarray]],
+        names: Sequence[str] | None = None,
+    ) -> None:
+        """Replace the scene on /scene: delete every entity shown so far (an earlier episode's
+        boxes), then the shelf `boards` [(name, half extents, centre)] as static cubes in the
+        world frame (ids "shelf/<name>") and box k as a cube of full extents `sizes_m[k]`
+        (its local x, y, z, as SAPIEN builds it) centred in frame `names[k]` (default
+        "box_<k>", the /tf child frames of `write_poses`), frame-locked so that the box
+        poses move it; ids are the frame names, colours BOX_PALETTE."""
+        sizes = np.asarray(sizes_m, dtype=np.float64)
+        if sizes.ndim != 2 or sizes.shape[1] != 3:
+            raise ValueError(f"sizes_m must be (N, 3), got {sizes.shape}")
+        if not (np.all(np.isfinite(sizes)) and np.all(sizes > 0)):
+            raise ValueError("box sizes must be finite and positive")
+        names = [f"box_{k}" for k in range(len(sizes))] if names is None else list(names)
+        if len(names) != len(sizes):
+            raise ValueError(f"{len(names)} names for {len(sizes)} boxes")
+        stamp = _stamp(_to_ns(t_s))
+        update = SceneUpdate()
+        deletion = update.deletions.add()
+        deletion.timestamp.CopyFrom(stamp)
+        deletion.type = SceneEntityDeletion.Type.ALL
+        for name, half, centre in boards:
+            entity = update.entities.add()
+            entity.timestamp.CopyFrom(stamp)
+            entity.frame_id = WORLD_FRAME
+            entity.id = f"shelf/{name}"
+            entity.frame_locked = True
+            _add_cube(entity, 2.0 * np.asarray(half, dtype=np.float64), SHELF_RGBA, centre)
+        for k, (name, size) in enumerate(zip(names, sizes.tolist(), strict=True)):
+            entity = update.entities.add()
+            entity.timestamp.CopyFrom(stamp)
+            entity.frame_id = name
+            entity.id = name
+            entity.frame_locked = True
+            _add_cube(entity, size, (*BOX_PALETTE[k % len(BOX_PALETTE)], 1.0))
+        self.write_proto(SCENE_TOPIC, t_s, update)
+
+    def delete_scene_entities(self, t_s: float, ids: Sequence[str]) -> None:
+        """Take entities off /scene from `t_s` on (e.g. "box_3" once it left the shelf)."""
+        stamp = _stamp(_to_ns(t_s))
+        update = SceneUpdate()
+        for entity_id in ids:
+            deletion = update.deletions.add()
+            deletion.timestamp.CopyFrom(stamp)
+            deletion.type = SceneEntityDeletion.Type.MATCHING_ID
+            deletion.id = entity_id
+        self.write_proto(SCENE_TOPIC, t_s, update)
+
+    def write_camera(
+        self,
+        t_s: float,
+        K: np.ndarray,
+        T_world_from_cam: np.ndarray,
+        width: int,
+        height: int,
+        frame_id: str = CAMERA_FRAME,
+    ) -> None:
+        """The pinhole camera of the images: its pose (the OpenCV optical frame, x right,
+        y down, z forward, in the world frame) as a FrameTransform world -> `frame_id` on
+        /camera/tf, and its intrinsics `K` (3x3, pixels) as a foxglove.CameraCalibration on
+        /camera/calibration (no distortion: plumb_bob with D = 0, P = [K | 0])."""
+        K = np.asarray(K, dtype=np.float64)
+        T = np.asarray(T_world_from_cam, dtype=np.float64)
+        if K.shape != (3, 3) or T.shape != (4, 4):
+            raise ValueError(f"K must be 3x3 and T_world_from_cam 4x4, got {K.shape}, {T.shape}")
+        stamp = _stamp(_to_ns(t_s))
+        tf = FrameTransforms()
+        transform: FrameTransform = tf.transforms.add()
+        transform.timestamp.CopyFrom(stamp)
+        transform.parent_frame_id = WORLD_FRAME
+        transform.child_frame_id = frame_id
+        x, y, z = T[:3, 3].tolist()
+        transform.translation.x, transform.translation.y, transform.translation.z = x, y, z
+        qw, qx, qy, qz = _quaternion_wxyz(T[:3, :3])
+        transform.rotation.x = qx
+        transform.rotation.y = qy
+        transform.rotation.z = qz
+        transform.rotation.w = qw
+        self.write_proto(CAMERA_TF_TOPIC, t_s, tf)
+        P = np.zeros((3, 4))
+        P[:, :3] = K
+        calibration = CameraCalibration(
+            timestamp=stamp,
+            frame_id=frame_id,
+            width=int(width),
+            height=int(height),
+            distortion_model="plumb_bob",
+            D=[0.0] * 5,
+            K=K.ravel().tolist(),
+            R=np.eye(3).ravel().tolist(),
+            P=P.ravel().tolist(),
+        )
+        self.write_proto(CALIBRATION_TOPIC, t_s, calibration)
 
     def write_json(self, t_s: float, topic: str, payload: dict[str, Any]) -> None:
         """A JSON object (e.g. a planner decision on /planner/decision)."""

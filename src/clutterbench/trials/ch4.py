@@ -239,6 +239,7 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
     world = BoxWorld.from_spec(spec, physics, render=True)
     obs, seg = observe_and_segment(world, spec, job)
     log = EpisodeLog(record_images=job["record_images"])
+    log.scene(0.0, spec.sizes_m, spec.shelf.boards(), obs.camera, obs.depth_m.shape)
     log.observation(0.0, obs.depth_m, obs.instance)
     log.poses(0.0, world.poses())
     boxes = match_segments(seg, obs.instance)  # the harness's, never the planner's
@@ -318,7 +319,7 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
             "strict_success_held": False,
         }
     t_end = world.steps_taken * physics.timestep_s
-    log.poses(t_end, world.poses())
+    log.poses(t_end, world.poses(), world.removed)
     out.pop("displacement_m", None)
     out.pop("displacement_held_m", None)
     if target_box is not None:  # a predetermined target: the pull must take that box out

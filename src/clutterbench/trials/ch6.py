@@ -374,6 +374,7 @@ def run_extraction(
     log = EpisodeLog(record_images=job["record_images"])
     dt = physics.timestep_s
     obs = observe(world, camera)
+    log.scene(0.0, spec.sizes_m, spec.shelf.boards(), obs.camera, obs.depth_m.shape)
     if target is None:
         target = draw_target(
             job["seed"], job["stream"], job["index"], obs, params.min_target_pixels
@@ -384,7 +385,7 @@ def run_extraction(
     end, t = "max_steps", 0.0
     while len(steps) < params.max_steps:
         log.observation(t, obs.depth_m, obs.instance)
-        log.poses(t, state.poses)
+        log.poses(t, state.poses, state.removed)
         if isinstance(planner, SearchOracle):
             planner.state = state
         try:
@@ -411,7 +412,7 @@ def run_extraction(
             break
         world = world_at(spec, state, physics, render=True)  # the next step's canonical start
         obs = observe(world, camera)
-    log.poses(t, state.poses)
+    log.poses(t, state.poses, state.removed)
     touched = {s["box"] for s in steps}
     overall = disturbance(
         np.asarray(spec.poses)[:, :3],

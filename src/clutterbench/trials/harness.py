@@ -5,20 +5,21 @@ worker processes can import it). Each worker process keeps one renderer and runs
 thread, so an episode's bits do not depend on how many workers run: the same params and seed
 give byte-identical records whatever `trials.workers` is. Results come back in episode
 order; the parent writes `records.jsonl` (one JSON record per episode) and `episodes.mcap`
-(every episode on one timeline, openable in Foxglove), both atomically.
+(every episode on one timeline, openable in Foxglove: docs/foxglove.md), both atomically.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import multiprocessing as mp
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from clutterbench.logs.mcap_episode import EpisodeWriter
+from clutterbench.observation import CameraModel
 from clutterbench.progress import progress_bar
 
 EPISODE_GAP_S = 1.0
@@ -28,6 +29,22 @@ DECISION_TOPIC = "/planner/decision"
 OUTCOME_TOPIC = "/trial/outcome"
 
 
+@dataclasses.dataclass(frozen=True)
+class SceneInfo:
+    """What the MCAP needs to draw an episode's scene: the boxes, the shelf, the camera."""
+
+    sizes_m: np.ndarray
+    """(N, 3) full extents of box k along its own x, y, z (SceneSpec.sizes_m), metres."""
+    boards: tuple[tuple[str, np.ndarray, np.ndarray], ...]
+    """The shelf's boards: (name, half extents, centre) in the world frame (Shelf.boards())."""
+    K: np.ndarray
+    """(3, 3) camera intrinsics (pixels)."""
+    T_world_from_cam: np.ndarray
+    """(4, 4) pose of the OpenCV camera frame in the world (shelf) frame."""
+    width: int
+    height: int
+
+
 @dataclasses.dataclass
 class EpisodeLog:
     """What an episode shows in the MCAP: events at simulated times (s from its start)."""
@@ -35,13 +52,38 @@ class EpisodeLog:
     events: list[tuple[float, str, Any]] = dataclasses.field(default_factory=list)
     record_images: bool = True
 
+    def scene(
+        self,
+        t_s: float,
+        sizes_m: np.ndarray,
+        boards: Sequence[tuple[str, np.ndarray, np.ndarray]],
+        camera: CameraModel,
+        image_hw: tuple[int, int],
+    ) -> None:
+        """The episode's boxes, shelf boards and camera (its images are `image_hw` = (H, W)),
+        recorded once at its start: /scene, /camera/calibration and /camera/tf."""
+        height, width = (int(v) for v in image_hw)
+        info = SceneInfo(
+            sizes_m=np.array(sizes_m, dtype=np.float64),
+            boards=tuple((str(n), np.array(h, float), np.array(c, float)) for n, h, c in boards),
+            K=np.array(camera.K, dtype=np.float64),
+            T_world_from_cam=np.array(camera.T_world_from_cam, dtype=np.float64),
+            width=width,
+            height=height,
+        )
+        self.events.append((t_s, "scene", info))
+
     def observation(self, t_s: float, depth_m: np.ndarray, instance: np.ndarray) -> None:
         if self.record_images:
             self.events.append((t_s, "depth", depth_m))
             self.events.append((t_s, "instance", instance))
 
-    def poses(self, t_s: float, poses: np.ndarray) -> None:
+    def poses(self, t_s: float, poses: np.ndarray, removed: Iterable[int] | None = None) -> None:
+        """Every box's pose [x, y, z, qw, qx, qy, qz]; `removed`: the boxes taken out so far
+        (the MCAP takes them off /scene)."""
         self.events.append((t_s, "poses", np.asarray(poses, dtype=np.float64)))
+        if removed is not None:
+            self.events.append((t_s, "removed", tuple(sorted(int(k) for k in removed))))
 
     def json(self, t_s: float, topic: str, payload: dict[str, Any]) -> None:
         self.events.append((t_s, topic, payload))
@@ -100,23 +142,46 @@ def run_episodes(
 
 def write_mcap(path: Path, results: Sequence[EpisodeResult], metadata: dict[str, str]) -> None:
     """Every episode on one timeline: episode k starts after episode k-1 ended plus a gap.
-    /trial/episode marks each start (its record's header), /trial/outcome each end."""
+    /trial/episode marks each start (its record's header), /trial/outcome each end. An
+    episode's scene (boxes and shelf on /scene) replaces the previous one's; the camera
+    (/camera/calibration, /camera/tf) is written with it and beside every depth image; a box
+    taken out leaves /scene."""
     t0 = 0.0
     with EpisodeWriter(path, metadata) as ep:
         for res in results:
             head = {k: v for k, v in res.record.items() if not isinstance(v, list | dict)}
             ep.write_json(t0, EPISODE_TOPIC, head)
+            scene: SceneInfo | None = None
+            camera_at: float | None = None
+            gone: set[int] = set()
             for t_s, kind, payload in res.log.events:
                 t = t0 + t_s
-                if kind == "depth":
+                if kind == "scene":
+                    scene, gone = payload, set()
+                    ep.write_scene(t, payload.sizes_m, payload.boards)
+                    _write_camera(ep, t, payload)
+                    camera_at = t
+                elif kind == "depth":
+                    if scene is not None and camera_at != t:
+                        _write_camera(ep, t, scene)
+                        camera_at = t
                     ep.write_depth(t, payload)
                 elif kind == "instance":
                     ep.write_instance(t, payload)
                 elif kind == "poses":
                     ep.write_poses(t, [f"box_{k}" for k in range(len(payload))], payload)
+                elif kind == "removed":
+                    new = sorted(set(payload) - gone)
+                    if scene is not None and new:
+                        ep.delete_scene_entities(t, [f"box_{k}" for k in new])
+                    gone |= set(new)
                 else:
                     ep.write_json(t, kind, payload)
             end = t0 + res.log.duration_s
             ep.write_json(end, OUTCOME_TOPIC, head)
             t0 = end + EPISODE_GAP_S
         ep.set_outcome({"episodes": len(results)})
+
+
+def _write_camera(ep: EpisodeWriter, t_s: float, scene: SceneInfo) -> None:
+    ep.write_camera(t_s, scene.K, scene.T_world_from_cam, scene.width, scene.height)
