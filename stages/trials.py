@@ -15,7 +15,7 @@ from clutterbench.io import read_json, write_json
 from clutterbench.planning.support import SupportParams
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
-from clutterbench.trials.ch6 import ch6_jobs, run_ch6_episode
+from clutterbench.trials.ch6 import ch6_jobs, load_planners, run_ch6_episode
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.harness import run_episodes, write_mcap
 from clutterbench.trials.records import write_records
@@ -48,6 +48,7 @@ def trials(params: dict, base: BaseConfig) -> None:
     conditions = {n: c for n, c in cfg.conditions.items() if not only or n in only}
     if not conditions:
         raise ClutterbenchError("trials.conditions: no conditions to run")
+    load_planners(cfg.planner_modules, [c.planner for c in conditions.values()])
     sim = load_section(SimConfig, "sim", params)
     for model in {cfg.ch6.model, cfg.ch6.ch4_model}:
         if not Path(f"models/{model}/best.pt").exists():

@@ -672,12 +672,12 @@ def plan(
         from clutterbench.sim.physics import BoxWorld
         from clutterbench.sim.render import observe
         from clutterbench.sim.spec import SceneSpec
-        from clutterbench.trials.ch6 import ch6_jobs, load_predictor, run_extraction
-        from clutterbench.trials.config import PLANNERS, ConditionConfig, TrialsConfig
+        from clutterbench.trials.ch6 import PLANNERS, ch6_jobs, load_predictor, run_extraction
+        from clutterbench.trials.config import ConditionConfig, TrialsConfig
         from clutterbench.trials.harness import write_mcap
         from clutterbench.trials.scenes import truth_moved_contact
 
-        if planner not in PLANNERS:
+        if planner not in PLANNERS:  # the registry (built-in planners and registered ones)
             raise ClutterbenchError(f"--planner {planner}: not one of {', '.join(PLANNERS)}")
         if rule not in ("coverage", "iou", "coverage_gap", "iou_gap"):
             raise ClutterbenchError(

@@ -258,3 +258,24 @@ def test_records_and_mcap_are_byte_identical_across_worker_counts(tiny_cp, tmp_p
     assert topics["/trial/episode"] == 2 and topics["/trial/outcome"] == 2
     assert topics["/camera/depth"] >= 2 and topics["/planner/decision"] >= 2
     assert topics["/scene"] >= 2 and topics["/camera/calibration"] == topics["/camera/depth"]
+
+
+def test_a_planner_module_registers_planners_for_the_conditions(tmp_path, monkeypatch):
+    """One module + its params entry: trials.planner_modules is imported, then every
+    condition's planner must be registered (one line naming the first that is not)."""
+    from clutterbench.errors import ClutterbenchError
+    from clutterbench.trials.ch6 import load_planners
+
+    (tmp_path / "my_planners.py").write_text(
+        "from clutterbench.planning.extraction import TargetFirstPlanner\n"
+        "from clutterbench.trials.ch6 import register_planner\n"
+        "register_planner('my_pull')(lambda job, spec: TargetFirstPlanner())\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(ClutterbenchError, match="planner 'my_pull': not registered"):
+        load_planners([], ["multi_step", "my_pull"])
+    load_planners(["my_planners"], ["multi_step", "my_pull"])
+    rec = run_extraction(SceneSpec.load(STACK3), _job("my_pull")[0], target=2).record
+    assert rec["planner"] == "my_pull" and rec["success"]
+    with pytest.raises(ClutterbenchError, match="cannot import no_such_module"):
+        load_planners(["no_such_module"], [])

@@ -101,7 +101,7 @@ def test_extraction_table_names_a_missing_condition_or_a_wrong_planner(tmp_path,
     with pytest.raises(ClutterbenchError, match="ran planner single_step, not multi_step"):
         extraction_table(RECORDS, {"multi_step/3-10": "ss"}, figures, tmp_path, "t")
     with pytest.raises(ClutterbenchError, match="'<method>/<objects>'"):
-        extraction_table(RECORDS, {"teleport/3": "ss"}, figures, tmp_path, "t")
+        extraction_table(RECORDS, {"teleport": "ss"}, figures, tmp_path, "t")
 
 
 FAMILY_RECORDS = {

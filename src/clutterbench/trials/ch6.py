@@ -10,7 +10,7 @@ planner.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -291,6 +291,26 @@ def _multi_step(job: dict[str, Any], spec: SceneSpec):
 @register_planner("bimanual")
 def _bimanual(job: dict[str, Any], spec: SceneSpec):
     return _cpg_planner(job, bimanual=True)
+
+
+def load_planners(modules: Sequence[str], names: Sequence[str]) -> None:
+    """Import the modules that register extra planners, then check that every planner a
+    condition names is registered (one line naming the first that is not)."""
+    import importlib
+
+    for module in modules:
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise ClutterbenchError(
+                f"trials.planner_modules: cannot import {module} ({exc})"
+            ) from None
+    for name in names:
+        if name not in PLANNERS:
+            raise ClutterbenchError(
+                f"planner '{name}': not registered (known: {', '.join(PLANNERS)}; a module "
+                "registering more goes in trials.planner_modules)"
+            )
 
 
 def make_planner(job: dict[str, Any], spec: SceneSpec):

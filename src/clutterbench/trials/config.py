@@ -21,7 +21,7 @@ PLANNERS = (
     "oracle_hold",
     "random",
 )
-"""ch. 6 trial policies (the registry trials.ch6.PLANNERS; a test keeps them equal): pull the
+"""The built-in ch. 6 trial policies (registered in trials.ch6.PLANNERS): pull the
 target at once, nothing held; the thesis' single-step method (its previous work, ch. 4: pull
 the target while holding the support of least risk); Algorithm 1 with one arm; Algorithm 1
 with the bimanual option (Fig. 6.7); the search oracles with one arm and with a holding arm;
@@ -93,7 +93,8 @@ class ConditionConfig:
     """One chapter 6 trials condition (run by stage trials with every other)."""
 
     planner: str
-    """Policy, a name in trials.config.PLANNERS."""
+    """Policy: a name registered in trials.ch6.PLANNERS (the built-in ones: PLANNERS here;
+    more from trials.planner_modules), checked when the trials stage starts."""
     stream: str
     """Scene stream (a key of trials.streams): conditions on one stream see the same scenes
     and the same targets."""
@@ -105,10 +106,6 @@ class ConditionConfig:
     pseudo-direct contact (`_gap`, ours)."""
     perception: Literal["instance"] = "instance"
     """Where object masks come from (the simulator's instance image)."""
-
-    def __post_init__(self) -> None:
-        if self.planner not in PLANNERS:
-            raise ValueError(f"planner: '{self.planner}' is not one of {', '.join(PLANNERS)}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -215,6 +212,10 @@ class TrialsConfig:
     """Condition name -> ch. 4 planner on a stream; each becomes stage trials_ch4@<name>."""
     max_attempts: int = bounded(30, ge=1)
     """A trial scene is redrawn at most this often."""
+    planner_modules: tuple[str, ...] = ()
+    """Python modules the trials stage imports first, so that the planners they register
+    (trials.ch6.register_planner) can be named by conditions: a new planner is one module
+    plus its entries here and in trials.conditions (docs/extending.md)."""
     mcap_images: bool = True
     """Write depth and instance images of every observation to the condition's MCAP."""
 
