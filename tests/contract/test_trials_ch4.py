@@ -73,13 +73,17 @@ def test_a_clean_pull_succeeds_and_is_judged_after_the_release(stack3, physics):
     out = pull_outcome(stack3, physics, 2, 1, THR)
     assert out["success"] and out["strict_success"] and out["strict_success_held"]
     assert out["n_left_shelf"] == 0 and out["n_disturbed"] == 0
-    # Pulling a box from under the held one: clean while held; once released, what the held
-    # box carries drops onto what is left (on the shelf: success, but not strict success).
-    for x, s in ((0, 1), (1, 2)):
-        out = pull_outcome(stack3, physics, x, s, THR)
-        assert out["success_held"] and out["strict_success_held"], (x, s)
-        assert out["success"] and not out["strict_success"], (x, s)
-        assert out["n_left_shelf"] == 0 and out["n_disturbed"] >= 1
+    # Pulling the bottom box from under the held middle one: clean while held; once released,
+    # the middle box and the top one it carries drop onto the floor (on the shelf: success,
+    # but the top box moved: not strict success).
+    out = pull_outcome(stack3, physics, 0, 1, THR)
+    assert out["success_held"] and out["strict_success_held"]
+    assert out["success"] and not out["strict_success"]
+    assert out["n_left_shelf"] == 0 and out["n_disturbed"] == 1
+    # The middle box from under the held top one: the released top box settles onto the
+    # bottom one; it was manipulated, nothing else moved: strict success.
+    out = pull_outcome(stack3, physics, 1, 2, THR)
+    assert out["success"] and out["strict_success"] and out["n_disturbed"] == 0
 
 
 def test_oracle_keeps_a_strict_success(stack3, physics):

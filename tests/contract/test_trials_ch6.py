@@ -80,11 +80,17 @@ def test_pulling_the_top_is_clean_and_pulling_the_bottom_fails(stack3, physics):
 def test_a_held_box_is_released_before_the_step_is_judged(stack3, physics):
     """Bimanual (Fig. 6.7): holding the middle box keeps the stack up while the bottom box is
     pulled, but once the second arm lets go the middle and top boxes drop: clean while held,
-    a failure when judged after the release, as every step is."""
+    a failure when judged after the release, as every step is. Holding the top box while the
+    middle one is pulled: the released top box settles onto the bottom one and nothing else
+    moved: a success."""
     step, state = _step(stack3, physics, 0, hold=1)
     assert step["success_held"] and step["others_still_held"], step
-    assert not step["success"] and step["n_disturbed"] == 2, step
+    # the released middle box may settle lower (it was manipulated); the top one it carried
+    # moved with it: a failure
+    assert not step["success"] and step["n_disturbed"] == 1, step
     assert state.poses[1, 2] < stack3.poses[1, 2] - 0.01  # it dropped once released
+    step, _ = _step(stack3, physics, 1, hold=2)
+    assert step["success"] and step["success_held"], step
 
 
 def test_a_step_starts_from_the_state_the_last_one_left(stack3, physics):

@@ -43,13 +43,18 @@ def _result(held, released, increments=10, aborted=False, extracted=True, on_she
 
 
 def test_a_step_is_judged_after_the_release_and_also_as_while_held():
-    # box 0 pulled out, box 1 held: still while held, it drops 3 cm once released.
-    r = _result([np.nan, 0.0, 0.001], [np.nan, 0.03, 0.001])
+    # box 0 pulled out, box 1 held: once released it drops 3 cm with box 2 on it.
+    r = _result([np.nan, 0.0, 0.001], [np.nan, 0.03, 0.03])
     step = judge_pull(r, box=0, hold=1, gone=frozenset(), threshold_m=THR)
     assert set(STEP_FIELDS) <= set(step)
     assert step["success_held"] is True and step["others_still_held"] is True
     assert step["success"] is False and step["others_still"] is False
-    assert step["n_disturbed"] == 1
+    assert step["n_disturbed"] == 1  # box 2; the released box 1 may settle lower
+    # the released box alone settles lower: success; the released box off the shelf: failure
+    alone = _result([np.nan, 0.0, 0.001], [np.nan, 0.03, 0.001])
+    assert judge_pull(alone, 0, 1, frozenset(), THR)["success"] is True
+    off = _result([np.nan, 0.0, 0.0], [np.nan, 0.2, 0.0], on_shelf=[False, False, True])
+    assert judge_pull(off, 0, 1, frozenset(), THR)["success"] is False
 
 
 def test_a_box_off_the_shelf_fails_the_step_even_below_the_threshold():

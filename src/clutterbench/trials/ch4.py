@@ -146,10 +146,13 @@ def pull_outcome(
     def judge(d: np.ndarray, shelf: np.ndarray, others: list[int]) -> tuple[int, int]:
         return sum(not shelf[k] for k in others), sum(d[k] > threshold_m for k in others)
 
+    # Left the shelf: any box but the pulled one (the released support too). Moved: the
+    # boxes other than the manipulated ones (the support may settle lower once released).
     others = [k for k in range(spec.n) if k != extract]
-    left, moved = (int(v) for v in judge(disp, on_shelf, others))
-    held_others = [k for k in others if k != support]
-    left_held, moved_held = (int(v) for v in judge(disp_held, on_shelf_held, held_others))
+    still = [k for k in others if k != support]
+    left = int(judge(disp, on_shelf, others)[0])
+    moved = int(judge(disp, on_shelf, still)[1])
+    left_held, moved_held = (int(v) for v in judge(disp_held, on_shelf_held, still))
     return {
         "executed": True,
         "aborted_before_motion": False,

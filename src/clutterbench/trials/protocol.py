@@ -7,7 +7,8 @@ protocol").
 - **Release, then judge.** The pulled box leaves the scene (or, aborted, is let go where it
   is); the scene settles with the second arm still holding (the *held* judgement, kept as a
   second column); then every held box is released, the scene settles again, and the step is
-  judged from physics.
+  judged from physics: no box other than the manipulated ones (pulled, held) may have moved
+  beyond the threshold or left the shelf, and the released box must still be on the shelf.
 - **An episode ends at its first failed step** (a box other than the pulled one moved beyond
   the threshold or left the shelf), when the target is out, when the target is no longer on
   the shelf (fell: a failure), or when the planner gives up.
@@ -150,9 +151,10 @@ def judge_pull(
     result: PullResult | None, box: int, hold: int | None, gone: frozenset[int], threshold_m: float
 ) -> dict[str, Any]:
     """A step's named outcome from physics. `result` None: aborted before any motion (nothing
-    was simulated, nothing moved). Released judgement: every box but the pulled one counts
-    (the released one too: it must stay where it was held); held judgement: the held box
-    is left out, as while the second arm still holds it."""
+    was simulated, nothing moved). A step fails when a box other than the manipulated ones
+    (pulled, held) moved beyond the threshold or left the shelf, judged after the release
+    (what the released box carried or leaned on has settled; the released box itself may
+    settle lower, but must stay on the shelf) and, as a second column, while still held."""
     if result is None or result.increments == 0:
         return {
             "executed": False,
@@ -166,10 +168,12 @@ def judge_pull(
             "n_disturbed": 0,
             "disturbance_m": 0.0,
         }
-    n, total = moved_others(result.displacement_m, result.on_shelf, {box}, gone, threshold_m)
-    held_excl = {box} | ({hold} if hold is not None else set())
+    manipulated = {box} | ({hold} if hold is not None else set())
+    n, total = moved_others(result.displacement_m, result.on_shelf, manipulated, gone, threshold_m)
+    if hold is not None and not result.on_shelf[hold]:
+        n += 1  # the released box fell off the shelf
     n_held, _ = moved_others(
-        result.displacement_held_m, np.ones_like(result.on_shelf), held_excl, gone, threshold_m
+        result.displacement_held_m, np.ones_like(result.on_shelf), manipulated, gone, threshold_m
     )
     return {
         "executed": True,
