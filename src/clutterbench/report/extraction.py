@@ -76,17 +76,17 @@ FAMILY_COLUMNS = [
 """Table 6.3 by scene family: ours only (the thesis has no per-family split)."""
 
 SUCCESS_NOTE = (
-    "protocol: every step starts from a fresh world at the state the last one left; the "
-    "pulled box leaves the shelf (or, aborted, is let go), every held box is released and the "
-    "scene settles, then the step is judged from physics (never from a planner's prediction). "
-    "A step succeeds when its box left the shelf and no box other than the manipulated ones "
-    "(pulled, held) moved beyond the threshold or left the shelf (the released box may settle "
-    "lower but must stay on the shelf); an episode ends at its first failed step (thesis 6.3.2: each failed "
-    "episode has one failed step), when the target is out (success), when the target fell, or "
-    "when the planner gives up. success per step: over the judged steps (executed pulls that "
-    "took their box out or disturbed the pile); aborts that moved nothing are counted apart. "
-    "Intervals: per episode, Wilson 95%; per step, a 95% cluster bootstrap over episodes "
-    "(2,000 resamples, seed 0), since the steps of one episode are not independent. "
+    "protocol: every step starts from a fresh world at the state the last one left; the pulled "
+    "box leaves the shelf (or, aborted, is let go), every held box is released and the scene "
+    "settles, then the step is judged from physics (never from a planner's prediction). A step "
+    "succeeds when its box left the shelf and no box other than the manipulated ones (pulled, "
+    "held) moved beyond the threshold or left the shelf (the released box may settle lower but "
+    "must stay on the shelf); an episode ends at its first failed step (thesis 6.3.2: each "
+    "failed episode has one failed step), when the target is out (success), when the target "
+    "fell, or when the planner gives up. success per step: over the judged steps (executed "
+    "pulls that took their box out or disturbed the pile); aborts that moved nothing are "
+    "counted apart. Intervals: per episode, Wilson 95%; per step, a 95% cluster bootstrap over "
+    "episodes (2,000 resamples, seed 0), since the steps of one episode are not independent. "
     "judged while held: the same episodes judged before the release, where that differs."
 )
 

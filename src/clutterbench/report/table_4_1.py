@@ -365,8 +365,9 @@ def _notes(
         "different robot, objects and scenes.",
         "success (the thesis' definition): only the pulled box left the shelf. strict "
         "success: also no box but the pulled and the supporting one moved beyond 5 mm. Both "
-        "judged after the support was released and the scene settled; 'judged while the support is held': before the "
-        "release. k/n = rate [Wilson 95% interval]; the thesis' rates as printed.",
+        "judged after the support was released and the scene settled; 'judged while the "
+        "support is held': before the release. k/n = rate [Wilson 95% interval]; the "
+        "thesis' rates as printed.",
         "mean disturbed boxes: other boxes that moved beyond the threshold; mean "
         "disturbance: the summed displacement of the other boxes, per episode.",
         f"trial scenes: {grouped(used, lambda rs: 'stream ' + values_text(rs, 'stream'))}; "
