@@ -4,7 +4,7 @@
 #   make shell   set up, then a bash with .venv activated (dvc, clutterbench, stages/*.py)
 # torch: the pinned CPU build by default; a CUDA build for paper scale on a GPU, e.g.
 #   make TORCH_SPEC=torch==2.13.0+cu128 TORCH_INDEX_URL=https://download.pytorch.org/whl/cu128 repro
-# (docs/platform.md)
+# and train on it with CLUTTERBENCH_TRAIN_DEVICE=cuda (docs/platform.md)
 SHELL := /bin/bash
 VENV := .venv
 BIN := $(abspath $(VENV))/bin

@@ -11,6 +11,7 @@ byte-identical.
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
 import zlib
 from collections.abc import Callable
@@ -35,6 +36,11 @@ from clutterbench.logs.mcap_episode import EpisodeWriter
 from clutterbench.models import build_model
 from clutterbench.models.checkpoint import save_checkpoint
 from clutterbench.progress import progress_bar
+
+DEVICE_ENV = "CLUTTERBENCH_TRAIN_DEVICE"
+"""Where training runs: cpu (the default), cuda, or auto (cuda when torch sees a GPU). It
+changes where the numbers are computed, not what: no dvc parameter, results agree
+statistically (bf16 autocast is a CPU setting; on a GPU training runs in float32)."""
 
 LOG_COLUMNS = (
     "epoch",
@@ -83,19 +89,41 @@ def image_size(ds: PairDataset) -> int:
     return int(h)
 
 
+def train_device(value: str | None = None) -> torch.device:
+    """The device named by `value` (default: $CLUTTERBENCH_TRAIN_DEVICE, else cpu)."""
+    name = (value if value is not None else os.environ.get(DEVICE_ENV, "cpu")).strip().lower()
+    if name == "auto":
+        name = "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda" and not torch.cuda.is_available():
+        raise ClutterbenchError(
+            f"{DEVICE_ENV}=cuda but this torch build ({torch.__version__}) sees no GPU; "
+            "install a CUDA build (TORCH_SPEC/TORCH_INDEX_URL, docs/platform.md) or use cpu"
+        )
+    if name not in ("cpu", "cuda"):
+        raise ClutterbenchError(f"{DEVICE_ENV}={name!r}: use cpu, cuda or auto")
+    return torch.device(name)
+
+
+def to_device(batch: dict[str, torch.Tensor], device: torch.device) -> dict[str, torch.Tensor]:
+    """The batch's tensors on `device` (the same objects when already there)."""
+    return {k: v.to(device) for k, v in batch.items()}
+
+
 def evaluate_loss(
     model: nn.Module, loader: DataLoader, loss: Loss, cfg: TrainConfig, threshold: float
 ) -> tuple[float, dict[str, float]]:
     """Mean loss and pixel scores of the collapse class over `loader` (eval mode, no grad)."""
     model.eval()
+    device = next(model.parameters()).device
     counts, total, n = PixelCounts(threshold), 0.0, 0
     with torch.no_grad():
         for batch in loader:
+            batch = to_device(batch, device)
             d = batch["depth_m"]
             logits = forward_logits(model, d, batch["target"], cfg.bf16, cfg.channels_last)
             total += float(loss(logits, batch)) * len(d)
             n += len(d)
-            counts.update(collapse_probs(logits), batch["collapse"])
+            counts.update(collapse_probs(logits).cpu(), batch["collapse"].cpu())
     return total / max(n, 1), counts.summary()
 
 
@@ -121,7 +149,8 @@ def train_model(
             f"train.models.{name}.net.input_size is {mcfg.net.input_size} but dataset "
             f"'{mcfg.dataset}' has {size}x{size} images (sim.camera.image_size)"
         )
-    model = build_model(mcfg.arch, mcfg.net)
+    device = train_device()
+    model = build_model(mcfg.arch, mcfg.net).to(device)
     if cfg.channels_last:
         model = model.to(memory_format=torch.channels_last)
     params = [p for p in model.parameters() if p.requires_grad]
@@ -166,8 +195,9 @@ def train_model(
             log.append(row)
             epoch_s.append(round(time.perf_counter() - t0, 1))
             mcap.write_json(float(epoch), "/train/epoch", row)
-            heat = forward_probs(model, sample["depth_m"][None], sample["target"][None], cfg.bf16)
-            mcap.write_mono8(float(epoch), "/val/heatmap", _to_mono8(heat[0, 0]))
+            depth, target = (sample[k][None].to(device) for k in ("depth_m", "target"))
+            heat = forward_probs(model, depth, target, cfg.bf16)
+            mcap.write_mono8(float(epoch), "/val/heatmap", _to_mono8(heat[0, 0].cpu()))
             print(
                 f"{name} epoch {epoch}: train {train_loss:.4f} val {val_loss:.4f} "
                 f"IoU {scores['iou']:.3f}",
@@ -211,6 +241,7 @@ def train_step(
     cfg: TrainConfig,
 ) -> torch.Tensor:
     """One optimizer step on one batch; returns the (detached) loss before the step."""
+    batch = to_device(batch, next(model.parameters()).device)
     logits = forward_logits(model, batch["depth_m"], batch["target"], cfg.bf16, cfg.channels_last)
     value = loss(logits, batch)
     opt.zero_grad(set_to_none=True)
