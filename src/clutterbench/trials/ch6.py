@@ -67,12 +67,14 @@ class SearchOracle:
     of removed boxes, for a sequence of clean steps that ends with the target out.
 
     Actions: every visible box (planners see no other) and the target; with `holding`, the
-    target may also be pulled while any visible box its unheld pull disturbs is held (the
-    bimanual and ch. 4 planners hold one box while pulling the target; holding a box the
-    pull leaves in place cannot stop the others' motion). As execution reproduces the
-    simulation bit for bit, the plan found is followed; no planner succeeds on an episode
-    where the search proved there is no such sequence, unless a node budget ran out
-    (counted) or a planner's aborted pull left a state outside the search's actions.
+    target may also be pulled while any one visible box is held (the bimanual and ch. 4
+    planners hold one box while pulling the target), the boxes its unheld pull disturbs
+    tried first. Holding a box that the unheld pull leaves within the threshold can still
+    save the others (it stops the few millimetres that let them slide), so no box is left
+    out. As execution reproduces the simulation bit for bit, the plan found is followed; no
+    planner succeeds on an episode where the search proved there is no such sequence,
+    unless a node budget ran out (counted) or a planner's aborted pull left a state outside
+    the search's actions.
     Lives here, not in planning/, because it reads the world."""
 
     def __init__(
@@ -143,16 +145,15 @@ class SearchOracle:
             first, after, disp = self.simulate(now, (target, None), cut_short=False)
             if first["success"]:
                 return [((target, None), after)]
-            # The boxes the target's pull disturbed: what stands in its way, and the only
-            # boxes whose holding can change its outcome (holding a box that stays put
-            # anyway leaves the others' motion as it was).
+            # The boxes the target's pull disturbed: what stands in its way, and the holds
+            # most likely to save it, so they are tried first.
             in_way = np.nan_to_num(disp, nan=0.0) > self.params.moved_threshold_m
             if self.holding:
-                for h in boxes:
-                    if h != target and in_way[h]:
-                        step, after, _ = self.simulate(now, (target, h))
-                        if step["success"]:
-                            return [((target, h), after)]
+                others = sorted((b for b in boxes if b != target), key=lambda b: (not in_way[b], b))
+                for h in others:
+                    step, after, _ = self.simulate(now, (target, h))
+                    if step["success"]:
+                        return [((target, h), after)]
             children = []
             for x in boxes:
                 if x != target:
