@@ -124,6 +124,9 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
                 assert {"extracted", "others_still", "success", "success_held"} <= set(step)
         topics = read_episode(a / "data/trials" / name / "episodes.mcap")["topics"]
         assert topics["/trial/outcome"] == cond.episodes
+        # Foxglove's 3D panel: the scene as cubes and the camera the images project through
+        assert topics.get("/scene", 0) >= cond.episodes, name
+        assert topics.get("/camera/calibration", 0) >= cond.episodes, name
     for rec in ch4:
         assert {"executed", "aborted_before_motion", "success_held", "risk_ties"} <= set(rec)
     assert (a / "reports/trials_ch4/fig_4_8.png").stat().st_size > 1000
