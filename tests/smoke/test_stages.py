@@ -122,6 +122,8 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
             for step in rec["steps"]:
                 assert {"executed", "aborted_before_motion", "aborted_after_motion"} <= set(step)
                 assert {"extracted", "others_still", "success", "success_held"} <= set(step)
+            # no step follows a failed one (an abort that disturbed nothing is no failure)
+            assert all(s["success"] is not False for s in rec["steps"][:-1])
         topics = read_episode(a / "data/trials" / name / "episodes.mcap")["topics"]
         assert topics["/trial/outcome"] == cond.episodes
         # Foxglove's 3D panel: the scene as cubes and the camera the images project through

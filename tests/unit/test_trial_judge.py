@@ -66,8 +66,8 @@ def test_an_abort_before_motion_is_not_a_collapse_and_is_not_judged():
     for r in (None, _result([np.nan, 0.0], [np.nan, 0.0], increments=0, aborted=True)):
         step = judge_pull(r, 0, None, frozenset(), THR)
         assert step["aborted_before_motion"] is True and step["executed"] is False
-        assert step["others_still"] is True and step["success"] is False
-        assert not judged(step)
+        assert step["others_still"] is True and step["success"] is None
+        assert not judged(step) and step["judged"] is False
         assert episode_end(step | {"box": 0}, False, True) is None
 
 
@@ -75,7 +75,8 @@ def test_an_abort_after_motion_that_moved_nothing_is_an_abort():
     r = _result([0.05, 0.0], [0.05, 0.0], increments=3, aborted=True, extracted=False)
     step = judge_pull(r, 0, None, frozenset(), THR)
     assert step["aborted_after_motion"] and step["executed"] and not step["extracted"]
-    assert step["others_still"] and not judged(step)
+    assert step["others_still"] and not judged(step) and step["judged"] is False
+    assert step["success"] is None and step["success_held"] is None  # neither won nor lost
     moved = judge_pull(
         _result([0.05, 0.02], [0.05, 0.02], 3, True, False), 0, None, frozenset(), THR
     )

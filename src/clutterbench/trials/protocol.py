@@ -35,11 +35,14 @@ STEP_FIELDS = (
     "aborted_after_motion",
     "extracted",
     "others_still",
+    "judged",
     "success",
     "others_still_held",
     "success_held",
 )
-"""The named outcome of every step record (booleans judged from physics)."""
+"""The named outcome of every step record (judged from physics). `success` and
+`success_held` are booleans on judged steps and None on an abort that disturbed nothing
+(neither a success nor a failure: the episode goes on)."""
 
 EPISODE_ENDS = ("target_out", "collapse", "target_fell", "gave_up", "max_steps")
 """Why an episode ended: the target left the shelf after a clean step; a step moved another
@@ -154,7 +157,9 @@ def judge_pull(
     was simulated, nothing moved). A step fails when a box other than the manipulated ones
     (pulled, held) moved beyond the threshold or left the shelf, judged after the release
     (what the released box carried or leaned on has settled; the released box itself may
-    settle lower, but must stay on the shelf) and, as a second column, while still held."""
+    settle lower, but must stay on the shelf) and, as a second column, while still held.
+    An abort that disturbed nothing is neither: `judged` false, `success` and `success_held`
+    None (the episode goes on)."""
     if result is None or result.increments == 0:
         return {
             "executed": False,
@@ -162,9 +167,10 @@ def judge_pull(
             "aborted_after_motion": False,
             "extracted": False,
             "others_still": True,
-            "success": False,
+            "judged": False,
+            "success": None,
             "others_still_held": True,
-            "success_held": False,
+            "success_held": None,
             "n_disturbed": 0,
             "disturbance_m": 0.0,
         }
@@ -175,15 +181,19 @@ def judge_pull(
     n_held, _ = moved_others(
         result.displacement_held_m, np.ones_like(result.on_shelf), manipulated, gone, threshold_m
     )
-    return {
+    step = {
         "executed": True,
         "aborted_before_motion": False,
         "aborted_after_motion": result.aborted,
         "extracted": result.extracted,
         "others_still": n == 0,
-        "success": result.extracted and n == 0,
+    }
+    counts = judged(step)
+    return step | {
+        "judged": counts,
+        "success": result.extracted and n == 0 if counts else None,
         "others_still_held": n_held == 0,
-        "success_held": result.extracted and n_held == 0,
+        "success_held": result.extracted and n_held == 0 if counts else None,
         "n_disturbed": n,
         "disturbance_m": total,
     }
