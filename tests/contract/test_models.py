@@ -10,12 +10,13 @@ import torch
 
 from clutterbench.collapse.config import TrainConfig, TrainModelConfig
 from clutterbench.collapse.losses import bce_loss
-from clutterbench.collapse.predict import CollapsePredictor, predict_collapse
+from clutterbench.collapse.predict import CollapsePredictor, forward_logits, predict_collapse
 from clutterbench.collapse.train import loss_fn, train_step
 from clutterbench.data.labels import CLASS_B, CLASS_C, CLASS_E, CLASS_S, PULL_CLASSES
 from clutterbench.errors import ClutterbenchError
 from clutterbench.models import ARCHS, build_model
 from clutterbench.models.checkpoint import FORMAT, load_checkpoint, save_checkpoint
+from clutterbench.models.common import fold_batchnorm
 from clutterbench.models.vgg import VGG16Encoder, VGGConfig
 
 SIZE = 64
@@ -263,3 +264,69 @@ def test_predict_collapse_takes_mask_pairs(arch):
         probs = torch.softmax(model(depth[:1].expand(4, -1, -1, -1), masks), dim=1)
     assert heat.shape == (4, SIZE, SIZE)
     np.testing.assert_allclose(heat, probs[:, -1].numpy(), atol=1e-5)  # the C class
+
+
+@pytest.mark.parametrize("n_masks", [1, 2])
+def test_grouped_forward_equals_the_per_pair_forward(arch, n_masks):
+    """Three scenes, seven targets: encoding each scene once (scene_of) gives the logits and
+    the weight gradients of running every (scene, target) pair on its own; a scene's
+    features given to another scene's target do not."""
+    torch.manual_seed(0)
+    extra = {"n_masks": 2, "n_classes": 4} if n_masks == 2 else {}
+    model = build_model(arch, tiny_config(arch, **extra)).eval()
+    g = torch.Generator().manual_seed(1)
+    depth = 0.4 + 0.5 * torch.rand(3, 1, SIZE, SIZE, generator=g)
+    masks = (torch.rand(7, n_masks, SIZE, SIZE, generator=g) > 0.8).float()
+    scene_of = torch.tensor([0, 0, 1, 2, 2, 2, 1])
+
+    def run(d, so):
+        model.zero_grad()
+        out = forward_logits(model, d, masks, bf16=False, channels_last=False, scene_of=so)
+        out.float().square().mean().backward()
+        return out.detach(), [p.grad.clone() for p in model.parameters()]
+
+    per_pair, per_pair_grads = run(depth[scene_of], None)
+    grouped, grouped_grads = run(depth, scene_of)
+    torch.testing.assert_close(grouped, per_pair, rtol=1e-4, atol=1e-5)
+    for a, b in zip(grouped_grads, per_pair_grads):
+        torch.testing.assert_close(a, b, rtol=1e-3, atol=1e-6)
+    wrong, _ = run(depth, scene_of.roll(1))
+    assert not torch.allclose(wrong, per_pair, rtol=1e-4, atol=1e-5)
+
+
+def test_predict_collapse_encodes_the_scene_once_with_the_same_maps(arch, monkeypatch):
+    torch.manual_seed(0)
+    model = build_model(arch, tiny_config(arch)).eval()
+    depth, target, _ = scene_batch(5)
+    predictor = CollapsePredictor(model, batch_size=2, bf16=False, channels_last=False)
+    calls = []
+    if getattr(model, "encodes_scene_once", False):
+        real = predictor.model.encode
+        monkeypatch.setattr(predictor.model, "encode", lambda d: calls.append(len(d)) or real(d))
+    maps = predict_collapse(predictor, depth[0, 0].numpy(), target[:, 0].numpy())
+    assert calls == ([1] if getattr(model, "encodes_scene_once", False) else [])
+    with torch.no_grad():
+        one_by_one = torch.sigmoid(model(depth[:1].expand(5, -1, -1, -1), target))
+    np.testing.assert_allclose(maps, one_by_one[:, 0].numpy(), rtol=1e-4, atol=1e-5)
+
+
+def test_folding_batchnorm_keeps_the_function(arch):
+    """Inference folds each BatchNorm into its conv: the same maps as the trained network
+    (eval mode), on the per-pair and the grouped path; BatchNorm is gone."""
+    torch.manual_seed(0)
+    model = build_model(arch, tiny_config(arch))
+    depth, target, truth = scene_batch(4)
+    opt = torch.optim.Adam(model.parameters(), lr=1e-2)
+    for _ in range(3):  # running statistics and affine parameters away from their init
+        opt.zero_grad()
+        bce_loss(model(depth, target), truth).backward()
+        opt.step()
+    model.eval()
+    folded = fold_batchnorm(model)
+    assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in folded.modules())
+    scene_of = torch.tensor([0, 0, 1, 1])
+    with torch.no_grad():
+        for d, so in ((depth, None), (depth[:2], scene_of)):
+            want = forward_logits(model, d, target, False, False, so)
+            got = forward_logits(folded, d, target, False, False, so)
+            torch.testing.assert_close(got, want, rtol=1e-4, atol=1e-4)

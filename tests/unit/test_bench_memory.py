@@ -6,8 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from clutterbench.collapse.bench import _memory_markdown
-from clutterbench.collapse.bench_memory import epoch_peak_rss, peak_rss_mb
+from clutterbench.bench.memory import epoch_peak_rss, memory_markdown, peak_rss_mb
 from clutterbench.collapse.config import TrainConfig
 from clutterbench.config import load_params, load_section
 from clutterbench.data.split import Fractions, split_dataset
@@ -49,4 +48,4 @@ def test_tiny_epoch_reports_its_peak(root, tmp_path):
         "decompressed_dataset_mb": 0.1,
         **run,
     }
-    assert f"| toy | 8 | {run['train_pairs']} |" in "\n".join(_memory_markdown([row]))
+    assert f"| toy | 8 | {run['train_pairs']} |" in "\n".join(memory_markdown([row]))

@@ -9,15 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from torch.utils.data import DataLoader
 
 from clutterbench.data import shards as shards_module
 from clutterbench.data.dataset import (
     CollapseDataset,
+    GroupedLoader,
     PullPairDataset,
-    ShardShuffleSampler,
+    SceneGroupBatchSampler,
     open_pairs,
-    shard_window_order,
+    scene_group_order,
 )
 from clutterbench.data.labels import (
     CLASS_C,
@@ -30,6 +30,7 @@ from clutterbench.data.split import Fractions, split_dataset
 from clutterbench.data.synthetic import write_synthetic_dataset
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import load_npz, read_json, write_json
+from clutterbench.sim.noise import DepthNoiseConfig
 
 SHARD_SIZE, N_SCENES, SIZE = 4, 22, 32  # 6 shards, the last one short
 
@@ -108,44 +109,86 @@ def count_shard_reads(monkeypatch) -> Counter:
 def test_a_shuffled_epoch_reads_each_shard_once(data, monkeypatch):
     ds = open_ds(data, split="train", cache_shards=2)
     reads = count_shard_reads(monkeypatch)
-    for _ in DataLoader(ds, batch_size=3, sampler=ds.shard_sampler(seed=1)):
+    for _ in GroupedLoader(ds, sampler=ds.group_sampler(3, 2, seed=1)):
         pass
     assert set(reads.values()) == {1} and len(reads) == len(set(ds.pair_shards.tolist()))
 
 
-def test_shard_window_order_is_a_shard_local_permutation():
-    pair_shards = np.repeat(np.arange(7), [3, 1, 4, 2, 5, 3, 2])
-    order = shard_window_order(pair_shards, 3, np.random.default_rng(0))
-    assert sorted(order.tolist()) == list(range(len(pair_shards)))
-    # Consecutive windows: pairs of 3, 3 then 1 shards, never mixed across windows.
-    seen = []
-    for shard in pair_shards[order]:
-        if shard not in seen:
-            seen.append(shard)
+def grouped_layout():
+    """7 shards of 1-3 scenes of 1-9 samples; returns (pair_scenes, scene_shards)."""
+    rng = np.random.default_rng(3)
+    scene_shards = np.repeat(np.arange(7), [2, 1, 3, 2, 3, 1, 2])
+    pair_scenes = np.repeat(np.arange(len(scene_shards)), rng.integers(1, 10, len(scene_shards)))
+    return pair_scenes, scene_shards
+
+
+def test_scene_group_order_is_a_shard_local_permutation_in_scene_runs():
+    pair_scenes, scene_shards = grouped_layout()
+    pair_shards = scene_shards[pair_scenes]
+    order = scene_group_order(pair_scenes, scene_shards, 3, 2, np.random.default_rng(0))
+    assert sorted(order.tolist()) == list(range(len(pair_scenes)))
+    # Consecutive windows of 3, 3 then 1 shards, never mixed across windows.
+    seen = list(dict.fromkeys(pair_shards[order].tolist()))
     windows = [set(seen[w : w + 3]) for w in range(0, 7, 3)]
-    sizes = [sum(np.isin(pair_shards, list(w))) for w in windows]
-    bounds = np.cumsum([0, *sizes])
+    bounds = np.cumsum([0, *(np.isin(pair_shards, list(w)).sum() for w in windows)])
     for w, lo, hi in zip(windows, bounds[:-1], bounds[1:]):
         assert set(pair_shards[order[lo:hi]].tolist()) == w
-    assert order.tolist() != sorted(order.tolist())  # shuffled within windows
+
+    # A scene's samples come together when `group` allows it, and in pieces when not.
+    def n_runs(group: int) -> int:
+        o = scene_group_order(pair_scenes, scene_shards, 3, group, np.random.default_rng(0))
+        return 1 + np.count_nonzero(np.diff(pair_scenes[o]))
+
+    n_scenes = len(scene_shards)
+    assert n_runs(9) == n_scenes and n_runs(2) > n_scenes
+    assert order.tolist() != sorted(order.tolist())  # shuffled
 
 
-def test_shard_window_order_visits_shards_in_random_order():
-    pair_shards = np.repeat(np.arange(6), 2)
+def test_scene_group_order_visits_shards_in_random_order():
+    pair_scenes, scene_shards = grouped_layout()
     firsts = {
-        tuple(dict.fromkeys(pair_shards[shard_window_order(pair_shards, 1, rng)].tolist()))
+        tuple(
+            dict.fromkeys(
+                scene_shards[pair_scenes[scene_group_order(pair_scenes, scene_shards, 1, 8, rng)]]
+            )
+        )
         for rng in map(np.random.default_rng, range(4))
     }
     assert len(firsts) > 1
 
 
-def test_sampler_is_seeded_and_reshuffles_each_epoch():
-    pair_shards = np.repeat(np.arange(10), 5)
-    a, b = ShardShuffleSampler(pair_shards, 2, 7), ShardShuffleSampler(pair_shards, 2, 7)
+def test_group_sampler_is_seeded_and_reshuffles_each_epoch():
+    pair_scenes, scene_shards = grouped_layout()
+    a, b = (SceneGroupBatchSampler(pair_scenes, scene_shards, 2, 5, 3, 7) for _ in range(2))
     first_a, first_b = list(a), list(b)
-    assert first_a == first_b and len(a) == 50
+    assert first_a == first_b and len(first_a) == len(a) == -(-len(pair_scenes) // 5)
+    assert all(len(batch) == 5 for batch in first_a[:-1])
+    assert sorted(i for batch in first_a for i in batch) == list(range(len(pair_scenes)))
     assert list(a) != first_a  # epoch 2 differs from epoch 1
-    assert list(ShardShuffleSampler(pair_shards, 2, 8)) != first_a
+    assert list(SceneGroupBatchSampler(pair_scenes, scene_shards, 2, 5, 3, 8)) != first_a
+
+
+@pytest.mark.parametrize("noise", [False, True])
+def test_a_grouped_batch_gives_each_sample_its_own_scene(data, noise):
+    """Dataset.batch: one depth image per run of a scene's samples, scene_of pointing each
+    sample at it; masks and labels as the items themselves."""
+    kw = {"noise": DepthNoiseConfig()} if noise else {}
+    ds = open_ds(data, split="train", **kw)
+    indices = [i for batch in ds.group_sampler(6, 3, seed=2) for i in batch][:12]
+    batch = ds.batch(indices)
+    scenes = ds.pairs[indices, 0]
+    assert len(batch["depth_m"]) == 1 + np.count_nonzero(np.diff(scenes))
+    assert len(batch["depth_m"]) < len(indices)  # some scene gives several samples
+    plain = open_ds(data, split="train")
+    for j, i in enumerate(indices):
+        item = plain[i]
+        depth = batch["depth_m"][int(batch["scene_of"][j])]
+        for k in ("target", "collapse"):
+            assert torch.equal(batch[k][j], item[k])
+        if noise:  # noised, but around this sample's own scene
+            assert 0 < float((depth - item["depth_m"]).abs().median()) < 0.01
+        else:
+            assert torch.equal(depth, item["depth_m"])
 
 
 def test_split_made_for_other_data_is_refused(data, tmp_path):

@@ -44,6 +44,10 @@ class TrainModelConfig:
     flip: bool = True
     """Random left-right flips (gravity is symmetric about the shelf's vertical plane;
     thesis 4.3.1 doubles its ch. 4 data this way)."""
+    scene_group: int = bounded(8, ge=1)
+    """A training batch takes the targets of a scene together, at most this many in a row,
+    so that a network that encodes the depth image apart from the masks (collapse_map)
+    encodes it once for them all; more scenes per batch with a smaller value."""
 
 
 def check_labels(m: TrainModelConfig, key: str) -> None:

@@ -17,20 +17,20 @@ from typing import Any
 
 import numpy as np
 import torch
-from torch.utils.data import DataLoader
 
 from clutterbench.collapse.config import EvaluateConfig
 from clutterbench.collapse.metrics import PixelCounts, best_iou_row, sweep_row
 from clutterbench.collapse.predict import CollapsePredictor, forward_probs
-from clutterbench.data.dataset import PairDataset, open_pairs
+from clutterbench.data.dataset import GroupedLoader, PairDataset, open_pairs
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_text
 from clutterbench.models.checkpoint import check_compatible, load_checkpoint
 from clutterbench.progress import progress_bar
 
 ProbSource = Callable[[dict[str, torch.Tensor]], torch.Tensor]
-"""A batch of dataset items (depth_m, target masks, collapse: (B, 1 or n_masks, H, W)) ->
-collapse probabilities (B, 1, H, W). The network in the stage; tests inject others (e.g. the
+"""A batch of P samples grouped by scene (Dataset.batch: depth_m (S, 1, H, W), scene_of
+(P,), target (P, n_masks, H, W), collapse (P, 1, H, W)) -> collapse probabilities
+(P, 1, H, W). The network in the stage; tests inject others (e.g. the
 truth)."""
 
 SCORES = ("pixel_accuracy", "iou", "precision", "recall")
@@ -89,6 +89,7 @@ def network_probs(predictor: CollapsePredictor) -> ProbSource:
             batch["target"],
             predictor.bf16,
             predictor.channels_last,
+            batch["scene_of"],
         )
 
     return probs
@@ -106,7 +107,7 @@ def accumulate(
     arrays of the pairs in `picks` for the figure."""
     counts = PixelCounts(threshold)
     samples: dict[str, list[np.ndarray]] = {k: [] for k in ("depth_m", "target", "truth", "prob")}
-    loader = DataLoader(ds, batch_size=batch_size)
+    loader = GroupedLoader(ds, batch_size=batch_size)
     with torch.no_grad(), progress_bar(desc, len(ds)) as advance:
         start = 0
         for batch in loader:
@@ -114,7 +115,8 @@ def accumulate(
             counts.update(prob, batch["collapse"])
             for j in range(len(prob)):
                 if start + j in picks:
-                    samples["depth_m"].append(batch["depth_m"][j, 0].numpy())
+                    depth = batch["depth_m"][int(batch["scene_of"][j]), 0]
+                    samples["depth_m"].append(depth.numpy())
                     samples["target"].append(batch["target"][j].numpy())
                     samples["truth"].append(batch["collapse"][j, 0].numpy())
                     samples["prob"].append(prob[j, 0].numpy())

@@ -1,12 +1,14 @@
 """Inference: depth + masks -> collapse heatmaps, batched over candidates.
 
 The support-graph step (thesis 6.2.2) calls `predict_collapse` once per scene with the masks
-of every object, so all targets of a scene go through the network in one or a few batches;
-the ch. 4 planner passes (extraction, support) mask pairs the same way.
+of every object, so the scene's depth image is encoded once and its targets go through the
+mask encoder and decoder in one or a few batches; the ch. 4 planner passes (extraction,
+support) mask pairs the same way (`scene_logits`).
 """
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +16,7 @@ import torch
 from torch import nn
 
 from clutterbench.models.checkpoint import check_compatible, load_checkpoint
+from clutterbench.models.common import fold_batchnorm
 
 
 def forward_logits(
@@ -22,14 +25,23 @@ def forward_logits(
     target: torch.Tensor,
     bf16: bool = True,
     channels_last: bool = True,
+    scene_of: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """(B, 1, H, W) depth (m) and (B, n_masks, H, W) masks -> logits, in the
-    measured-fastest CPU setup (channels-last memory, bf16 autocast; reports/bench/models.md)."""
+    """(S, 1, H, W) depth (m) and (P, n_masks, H, W) masks -> (P, K, H, W) logits, in the
+    measured-fastest CPU setup (channels-last memory, bf16 autocast; reports/bench/models.md).
+
+    Without `scene_of` mask p goes with depth p (S = P). With it, mask p goes with depth
+    scene_of[p]: a network that `encodes_scene_once` encodes each depth image once for all
+    its targets, any other network sees each pair's depth image as before."""
+    if scene_of is not None and not getattr(model, "encodes_scene_once", False):
+        depth_m, scene_of = depth_m.index_select(0, scene_of), None
     if channels_last:
         depth_m = depth_m.contiguous(memory_format=torch.channels_last)
         target = target.contiguous(memory_format=torch.channels_last)
     with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
-        return model(depth_m, target)
+        if scene_of is None:
+            return model(depth_m, target)
+        return model(depth_m, target, scene_of)
 
 
 def forward_probs(
@@ -38,9 +50,11 @@ def forward_probs(
     target: torch.Tensor,
     bf16: bool = True,
     channels_last: bool = True,
+    scene_of: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """(B, 1, H, W) depth (m) and masks -> (B, 1, H, W) float32 collapse probabilities."""
-    return collapse_probs(forward_logits(model, depth_m, target, bf16, channels_last))
+    """Depth (m) and masks as `forward_logits` -> (P, 1, H, W) float32 collapse
+    probabilities."""
+    return collapse_probs(forward_logits(model, depth_m, target, bf16, channels_last, scene_of))
 
 
 def collapse_probs(logits: torch.Tensor) -> torch.Tensor:
@@ -61,11 +75,16 @@ class CollapsePredictor:
         batch_size: int = 16,
         bf16: bool = True,
         channels_last: bool = True,
+        encode_once: bool = True,
+        fold_bn: bool = True,
     ):
-        self.model = model.eval()
+        self.model = fold_batchnorm(model) if fold_bn else model.eval()
         if channels_last:
             self.model = self.model.to(memory_format=torch.channels_last)
         self.batch_size, self.bf16, self.channels_last = batch_size, bf16, channels_last
+        self.encode_once = encode_once
+        self.seconds = 0.0
+        """Wall time spent in `scene_logits` so far (the collapse prediction's share)."""
 
     @classmethod
     def from_checkpoint(
@@ -87,29 +106,48 @@ class CollapsePredictor:
 
 
 @torch.no_grad()
+def scene_logits(
+    predictor: CollapsePredictor, depth_m: np.ndarray, masks: np.ndarray
+) -> torch.Tensor:
+    """One depth image (H, W) float32 metres and K candidate mask sets (K, n_masks, H, W) ->
+    (K, n_classes, H, W) logits, in batches of the predictor's batch size. A network that
+    `encodes_scene_once` encodes the depth image once for all K candidates and runs only its
+    mask encoders and decoder per candidate."""
+    assert depth_m.dtype == np.float32 and depth_m.ndim == 2, "depth must be float32 metres, HxW"
+    if masks.ndim != 4 or masks.shape[2:] != depth_m.shape:
+        h, w = depth_m.shape
+        raise ValueError(f"target_masks must be (K, {h}, {w}) or (K, n_masks, {h}, {w})")
+    started = time.perf_counter()
+    model, bf16, channels_last = predictor.model, predictor.bf16, predictor.channels_last
+    memory = torch.channels_last if channels_last else torch.contiguous_format
+    depth = torch.from_numpy(np.ascontiguousarray(depth_m))[None, None]
+    feats = None
+    # One candidate: nothing to share, and the concatenated decoder is the faster one.
+    if predictor.encode_once and len(masks) > 1 and getattr(model, "encodes_scene_once", False):
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+            feats = model.encode(depth.contiguous(memory_format=memory))
+    out = []
+    for start in range(0, len(masks), predictor.batch_size):
+        chunk = torch.from_numpy(masks[start : start + predictor.batch_size].astype(np.float32))
+        if feats is None:  # one depth image per candidate
+            d = depth.expand(len(chunk), -1, -1, -1)
+            out.append(forward_logits(model, d, chunk, bf16, channels_last))
+            continue
+        scene_of = torch.zeros(len(chunk), dtype=torch.int64)
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+            out.append(model.decode(feats, chunk.contiguous(memory_format=memory), scene_of))
+    logits = torch.cat(out) if out else torch.zeros((0, 1, *depth_m.shape))
+    predictor.seconds += time.perf_counter() - started
+    return logits
+
+
 def predict_collapse(
     predictor: CollapsePredictor, depth_m: np.ndarray, target_masks: np.ndarray
 ) -> np.ndarray:
     """Heatmaps (K, H, W) float32 in [0, 1] for one depth image (H, W) float32 metres and
     K binary target masks (K, H, W) (or K mask sets (K, n_masks, H, W), e.g. extraction and
     support): the collapse probability of each candidate action."""
-    assert depth_m.dtype == np.float32 and depth_m.ndim == 2, "depth must be float32 metres, HxW"
     masks = np.asarray(target_masks)
     if masks.ndim == 3:
         masks = masks[:, None]
-    if masks.ndim != 4 or masks.shape[2:] != depth_m.shape:
-        h, w = depth_m.shape
-        raise ValueError(f"target_masks must be (K, {h}, {w}) or (K, n_masks, {h}, {w})")
-    depth = torch.from_numpy(np.ascontiguousarray(depth_m))[None, None]
-    out = np.empty((len(masks), *depth_m.shape), dtype=np.float32)
-    for start in range(0, len(masks), predictor.batch_size):
-        chunk = torch.from_numpy(masks[start : start + predictor.batch_size].astype(np.float32))
-        probs = forward_probs(
-            predictor.model,
-            depth.expand(len(chunk), -1, -1, -1),
-            chunk,
-            predictor.bf16,
-            predictor.channels_last,
-        )
-        out[start : start + len(chunk)] = probs[:, 0].numpy()
-    return out
+    return collapse_probs(scene_logits(predictor, depth_m, masks))[:, 0].numpy()

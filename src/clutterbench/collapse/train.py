@@ -21,14 +21,13 @@ from typing import Any
 import numpy as np
 import torch
 from torch import nn
-from torch.utils.data import DataLoader
 
 from clutterbench.collapse.config import TrainConfig, TrainModelConfig
 from clutterbench.collapse.losses import bce_loss, ce_loss, focal_loss
 from clutterbench.collapse.metrics import PixelCounts
 from clutterbench.collapse.predict import collapse_probs, forward_logits, forward_probs
 from clutterbench.config import as_dict
-from clutterbench.data.dataset import PairDataset, open_pairs
+from clutterbench.data.dataset import GroupedLoader, PairDataset, open_pairs
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json
 from clutterbench.logs.csv_log import CsvLog
@@ -110,7 +109,7 @@ def to_device(batch: dict[str, torch.Tensor], device: torch.device) -> dict[str,
 
 
 def evaluate_loss(
-    model: nn.Module, loader: DataLoader, loss: Loss, cfg: TrainConfig, threshold: float
+    model: nn.Module, loader: GroupedLoader, loss: Loss, cfg: TrainConfig, threshold: float
 ) -> tuple[float, dict[str, float]]:
     """Mean loss and pixel scores of the collapse class over `loader` (eval mode, no grad)."""
     model.eval()
@@ -119,10 +118,9 @@ def evaluate_loss(
     with torch.no_grad():
         for batch in loader:
             batch = to_device(batch, device)
-            d = batch["depth_m"]
-            logits = forward_logits(model, d, batch["target"], cfg.bf16, cfg.channels_last)
-            total += float(loss(logits, batch)) * len(d)
-            n += len(d)
+            logits = batch_logits(model, batch, cfg)
+            total += float(loss(logits, batch)) * len(logits)
+            n += len(logits)
             counts.update(collapse_probs(logits).cpu(), batch["collapse"].cpu())
     return total / max(n, 1), counts.summary()
 
@@ -161,12 +159,12 @@ def train_model(
         if mcfg.lr_schedule == "cosine"
         else None
     )
-    gen = torch.Generator().manual_seed(seed)
-    # Shard-local shuffle: a uniform shuffle would decompress a shard for nearly every pair.
-    train_loader = DataLoader(
-        train_ds, batch_size=mcfg.batch_size, sampler=train_ds.shard_sampler(seed), generator=gen
+    # Shard-local shuffle (a uniform one would decompress a shard for nearly every pair),
+    # each scene's targets together so that its depth image is encoded once.
+    train_loader = GroupedLoader(
+        train_ds, sampler=train_ds.group_sampler(mcfg.batch_size, mcfg.scene_group, seed)
     )
-    val_loader = DataLoader(val_ds, batch_size=max(mcfg.batch_size, 32))
+    val_loader = GroupedLoader(val_ds, batch_size=max(mcfg.batch_size, 32))
     log = CsvLog(paths.report_dir / "log.csv", LOG_COLUMNS)
     sample = val_ds[len(val_ds) // 2]  # the heatmap followed epoch by epoch in the MCAP
     best = {"epoch": 0, "val_loss": float("inf")}
@@ -242,7 +240,7 @@ def train_step(
 ) -> torch.Tensor:
     """One optimizer step on one batch; returns the (detached) loss before the step."""
     batch = to_device(batch, next(model.parameters()).device)
-    logits = forward_logits(model, batch["depth_m"], batch["target"], cfg.bf16, cfg.channels_last)
+    logits = batch_logits(model, batch, cfg)
     value = loss(logits, batch)
     opt.zero_grad(set_to_none=True)
     value.backward()
@@ -250,9 +248,19 @@ def train_step(
     return value.detach()
 
 
+def batch_logits(
+    model: nn.Module, batch: dict[str, torch.Tensor], cfg: TrainConfig
+) -> torch.Tensor:
+    """Logits of a batch (its samples' depth images by batch["scene_of"] when grouped)."""
+    scene_of = batch.get("scene_of")
+    return forward_logits(
+        model, batch["depth_m"], batch["target"], cfg.bf16, cfg.channels_last, scene_of
+    )
+
+
 def _train_epoch(
     model: nn.Module,
-    loader: DataLoader,
+    loader: GroupedLoader,
     opt: torch.optim.Optimizer,
     loss: Loss,
     cfg: TrainConfig,
@@ -262,11 +270,11 @@ def _train_epoch(
     total, n = 0.0, 0
     with progress_bar(desc, len(loader.dataset)) as advance:
         for batch in loader:
-            d = batch["depth_m"]
             value = train_step(model, batch, opt, loss, cfg)
-            total += float(value) * len(d)
-            n += len(d)
-            advance(len(d))
+            k = len(batch["target"])
+            total += float(value) * k
+            n += k
+            advance(k)
     return total / max(n, 1)
 
 

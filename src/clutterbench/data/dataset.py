@@ -2,8 +2,9 @@
 support) triples; masks and labels derived at load time.
 
 Shards are read lazily (clutterbench.data.shards): memory holds the pair index and a few
-shards, whatever the dataset's size. Training draws pairs with ShardShuffleSampler so that
-a shuffled epoch still reads each shard once.
+shards, whatever the dataset's size. Training draws batches with SceneGroupBatchSampler: a
+shuffled epoch still reads each shard once, and a batch takes each of its scenes' targets
+together so that the depth image is encoded once for them (GroupedLoader, Dataset.batch).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.sim.noise import DepthNoiseConfig, add_depth_noise
 
 CACHE_SHARDS = 4
-"""Shards kept decompressed per dataset; also the shuffle window of ShardShuffleSampler."""
+"""Shards kept decompressed per dataset; also the shuffle window of SceneGroupBatchSampler."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -131,19 +132,68 @@ class _ShardPairs(Dataset):
         """(P,) shard number of each pair's scene."""
         return self.index.shard[self.pairs[:, 0]]
 
-    def shard_sampler(self, seed: int) -> ShardShuffleSampler:
-        """A shuffling sampler whose window matches this dataset's shard cache."""
-        return ShardShuffleSampler(self.pair_shards, self.store.cache_shards, seed)
+    def group_sampler(self, batch_size: int, group: int, seed: int) -> SceneGroupBatchSampler:
+        """Shuffled batches of `batch_size` samples in which a scene's samples come together,
+        in runs of at most `group` (scene_group_order); each shard read once per epoch."""
+        return SceneGroupBatchSampler(
+            self.pairs[:, 0], self.index.shard, self.store.cache_shards, batch_size, group, seed
+        )
 
-    def _augment(self, depth_m: np.ndarray, images: list[np.ndarray]) -> list[np.ndarray]:
-        """[depth, *images], depth noised (if configured) and all flipped left-right together
-        with probability 1/2 (if configured). Images may have leading channel axes."""
+    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
+        """Sample `i`: depth_m (1, H, W) and the sample's masks and labels."""
+        batch = self.batch([i])
+        del batch["scene_of"]
+        return {k: v[0] for k, v in batch.items()}
+
+    def batch(self, indices: Sequence[int]) -> dict[str, torch.Tensor]:
+        """Samples `indices` as one batch grouped by scene: depth_m (S, 1, H, W) once per run
+        of consecutive samples of the same scene, scene_of (P,) int64 (the depth image of
+        each sample), and the samples' masks and labels stacked (P, ...). A run shares its
+        augmentation (the depth noise, the flip), as the targets of one observed scene do."""
+        depths: list[np.ndarray] = []
+        scene_of: list[int] = []
+        items: list[dict[str, np.ndarray]] = []
+        last = -1
+        for i in indices:
+            row = self.pairs[int(i)]
+            s = int(row[0])
+            shard = self.store.load(int(self.index.shard[s]), self.arrays)
+            r, n = int(self.index.row[s]), int(self.index.n_objects[s])
+            if s != last:
+                flip = self._draw_augmentation(shard["depth_m"][r], depths)
+                last = s
+            item = self._sample(shard, r, n, row[1:])
+            items.append({k: a[..., ::-1] for k, a in item.items()} if flip else item)
+            scene_of.append(len(depths) - 1)
+        out = {"depth_m": _float_tensor(np.stack(depths))[:, None]}
+        out["scene_of"] = torch.tensor(scene_of, dtype=torch.int64)
+        for k in items[0] if items else ():
+            stacked = np.stack([item[k] for item in items])
+            if k == "classes":
+                out[k] = torch.from_numpy(np.array(stacked, dtype=np.int64))
+            else:
+                out[k] = _float_tensor(stacked)
+        return out
+
+    def _draw_augmentation(self, depth_m: np.ndarray, depths: list[np.ndarray]) -> bool:
+        """Append `depth_m` to `depths`, noised (if configured) and flipped left-right with
+        probability 1/2 (if configured); returns whether it was flipped."""
         if self.noise is not None:
             depth_m = add_depth_noise(depth_m, self.noise, self.rng)
-        arrays = [depth_m, *images]
-        if self.flip and self.rng.random() < 0.5:
-            arrays = [a[..., ::-1] for a in arrays]
-        return arrays
+        flip = bool(self.flip and self.rng.random() < 0.5)
+        depths.append(depth_m[..., ::-1] if flip else depth_m)
+        return flip
+
+    arrays: tuple[str, ...] = ("depth_m", "instance")
+    """Shard arrays a sample is built from."""
+
+    def _sample(
+        self, shard: dict[str, np.ndarray], r: int, n: int, sample: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        """The masks and labels (each with a leading channel axis, (1 or 2, H, W), except
+        `classes` (H, W)) of the sample `sample` (its row of `pairs` after the scene) of
+        scene row `r` (n boxes) of `shard`."""
+        raise NotImplementedError
 
     def pair_collapses(self, i: int) -> bool:
         """Whether some box moves in sample `i` (reads its scene's shard)."""
@@ -164,19 +214,18 @@ class CollapseDataset(_ShardPairs):
     """
 
     n_masks = 1
+    arrays = ("depth_m", "instance", "removal_m")
 
-    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
-        s, x = (int(v) for v in self.pairs[i])
-        n = int(self.index.n_objects[s])
-        shard = self.store.load(int(self.index.shard[s]), ("depth_m", "instance", "removal_m"))
-        r = int(self.index.row[s])
+    def _sample(
+        self, shard: dict[str, np.ndarray], r: int, n: int, sample: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        x = int(sample[0])
         instance = shard["instance"][r]
         moved = moved_matrix(shard["removal_m"][r, :n, :n], self.threshold_m)[x]
-        arrays = self._augment(
-            shard["depth_m"][r], [target_mask(instance, x), collapse_mask(instance, moved)]
-        )
-        names = ("depth_m", "target", "collapse")
-        return {k: _float_tensor(a)[None] for k, a in zip(names, arrays)}
+        return {
+            "target": target_mask(instance, x)[None],
+            "collapse": collapse_mask(instance, moved)[None],
+        }
 
     def pair_collapses(self, i: int) -> bool:
         s, x = (int(v) for v in self.pairs[i])
@@ -216,20 +265,18 @@ class PullPairDataset(_ShardPairs):
     def _samples(self, visible: np.ndarray) -> np.ndarray:
         return extract_support_pairs(visible)
 
-    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
-        s, x, sup = (int(v) for v in self.pairs[i])
-        n = int(self.index.n_objects[s])
-        shard = self.store.load(int(self.index.shard[s]), ("depth_m", "instance", "pull_m"))
-        r = int(self.index.row[s])
+    arrays = ("depth_m", "instance", "pull_m")
+
+    def _sample(
+        self, shard: dict[str, np.ndarray], r: int, n: int, sample: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        x, sup = (int(v) for v in sample)
         instance = shard["instance"][r]
         classes = ch4_class_map(instance, x, sup, shard["pull_m"][r, x, sup, :n], self.threshold_m)
-        masks = np.stack([target_mask(instance, x), target_mask(instance, sup)])
-        depth, masks, classes = self._augment(shard["depth_m"][r], [masks, classes])
         return {
-            "depth_m": _float_tensor(depth)[None],
-            "target": _float_tensor(masks),
-            "collapse": _float_tensor(classes == CLASS_C)[None],
-            "classes": torch.from_numpy(np.array(classes, dtype=np.int64)),
+            "target": np.stack([target_mask(instance, x), target_mask(instance, sup)]),
+            "collapse": (classes == CLASS_C)[None],
+            "classes": classes,
         }
 
     def pair_collapses(self, i: int) -> bool:
@@ -257,38 +304,95 @@ def open_pairs(n_masks: int, *args, **kwargs) -> PairDataset:
     return DATASETS[n_masks](*args, **kwargs)
 
 
-def shard_window_order(
-    pair_shards: np.ndarray, window: int, rng: np.random.Generator
+def scene_group_order(
+    pair_scenes: np.ndarray,
+    scene_shards: np.ndarray,
+    window: int,
+    group: int,
+    rng: np.random.Generator,
 ) -> np.ndarray:
-    """A permutation of pair positions: shards in random order, taken `window` at a time,
-    the pairs of each window shuffled together. Every pair once; while a window is read only
-    its `window` shards are in use, so an LRU cache of that many shards reads each once."""
-    by_shard = np.argsort(pair_shards, kind="stable")
-    _, starts = np.unique(pair_shards[by_shard], return_index=True)
-    groups = np.split(by_shard, starts[1:]) if len(by_shard) else []
-    visit = rng.permutation(len(groups))
-    parts = [
-        rng.permutation(np.concatenate([groups[g] for g in visit[w : w + window]]))
-        for w in range(0, len(visit), window)
-    ]
+    """A permutation of sample positions in which each scene's samples come in runs of at
+    most `group` (a scene with more samples, e.g. the 90 ordered pairs of a 10-box ch. 4
+    pile, is cut into several runs, which meet again only by chance). Shards are visited in
+    random order, `window` at a time; the runs of a window are shuffled together, the
+    samples of a run too, so an LRU cache of `window` shards reads each shard once per
+    epoch."""
+    if group < 1:
+        raise ValueError("group must be >= 1")
+    by_scene = np.argsort(pair_scenes, kind="stable")
+    scenes, starts = np.unique(pair_scenes[by_scene], return_index=True)
+    samples = np.split(by_scene, starts[1:]) if len(by_scene) else []
+    shards = scene_shards[scenes]
+    parts = []
+    visit = rng.permutation(np.unique(shards))
+    for w in range(0, len(visit), window):
+        runs = []
+        for k in np.flatnonzero(np.isin(shards, visit[w : w + window])):
+            mine = rng.permutation(samples[k])
+            runs += [mine[j : j + group] for j in range(0, len(mine), group)]
+        parts += [runs[j] for j in rng.permutation(len(runs))]
     return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, np.int64)
 
 
-class ShardShuffleSampler(Sampler[int]):
-    """Shuffled epochs that stay shard-local (shard_window_order); epoch e is seeded by
-    (seed, e), so the same seed gives the same sequence of epochs."""
+class SceneGroupBatchSampler(Sampler[list[int]]):
+    """Batches of `batch_size` sample positions (the last may be smaller) cut from
+    scene_group_order: a batch holds few scenes, each with several targets, so the depth
+    encoder runs once per scene (Dataset.batch, collapse.train). Epoch e is seeded by
+    (seed, e)."""
 
-    def __init__(self, pair_shards: np.ndarray, window: int, seed: int):
+    def __init__(
+        self,
+        pair_scenes: np.ndarray,
+        scene_shards: np.ndarray,
+        window: int,
+        batch_size: int,
+        group: int,
+        seed: int,
+    ):
         super().__init__()
-        if window < 1:
-            raise ValueError("window must be >= 1")
-        self.pair_shards, self.window, self.seed = np.asarray(pair_shards), window, seed
+        if window < 1 or batch_size < 1 or group < 1:
+            raise ValueError("window, batch_size and group must be >= 1")
+        self.pair_scenes, self.scene_shards = np.asarray(pair_scenes), np.asarray(scene_shards)
+        self.window, self.batch_size, self.group, self.seed = window, batch_size, group, seed
         self.epoch = 0
 
     def __len__(self) -> int:
-        return len(self.pair_shards)
+        return -(-len(self.pair_scenes) // self.batch_size)
 
-    def __iter__(self) -> Iterator[int]:
+    def __iter__(self) -> Iterator[list[int]]:
         rng = np.random.default_rng([self.seed, self.epoch])
         self.epoch += 1
-        return iter(shard_window_order(self.pair_shards, self.window, rng).tolist())
+        order = scene_group_order(
+            self.pair_scenes, self.scene_shards, self.window, self.group, rng
+        ).tolist()
+        return iter([order[j : j + self.batch_size] for j in range(0, len(order), self.batch_size)])
+
+
+class GroupedLoader:
+    """Batches of a dataset (its `batch`: a scene's consecutive samples share one depth
+    image) in the order of a batch sampler, or, without one, in order `batch_size` at a time
+    (samples are stored scene by scene, so a batch holds few scenes)."""
+
+    def __init__(
+        self,
+        dataset: PairDataset,
+        batch_size: int | None = None,
+        sampler: Sampler[list[int]] | None = None,
+    ):
+        if (batch_size is None) == (sampler is None):
+            raise ValueError("give batch_size or sampler")
+        self.dataset, self.batch_size, self.sampler = dataset, batch_size, sampler
+
+    def _batches(self) -> Iterator[list[int]]:
+        if self.sampler is not None:
+            return iter(self.sampler)
+        n, b = len(self.dataset), self.batch_size
+        return (list(range(j, min(j + b, n))) for j in range(0, n, b))
+
+    def __len__(self) -> int:
+        if self.sampler is not None:
+            return len(self.sampler)
+        return -(-len(self.dataset) // self.batch_size)
+
+    def __iter__(self) -> Iterator[dict[str, torch.Tensor]]:
+        return (self.dataset.batch(indices) for indices in self._batches())

@@ -30,8 +30,12 @@ def register_arch(name: str, config_cls: type, module_cls: type[nn.Module]) -> N
     types and `bounded` ranges checked as everywhere else), with at least `input_size`,
     `n_masks` and `n_classes`. `module_cls(cfg)` builds the network; it keeps `cfg` as
     `self.cfg` (checkpoints save it) and maps (depth_m (B, 1, S, S) metres, masks
-    (B, n_masks, S, S)) to logits (B, n_classes, S, S). Registering the same pair again is a
-    no-op; another pair under a taken name is an error."""
+    (B, n_masks, S, S)) to logits (B, n_classes, S, S). A network whose depth encoder
+    does not see the masks may set `encodes_scene_once = True` and accept a third argument
+    scene_of (P,) int64 (depth (S, ...), masks (P, ...), mask p with depth scene_of[p]), so
+    that training and inference encode each scene once for all its targets
+    (models.collapse_map). Registering the same pair again is a no-op; another pair under a
+    taken name is an error."""
     if not (isinstance(config_cls, type) and dataclasses.is_dataclass(config_cls)):
         raise TypeError(f"arch '{name}': config_cls must be a dataclass, got {config_cls!r}")
     if not (isinstance(module_cls, type) and issubclass(module_cls, nn.Module)):

@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from clutterbench.config import bounded
@@ -77,14 +78,86 @@ class CollapseMapNet(nn.Module):
             c = c_out
         self.head = nn.Conv2d(c, cfg.n_classes, 1)
 
-    def forward(self, depth_m: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
-        """(B, 1, H, W) depth in metres and (B, n_masks, H, W) masks -> (B, n_classes, H, W)
-        logits."""
-        check_input(depth_m, masks, self.cfg.input_size, self.cfg.n_masks)
-        feats = self.depth_encoder(normalise_depth(depth_m, *self.cfg.depth_range_m))
+    encodes_scene_once = True
+    """The depth encoder does not see the masks: `encode` runs once per scene and `decode`
+    once per target (clutterbench.collapse.predict.grouped_logits)."""
+
+    def encode(self, depth_m: torch.Tensor) -> list[torch.Tensor]:
+        """(S, 1, H, W) depth in metres -> the VGG feature maps of each scene (strides 2 ...
+        32), shared by every target of that scene."""
+        return self.depth_encoder(normalise_depth(depth_m, *self.cfg.depth_range_m))
+
+    def decode(
+        self,
+        feats: list[torch.Tensor],
+        masks: torch.Tensor,
+        scene_of: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """Scene features (from `encode`) and (P, n_masks, H, W) masks -> (P, n_classes, H, W)
+        logits; target p belongs to scene scene_of[p] (None: target p to scene p).
+
+        Grouped, each decoder conv is split by its input channels (a conv of concatenated
+        maps is the sum of the convs of each map): the part that reads VGG maps runs once
+        per scene and is added to each of its targets, only the part that reads the mask
+        features runs per target. The same function as the concatenated decoder (within
+        float rounding), with the same weights."""
+        if scene_of is None:
+            return self._decode_pairs(feats, masks)
+        x = self.mask_encoder(masks)
+        scene_parts = [feats[-1]]  # the VGG head is upsampled with the mask code
+        for i, block in enumerate(self.decoder):
+            conv, rest = block[0], block[1:]
+            size = feats[3 - i].shape[-2:] if i < 4 else masks.shape[-2:]
+            pair_in = [upsample_to(x, size)]
+            scene_in = [upsample_to(t, size) for t in scene_parts]
+            if i < 4:
+                scene_in.append(feats[3 - i])
+            if i == 0:  # channel order of the concatenated decoder: [VGG head, masks, skip]
+                y = _split_conv(conv, [scene_in[0], pair_in[0], scene_in[1]], [1, 0, 1], scene_of)
+            elif scene_in:  # [upsampled x, skip]
+                y = _split_conv(conv, [pair_in[0], scene_in[0]], [0, 1], scene_of)
+            else:  # the last layer, at full size, has no skip
+                y = conv(pair_in[0])
+            x, scene_parts = rest(y), []
+        return self.head(x)
+
+    def _decode_pairs(self, feats: list[torch.Tensor], masks: torch.Tensor) -> torch.Tensor:
+        """The concatenated decoder, one depth image per target (thesis Fig. 5.4, 6.3)."""
         x = torch.cat([feats[-1], self.mask_encoder(masks)], dim=1)
         for i, conv in enumerate(self.decoder):
-            skip = feats[3 - i] if i < 4 else depth_m
-            x = upsample_to(x, skip)
+            skip = feats[3 - i] if i < 4 else masks
+            x = upsample_to(x, skip.shape[-2:])
             x = conv(torch.cat([x, skip], dim=1) if i < 4 else x)
         return self.head(x)
+
+    def forward(
+        self,
+        depth_m: torch.Tensor,
+        masks: torch.Tensor,
+        scene_of: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """(S, 1, H, W) depth in metres and (P, n_masks, H, W) masks -> (P, n_classes, H, W)
+        logits. Without `scene_of`, S = P and mask p goes with depth p; with it, mask p goes
+        with depth scene_of[p] and each depth image is encoded once."""
+        check_input(depth_m, masks, self.cfg.input_size, self.cfg.n_masks, scene_of)
+        return self.decode(self.encode(depth_m), masks, scene_of)
+
+
+def _split_conv(
+    conv: nn.Conv2d, parts: list[torch.Tensor], per_scene: list[int], scene_of: torch.Tensor
+) -> torch.Tensor:
+    """conv(cat(parts)) for targets, where the parts flagged `per_scene` hold one map per
+    scene: each part meets its slice of the kernel; the scene parts' sum is gathered to the
+    targets (scene_of) and added to the target parts' sum."""
+    sums: list[torch.Tensor | None] = [None, None]
+    c = 0
+    for part, scene in zip(parts, per_scene):
+        w = conv.weight[:, c : c + part.shape[1]]
+        c += part.shape[1]
+        y = F.conv2d(part, w, None, conv.stride, conv.padding)
+        sums[scene] = y if sums[scene] is None else sums[scene] + y
+    pairs, scenes = sums
+    assert pairs is not None and scenes is not None and c == conv.in_channels
+    if conv.bias is not None:  # once (BatchNorm folded into the conv for inference)
+        pairs = pairs + conv.bias.reshape(1, -1, 1, 1)
+    return pairs + scenes.index_select(0, scene_of)

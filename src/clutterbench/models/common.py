@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 from typing import Any
 
@@ -30,16 +31,30 @@ def conv_bn_relu(c_in: int, c_out: int, stride: int = 1, groups: int = 1) -> nn.
 
 
 def check_input(
-    depth_m: torch.Tensor, masks: torch.Tensor, input_size: int, n_masks: int = 1
+    depth_m: torch.Tensor,
+    masks: torch.Tensor,
+    input_size: int,
+    n_masks: int = 1,
+    scene_of: torch.Tensor | None = None,
 ) -> None:
+    """Depth (S, 1, H, W) and masks (P, n_masks, H, W); P = S without `scene_of`, else
+    scene_of is (P,) int64 indices into the S depth images."""
     if depth_m.ndim != 4 or depth_m.shape[1] != 1:
         raise ValueError(f"depth_m must be (B, 1, H, W), got {tuple(depth_m.shape)}")
-    b, _, h, w = depth_m.shape
-    if masks.shape != (b, n_masks, h, w):
+    s, _, h, w = depth_m.shape
+    p = s if scene_of is None else len(scene_of)
+    if masks.shape != (p, n_masks, h, w):
+        per = "" if scene_of is None else f", B = len(scene_of) = {p}"
         raise ValueError(
             f"masks {tuple(masks.shape)} must be (B, {n_masks}, H, W) like depth "
-            f"{tuple(depth_m.shape)}"
+            f"{tuple(depth_m.shape)}{per}"
         )
+    if scene_of is not None and (
+        scene_of.ndim != 1
+        or scene_of.dtype != torch.int64
+        or (len(scene_of) and not 0 <= int(scene_of.min()) <= int(scene_of.max()) < s)
+    ):
+        raise ValueError(f"scene_of must be (P,) int64 indices into the {s} depth images")
     if depth_m.shape[-2:] != (input_size, input_size):
         raise ValueError(
             f"model takes {input_size}x{input_size} images, got "
@@ -47,8 +62,10 @@ def check_input(
         )
 
 
-def upsample_to(x: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
-    return F.interpolate(x, size=like.shape[-2:], mode="bilinear", align_corners=False)
+def upsample_to(x: torch.Tensor, like: torch.Tensor | torch.Size) -> torch.Tensor:
+    """`x` resized (bilinear) to the size of the map `like` (or to the size `like`)."""
+    size = like if isinstance(like, torch.Size) else like.shape[-2:]
+    return F.interpolate(x, size=size, mode="bilinear", align_corners=False)
 
 
 def load_torch_file(path: Path, what: str, missing_hint: str = "") -> Any:
@@ -68,3 +85,25 @@ def check_size_and_depth_range(input_size: int, depth_range_m: tuple[float, floa
         raise ValueError(f"input_size: {input_size} is not a multiple of 32")
     if not 0 < depth_range_m[0] < depth_range_m[1]:
         raise ValueError("depth_range_m: need 0 < near < far")
+
+
+@torch.no_grad()
+def fold_batchnorm(model: nn.Module) -> nn.Module:
+    """An inference copy of `model` (eval mode) in which every BatchNorm that directly
+    follows a convolution in a Sequential is folded into that convolution's weights and
+    bias (W' = W g / s, b' = (b - mean) g / s + beta, s = sqrt(var + eps)) and replaced by
+    Identity: the same function with one pass over memory less per layer."""
+    model = copy.deepcopy(model).eval()
+    for seq in [m for m in model.modules() if isinstance(m, nn.Sequential)]:
+        layers = list(seq)
+        for i, (conv, bn) in enumerate(zip(layers, layers[1:])):
+            if not (isinstance(conv, nn.Conv2d) and isinstance(bn, nn.BatchNorm2d)):
+                continue
+            if bn.running_mean is None or conv.out_channels != bn.num_features:
+                continue
+            scale = bn.weight / torch.sqrt(bn.running_var + bn.eps)
+            bias = conv.bias if conv.bias is not None else torch.zeros_like(bn.running_mean)
+            conv.weight.mul_(scale.reshape(-1, 1, 1, 1))
+            conv.bias = nn.Parameter((bias - bn.running_mean) * scale + bn.bias)
+            seq[i + 1] = nn.Identity()
+    return model

@@ -57,6 +57,10 @@ class CollapseGraphPlanner:
     """Algorithm 1 on the collapse prediction graph (CPG) from the CP's heatmaps; with
     `bimanual`, the Fig. 6.7 option of holding the target's single supported object."""
 
+    reuse_maps = True
+    """Read a collapse score from the heatmaps support_edges computed on the same
+    observation (False: predict it again, as before; kept for `make bench`)."""
+
     def __init__(
         self,
         predict: PredictFn,
@@ -67,6 +71,10 @@ class CollapseGraphPlanner:
     ):
         self.predict, self.params, self.cp_max = predict, params, cp_max
         self.min_pixels, self.bimanual = min_pixels, bimanual
+        self._maps: tuple[Observation, list[int], np.ndarray] | None = None
+        """The last observation's heatmaps of every visible object (from support_edges):
+        the decision's collapse scores and the pull's first abort check read the same
+        observation and reuse them."""
 
     def support_edges(self, obs: Observation) -> list[SupportEdge]:
         """Support relations inferred from one observation (thesis 6.2.2)."""
@@ -74,6 +82,7 @@ class CollapseGraphPlanner:
         if len(ids) < 2:
             return []
         heatmaps = self.predict(obs.depth_m, masks.astype(np.uint8))
+        self._maps = (obs, ids, heatmaps)
         return infer_support(heatmaps, masks, ids, self.params, self._gaps(obs, masks))
 
     def _gaps(self, obs: Observation, masks: np.ndarray) -> np.ndarray | None:
@@ -117,7 +126,10 @@ class CollapseGraphPlanner:
         if box not in ids or len(ids) < 2:
             return 0.0
         k = ids.index(box)
-        heat = self.predict(obs.depth_m, masks[k : k + 1].astype(np.uint8))[0]
+        if self.reuse_maps and self._maps and self._maps[0] is obs and self._maps[1] == ids:
+            heat = self._maps[2][k]
+        else:
+            heat = self.predict(obs.depth_m, masks[k : k + 1].astype(np.uint8))[0]
         area_c = heat > self.params.prob_threshold
         contact = support_contact(masks, self.params, self._gaps(obs, masks))[k]
         scores = [

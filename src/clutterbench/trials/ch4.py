@@ -57,30 +57,17 @@ def class_probs(predictor: Any, depth_m: np.ndarray, pair_masks: np.ndarray) -> 
     in batches of the predictor's batch size."""
     import torch
 
-    from clutterbench.collapse.predict import forward_logits
+    from clutterbench.collapse.predict import scene_logits
 
     assert pair_masks.ndim == 4 and pair_masks.shape[1] == 2, "pair masks must be (A, 2, H, W)"
-    depth = torch.from_numpy(np.ascontiguousarray(depth_m, dtype=np.float32))[None, None]
-    out = np.empty((len(pair_masks), 4, *depth_m.shape), dtype=np.float32)
-    with torch.no_grad():
-        for start in range(0, len(pair_masks), predictor.batch_size):
-            chunk = torch.from_numpy(
-                pair_masks[start : start + predictor.batch_size].astype(np.float32)
-            )
-            logits = forward_logits(
-                predictor.model,
-                depth.expand(len(chunk), -1, -1, -1),
-                chunk,
-                predictor.bf16,
-                predictor.channels_last,
-            )
-            if logits.shape[1] != 4:
-                raise ValueError(
-                    f"the ch. 4 planner needs a 4-class network (B/E/S/C), this one has "
-                    f"{logits.shape[1]} output channels"
-                )
-            out[start : start + len(chunk)] = torch.softmax(logits.float(), dim=1).numpy()
-    return out
+    depth = np.ascontiguousarray(depth_m, dtype=np.float32)
+    logits = scene_logits(predictor, depth, pair_masks.astype(np.float32, copy=False))
+    if logits.shape[1] != 4:
+        raise ValueError(
+            f"the ch. 4 planner needs a 4-class network (B/E/S/C), this one has "
+            f"{logits.shape[1]} output channels"
+        )
+    return torch.softmax(logits.float(), dim=1).numpy()
 
 
 def pair_masks(seg: Segmentation, pairs: list[Pair]) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""`make bench`: simulation throughput, written to reports/bench/.
+"""`make bench`, simulation part: throughput -> reports/bench/sim.{json,md}, replay.json.
 
 Measures in one process (one core): labelled scenes per second (place + settle + render +
 every removal), render time per picture, and the raw SAPIEN cost of the same work (the
@@ -13,10 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
+from clutterbench.bench import header, measure_table, write_result
 from clutterbench.config import load_params, load_section
 from clutterbench.data.config import GenerateConfig
 from clutterbench.data.generate import label_scene
-from clutterbench.io import load_npz, write_json, write_text
+from clutterbench.io import load_npz
 from clutterbench.platform_info import cpu_description
 from clutterbench.progress import progress_bar
 from clutterbench.sim.config import SimConfig
@@ -89,18 +90,13 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
         "processes": 1,
         **cpu_description(),  # cpu_model, logical_cpus, torch_threads, machine
     }
-    write_json(out_dir / "sim.json", result)
-    lines = ["# Simulation benchmark (one core)", "", "| measure | value |", "|---|---|"]
-    lines += [
-        f"| {k} | {v:.3f} |" if isinstance(v, float) else f"| {k} | {v} |"
-        for k, v in result.items()
-    ]
+    lines = header("Simulation benchmark (one core)", result) + measure_table(result)
     lines += [
         "",
         "Targets: >= 20 labelled scenes / s / core; overhead_ratio <= 2 "
         "(pipeline time / time inside SAPIEN step + render calls in the same run).",
     ]
-    write_text(out_dir / "sim.md", "\n".join(lines) + "\n")
+    write_result(out_dir, "sim", result, lines)
     return result
 
 
@@ -137,17 +133,5 @@ def bench_replay(
         result[name] = {"labels_replayed": rows, "bit_identical": same, "agreement": same / rows}
         print(f"replay {name}: {same}/{rows} labels bit-identical")
     result["machine"] = cpu_description()
-    write_json(out_dir / "replay.json", result)
+    write_result(out_dir, "replay", result)
     return result
-
-
-if __name__ == "__main__":
-    from clutterbench.collapse.bench import bench_models
-    from clutterbench.trials.bench import bench_trials
-
-    res = bench_sim()
-    for k, v in res.items():
-        print(f"{k}: {v}")
-    bench_replay()
-    bench_models()
-    bench_trials()

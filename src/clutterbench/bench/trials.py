@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from clutterbench.bench import header, measure_table, write_result
 from clutterbench.config import load_params, load_section
-from clutterbench.io import read_json, write_json, write_text
+from clutterbench.io import read_json
 from clutterbench.planning.cpg import build_cpg
 from clutterbench.planning.extraction import CollapseGraphPlanner
 from clutterbench.planning.support import SupportParams
@@ -134,14 +135,8 @@ def bench_trials(
         result[f"trial_{planner_name}_s_median"] = float(np.median(wall))
     result |= bench_ch4(trials, sim, graphs)
     result |= cpu_description()  # cpu_model, logical_cpus, torch_threads (1), machine
-    write_json(out_dir / "trials.json", result)
-    lines = ["# Trials benchmark (one core)", "", "| measure | value |", "|---|---|"]
-    lines += [
-        f"| {k} | {v:.3f} |" if isinstance(v, float) else f"| {k} | {v} |"
-        for k, v in result.items()
-        if k != "threads"
-    ]
-    write_text(out_dir / "trials.md", "\n".join(lines) + "\n")
+    lines = header("Trials benchmark (one core)", result) + measure_table(result, skip=("threads",))
+    write_result(out_dir, "trials", result, lines)
     for k, v in result.items():
         print(f"{k}: {v}")
     return result

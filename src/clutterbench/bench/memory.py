@@ -1,4 +1,5 @@
-"""`make bench`, memory part: peak RSS of a training epoch over sharded data.
+"""`make bench`, memory part: peak RSS of a training epoch over sharded data (its rows and
+markdown section go into reports/bench/models.{json,md}, written by the models part).
 
 Each measurement runs in a fresh process over a synthetic dataset (clutterbench.data.
 synthetic) with the generate stage's shard layout: the data of a whole epoch (every train and
@@ -17,14 +18,12 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from torch.utils.data import DataLoader
 
 from clutterbench.collapse.config import TrainConfig, TrainModelConfig
-from clutterbench.collapse.predict import forward_logits
-from clutterbench.collapse.train import loss_fn
+from clutterbench.collapse.train import loss_fn, train_step
 from clutterbench.config import load_section
 from clutterbench.data.config import GenerateConfig
-from clutterbench.data.dataset import CollapseDataset
+from clutterbench.data.dataset import CollapseDataset, GroupedLoader
 from clutterbench.data.split import SplitConfig, split_dataset
 from clutterbench.io import load_npz
 from clutterbench.models import build_model
@@ -70,15 +69,11 @@ def epoch_peak_rss(
         model = model.to(memory_format=torch.channels_last)
     opt = torch.optim.Adam(model.parameters(), lr=mcfg.lr)
     loss = loss_fn(cfg, mcfg)
-    loader = DataLoader(train_ds, batch_size=mcfg.batch_size, sampler=train_ds.shard_sampler(0))
-    for b, batch in enumerate(loader):
+    sampler = train_ds.group_sampler(mcfg.batch_size, mcfg.scene_group, 0)
+    for b, batch in enumerate(GroupedLoader(train_ds, sampler=sampler)):
         if b < train_batches:
-            d, t = batch["depth_m"], batch["target"]
-            value = loss(forward_logits(model, d, t, cfg.bf16, cfg.channels_last), batch)
-            opt.zero_grad(set_to_none=True)
-            value.backward()
-            opt.step()
-    for _ in DataLoader(val_ds, batch_size=max(mcfg.batch_size, 32)):
+            train_step(model, batch, opt, loss, cfg)
+    for _ in GroupedLoader(val_ds, batch_size=max(mcfg.batch_size, 32)):
         pass
     return {
         "train_pairs": len(train_ds),
@@ -147,3 +142,32 @@ def bench_train_memory(params: dict[str, Any]) -> list[dict[str, Any]]:
         )
         print(rows[-1], flush=True)
     return rows
+
+
+def memory_markdown(rows: list[dict]) -> list[str]:
+    """The models.md section for bench_train_memory's rows."""
+    first = rows[0]
+    lines = [
+        "",
+        "## Peak memory of a training epoch",
+        "",
+        f"{first['model']} at default scale (batch {first['batch_size']}, {first['image_size']} "
+        f"px, shards of {first['shard_size']} scenes) on synthetic ch6-shaped data: every "
+        f"train and val batch of one epoch is loaded, Adam steps on the first "
+        f"{first['train_batches']}. Peak RSS of a fresh process (VmHWM).",
+        "",
+        "| data | scenes | train pairs | decompressed data MB | peak RSS MB | epoch s |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['dataset']} | {r['scenes']} | {r['train_pairs']} | "
+            f"{r['decompressed_dataset_mb']:.0f} | {r['peak_rss_mb']:.0f} | "
+            f"{r['epoch_seconds']:.0f} |"
+        )
+    lines += [
+        "",
+        "Shards are read lazily with a cache of a few shards, so peak RSS should not grow "
+        "with the number of scenes (decompressed data MB: what a load-everything loader held).",
+    ]
+    return lines

@@ -5,7 +5,7 @@ under the four combinations of channels-last and bf16 autocast and at 1 and 2 th
 the inference API: ms per collapse map at default and paper sizes, and ms for all targets of
 a 10-object scene in one batched call. When a trained checkpoint exists, also how far bf16
 inference moves its probabilities from float32 on real validation images. Last, the peak RSS
-of a training epoch over sharded data of growing size (clutterbench.collapse.bench_memory).
+of a training epoch over sharded data of growing size (clutterbench.bench.memory).
 """
 
 from __future__ import annotations
@@ -19,13 +19,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from clutterbench.collapse.bench_memory import bench_train_memory
+from clutterbench.bench import header, write_result
+from clutterbench.bench.memory import bench_train_memory, memory_markdown
 from clutterbench.collapse.config import TrainConfig
 from clutterbench.collapse.losses import bce_loss, ce_loss
 from clutterbench.collapse.predict import CollapsePredictor, predict_collapse
 from clutterbench.config import load_params, load_section
 from clutterbench.data.dataset import CollapseDataset
-from clutterbench.io import write_json, write_text
 from clutterbench.models import build_model
 from clutterbench.platform_info import cpu_description
 
@@ -161,17 +161,13 @@ def bench_models(out_dir: Path = Path("reports/bench")) -> dict:
             float(gen[m.dataset]["moved_threshold_m"]),
         )
     result["train_epoch_memory"] = bench_train_memory(params)
-    write_json(out_dir / "models.json", result)
-    write_text(out_dir / "models.md", _markdown(result))
+    write_result(out_dir, "models", result, _markdown(result))
     return result
 
 
-def _markdown(result: dict) -> str:
-    lines = [
-        "# Network benchmark (CPU)",
-        "",
-        f"Machine: {result['machine']}. Train step: Adam, batch {BATCH}, per image (median of "
-        f"{STEPS}).",
+def _markdown(result: dict) -> list[str]:
+    lines = header("Network benchmark (CPU)", result) + [
+        f"Train step: Adam, batch {BATCH}, per image (median of {STEPS}).",
         "",
         "| model | threads | channels-last | bf16 | train ms / image |",
         "|---|---|---|---|---|",
@@ -199,33 +195,5 @@ def _markdown(result: dict) -> str:
         ]
     lines += ["", "Target: <= 20 ms per collapse map at default size on 2 cores."]
     if "train_epoch_memory" in result:
-        lines += _memory_markdown(result["train_epoch_memory"])
-    return "\n".join(lines) + "\n"
-
-
-def _memory_markdown(rows: list[dict]) -> list[str]:
-    first = rows[0]
-    lines = [
-        "",
-        "## Peak memory of a training epoch",
-        "",
-        f"{first['model']} at default scale (batch {first['batch_size']}, {first['image_size']} "
-        f"px, shards of {first['shard_size']} scenes) on synthetic ch6-shaped data: every "
-        f"train and val batch of one epoch is loaded, Adam steps on the first "
-        f"{first['train_batches']}. Peak RSS of a fresh process (VmHWM).",
-        "",
-        "| data | scenes | train pairs | decompressed data MB | peak RSS MB | epoch s |",
-        "|---|---|---|---|---|---|",
-    ]
-    for r in rows:
-        lines.append(
-            f"| {r['dataset']} | {r['scenes']} | {r['train_pairs']} | "
-            f"{r['decompressed_dataset_mb']:.0f} | {r['peak_rss_mb']:.0f} | "
-            f"{r['epoch_seconds']:.0f} |"
-        )
-    lines += [
-        "",
-        "Shards are read lazily with a cache of a few shards, so peak RSS should not grow "
-        "with the number of scenes (decompressed data MB: what a load-everything loader held).",
-    ]
+        lines += memory_markdown(result["train_epoch_memory"])
     return lines

@@ -1,0 +1,49 @@
+"""`make bench` (`python -m clutterbench.bench`): how fast this CPU runs the pipeline.
+
+Parts, in order (`__main__.PARTS`): simulation throughput and label replay (`sim`), network
+train / inference speed plus the peak RSS of a training epoch (`models`, `memory`), the
+grouped (scene encoded once) vs per-pair paths of the collapse networks (`grouped`), and
+support-graph latency and wall time per trial (`trials`). Results go to reports/bench/: one
+JSON per part and a markdown table beside most; each records the CPU model it ran on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from clutterbench.io import write_json, write_text
+
+
+def machine_line(result: Mapping[str, Any]) -> str:
+    """The markdown line under a title naming the machine (keys of cpu_description())."""
+    return (
+        f"Machine: {result['cpu_model']}, {result['logical_cpus']} logical CPUs, "
+        f"{result['torch_threads']} torch threads, {result['machine']}."
+    )
+
+
+def header(title: str, result: Mapping[str, Any]) -> list[str]:
+    """A result's markdown title and machine line."""
+    return [f"# {title}", "", machine_line(result), ""]
+
+
+def measure_table(result: Mapping[str, Any], skip: tuple[str, ...] = ()) -> list[str]:
+    """A two-column markdown table of a flat result; floats to 3 decimals."""
+    lines = ["| measure | value |", "|---|---|"]
+    lines += [
+        f"| {k} | {v:.3f} |" if isinstance(v, float) else f"| {k} | {v} |"
+        for k, v in result.items()
+        if k not in skip
+    ]
+    return lines
+
+
+def write_result(
+    out_dir: Path, name: str, result: Mapping[str, Any], markdown: list[str] | None = None
+) -> None:
+    """`result` as out_dir/<name>.json and, when given, the markdown lines as <name>.md."""
+    write_json(out_dir / f"{name}.json", result)
+    if markdown is not None:
+        write_text(out_dir / f"{name}.md", "\n".join(markdown) + "\n")
