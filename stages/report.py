@@ -22,6 +22,7 @@ from clutterbench.report.extraction import (
 from clutterbench.report.support import support_table
 from clutterbench.report.table_4_1 import table_4_1, table_4_1_target
 from clutterbench.report.table_4_2 import table_4_2
+from clutterbench.report.table_5_2 import table_5_2
 from clutterbench.report.tables import load_thesis_figures
 from clutterbench.stage import run_stage
 from clutterbench.trials.config import TrialsConfig
@@ -112,6 +113,11 @@ def report(params: dict, base: BaseConfig) -> None:
     table_4_1_target(
         by_condition, cfg.table_4_1_target, figures, Path("reports/tables"), base.scale
     )
+
+    ch5: dict[str, list[dict]] = {}
+    for r in read_records(Path("reports/trials_ch5/records.jsonl")):
+        ch5.setdefault(r["condition"], []).append(r)
+    table_5_2(ch5, cfg.table_5_2, figures, Path("reports/tables"), base.scale)
 
 
 if __name__ == "__main__":

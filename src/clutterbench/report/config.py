@@ -22,5 +22,7 @@ class ReportConfig:
     """Table 4.1 row '<method>/<box set>' -> trials_ch4 condition (totals added per method)."""
     table_4_1_target: Mapping[str, str] = dataclasses.field(default_factory=dict)
     """Predetermined-target row (method) -> trials_ch4 condition."""
+    table_5_2: Mapping[str, str] = dataclasses.field(default_factory=dict)
+    """Table 5.2 row '<method>/<scene type>' -> trials_ch5 condition (totals added per method)."""
     table_4_2: Mapping[str, str | None] = dataclasses.field(default_factory=dict)
     """Thesis Table 4.2 row (model x ground truth) -> our evaluate run."""

@@ -9,7 +9,15 @@ import numpy as np
 
 from clutterbench.config import bounded
 
-FAMILY_NAMES = ("shelved", "stacked", "random", "organized", "disorganized", "pile")
+FAMILY_NAMES = (
+    "shelved",
+    "stacked",
+    "random",
+    "organized",
+    "disorganized",
+    "pile",
+    "leaning",
+)
 """Names of the scene families in sim/families (checked equal to its registry by a test)."""
 REJECT_REASONS = ("moving", "fell", "no_room", "overlap", "creeping")
 """Why a placement attempt is redrawn: still moving after sim.physics.settle_max_s, a box

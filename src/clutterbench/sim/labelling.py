@@ -149,19 +149,22 @@ def draw_settled_spec(
     max_attempts: int,
     shelf: Shelf,
     meta: Mapping[str, object] | None = None,
+    keep_groups: bool = False,
 ) -> SceneSpec:
     """Scene `index` of the seed stream `key`, placed and settled (no labels): the canonical
     start of a trial, or a single scene for the CLI; its meta records the attempt and the
-    rejections before it."""
+    rejections before it, and with `keep_groups` the groups the family arranged (meta
+    "groups", the seeds of the ground-truth arrangement clusters, sim/clusters.py)."""
     family, n = draw_scene_setup(seed, key, index, families, n_objects)
     rejected: dict[str, int] = {}
     for attempt in range(max_attempts):
         rng = scene_rng(seed, key, index, attempt)
-        world, _, reason = place_and_settle(family, catalogue, n, rng, physics, shelf)
+        world, groups, reason = place_and_settle(family, catalogue, n, rng, physics, shelf)
         if reason is not None:
             rejected[reason] = rejected.get(reason, 0) + 1
             continue
         sizes = np.array(world.sizes_m)
+        kept = {"groups": [[int(i) for i in g] for g in groups]} if keep_groups else {}
         return SceneSpec(
             sizes_m=sizes,
             poses=world.poses(),
@@ -175,6 +178,7 @@ def draw_settled_spec(
                 **dict(meta or {}),
                 "attempt": attempt,
                 "rejected": dict(sorted(rejected.items())),
+                **kept,
             },
             type_ids=catalogue_type_ids(sizes, catalogue),
         )

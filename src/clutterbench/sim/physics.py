@@ -20,7 +20,7 @@ import sapien
 from sapien import physx
 
 from clutterbench.sim.config import PhysicsConfig
-from clutterbench.sim.geometry import box_aabb_half_extents, displacement_m
+from clutterbench.sim.geometry import box_aabb_half_extents, displacement_m, quat_mul
 from clutterbench.sim.shelf import Shelf
 
 if TYPE_CHECKING:
@@ -358,6 +358,42 @@ class BoxWorld:
             self.step()
         self.release([target])
         return self._settle_action(before)
+
+    def carry_group(
+        self,
+        boxes: Iterable[int],
+        translation_m: np.ndarray,
+        rotation_x_rad: float = 0.0,
+        speed_m_s: float | None = None,
+    ) -> None:
+        """Carry `boxes` together by one rigid motion (ch. 5: a cluster moved aside): turned
+        by `rotation_x_rad` about the world x axis (the camera's view axis: setting a leaning
+        cluster upright) around their centroid while translated by `translation_m`, at
+        sim.physics.pull_speed_m_s along the farthest-travelling box. They stay held
+        (kinematic) where they end; `release` lets them go. Nothing settles afterwards."""
+        boxes = list(boxes)
+        self._check(*boxes)
+        self.hold(boxes)
+        starts = [self.entities[i].pose for i in boxes]
+        p0 = np.array([np.array(s.p) for s in starts])
+        pivot = p0.mean(axis=0)
+        shift = np.asarray(translation_m, dtype=np.float64)
+        # the farthest a box travels: the shift plus its arc about the pivot
+        arc = np.abs(rotation_x_rad) * np.linalg.norm((p0 - pivot)[:, 1:], axis=1)
+        dist = float(np.linalg.norm(shift) + (arc.max() if len(arc) else 0.0))
+        speed = speed_m_s or self.cfg.pull_speed_m_s
+        n_steps = max(1, int(np.ceil(dist / (speed * self.cfg.timestep_s))))
+        for k in range(1, n_steps + 1):
+            t = k / n_steps
+            a = t * rotation_x_rad
+            c, s = np.cos(a), np.sin(a)
+            R = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+            q_rot = np.array([np.cos(a / 2), np.sin(a / 2), 0.0, 0.0])
+            for j, i in enumerate(boxes):
+                p = pivot + R @ (p0[j] - pivot) + t * shift
+                q = quat_mul(q_rot, np.array(starts[j].q))
+                self.bodies[i].set_kinematic_target(sapien.Pose(p, q))
+            self.step()
 
     def insert(
         self, size_m: np.ndarray, pose: np.ndarray, density_kg_m3: float | None = None

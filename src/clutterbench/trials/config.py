@@ -196,6 +196,55 @@ class Ch4TrialParams:
     """Episode drawn as thesis Fig. 4.8 by risk conditions in target mode."""
 
 
+CH5_PLANNERS = ("replenish", "no_collapse", "random", "oracle")
+"""ch. 5 trial policies: the thesis' replenishment planner (Fig. 5.2) with collapse
+prediction; the same without it (every blocker movable, the thesis' comparison); a uniformly
+random placement candidate (floor); every candidate action simulated from the current state,
+the first that succeeds kept (ceiling)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Ch5ConditionConfig:
+    """One chapter 5 replenishment condition (stage trials_ch5, thesis Table 5.2)."""
+
+    planner: Literal["replenish", "no_collapse", "random", "oracle"]
+    """Policy (trials.config.CH5_PLANNERS)."""
+    stream: str
+    """Scene stream (a key of trials.streams)."""
+    episodes: int = bounded(100, ge=1)
+    """Number of trials."""
+    perception: Literal["detector", "clusters"] = "detector"
+    """Arrangement clusters from the trained detector (models/detector), or the generator's
+    ground-truth clusters (the detector's share of the failures)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Ch5TrialParams:
+    """How a replenishment is planned, executed and judged (thesis 5.2.3, 5.3.2)."""
+
+    model: str = "cmn_bs32"
+    """Collapse map network of the planner (a key of train.models; thesis 5.2.2)."""
+    prob_threshold: float | None = None
+    """R_s: pixels whose collapse probability is at least this; null: the threshold chosen on
+    the ch. 5 validation split by evaluate@<model>_ch5 (val_chosen_threshold)."""
+    iou_threshold: float = bounded(0.1, gt=0.0, le=1.0)
+    """th: B_s is movable when IoU(B_j, R_s) < th for every other cluster (thesis 5.2.3)."""
+    finger_m: float = bounded(0.012, ge=0.0)
+    """g: finger thickness, the margin of every candidate and move (eqs. 5.2-5.9)."""
+    moved_threshold_m: float = bounded(0.0064, gt=0.0)
+    """A box other than the manipulated ones moved when its centre moved more (thesis 5.2.2)."""
+    place_tol_m: float = bounded(0.02, gt=0.0)
+    """The new box must rest within this of its planned place (across and up, shelf y-z)."""
+    new_boxes: Literal["same", "various", "new"] = "various"
+    """Catalogue the box to replenish is drawn from (its size is known to the planner)."""
+    max_steps: int = bounded(3, ge=1)
+    """Plans per episode (a rearrangement is followed by a new plan); then it gives up."""
+    oracle_budget: int = bounded(40, ge=1)
+    """The oracle simulates at most this many candidate actions per decision."""
+    min_points: int = bounded(3, ge=1)
+    """A candidate is occupied when this many depth points of boxes fall inside it."""
+
+
 @dataclasses.dataclass(frozen=True)
 class TrialsConfig:
     workers: int = bounded(2, ge=1)
@@ -210,6 +259,10 @@ class TrialsConfig:
     """Chapter 4 judging."""
     ch4_conditions: Mapping[str, Ch4ConditionConfig] = dataclasses.field(default_factory=dict)
     """Condition name -> ch. 4 planner on a stream; each becomes stage trials_ch4@<name>."""
+    ch5: Ch5TrialParams = Ch5TrialParams()
+    """Chapter 5 replenishment planning and judging."""
+    ch5_conditions: Mapping[str, Ch5ConditionConfig] = dataclasses.field(default_factory=dict)
+    """Condition name -> ch. 5 planner on a stream; stage trials_ch5 runs them all."""
     max_attempts: int = bounded(30, ge=1)
     """A trial scene is redrawn at most this often."""
     planner_modules: tuple[str, ...] = ()
@@ -220,7 +273,7 @@ class TrialsConfig:
     """Write depth and instance images of every observation to the condition's MCAP."""
 
     def __post_init__(self) -> None:
-        for group in ("conditions", "ch4_conditions"):
+        for group in ("conditions", "ch4_conditions", "ch5_conditions"):
             for name, cond in getattr(self, group).items():
                 if cond.stream not in self.streams:
                     raise ValueError(

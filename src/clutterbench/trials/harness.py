@@ -78,6 +78,12 @@ class EpisodeLog:
             self.events.append((t_s, "depth", depth_m))
             self.events.append((t_s, "instance", instance))
 
+    def heatmap(self, t_s: float, topic: str, probs: np.ndarray) -> None:
+        """A (H, W) probability map in [0, 1] (a collapse map), written as mono8 on `topic`."""
+        if self.record_images:
+            image = np.clip(np.round(np.asarray(probs, dtype=np.float64) * 255), 0, 255)
+            self.events.append((t_s, "heatmap", (topic, image.astype(np.uint8))))
+
     def poses(self, t_s: float, poses: np.ndarray, removed: Iterable[int] | None = None) -> None:
         """Every box's pose [x, y, z, qw, qx, qy, qz]; `removed`: the boxes taken out so far
         (the MCAP takes them off /scene)."""
@@ -168,6 +174,8 @@ def write_mcap(path: Path, results: Sequence[EpisodeResult], metadata: dict[str,
                     ep.write_depth(t, payload)
                 elif kind == "instance":
                     ep.write_instance(t, payload)
+                elif kind == "heatmap":
+                    ep.write_mono8(t, payload[0], payload[1])
                 elif kind == "poses":
                     ep.write_poses(t, [f"box_{k}" for k in range(len(payload))], payload)
                 elif kind == "removed":

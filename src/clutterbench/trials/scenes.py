@@ -32,8 +32,10 @@ def draw_trial_spec(
     camera: CameraConfig,
     max_attempts: int,
     shelf: Shelf | None = None,
+    keep_groups: bool = False,
 ) -> SceneSpec:
-    """Scene `index` of a trials stream, settled (the canonical start of its episode)."""
+    """Scene `index` of a trials stream, settled (the canonical start of its episode); with
+    `keep_groups` its meta holds the family's groups (ground-truth clusters)."""
     return draw_settled_spec(
         seed=seed,
         key=stream_key(stream),
@@ -45,6 +47,7 @@ def draw_trial_spec(
         camera=camera,
         max_attempts=max_attempts,
         shelf=shelf or Shelf(),
+        keep_groups=keep_groups,
     )
 
 

@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.sim.families.arrangement import Disorganized, Organized
+from clutterbench.sim.families.arrangement import Disorganized, Leaning, Organized
 from clutterbench.sim.families.base import Placement, SceneFamily
 from clutterbench.sim.families.random_drop import RandomDrop
 from clutterbench.sim.families.shelved import Shelved
 from clutterbench.sim.families.stacked import Pile, Stacked
 
 FAMILIES: dict[str, SceneFamily] = {
-    f.name: f for f in (Shelved(), Stacked(), RandomDrop(), Organized(), Disorganized(), Pile())
+    f.name: f
+    for f in (Shelved(), Stacked(), RandomDrop(), Organized(), Disorganized(), Pile(), Leaning())
 }
 
 

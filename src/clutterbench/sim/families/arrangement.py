@@ -1,15 +1,32 @@
 """Thesis ch. 5 arrangements (Fig. 5.3, 5.5): clusters stacked (C^h) or shelved (C^v);
 `disorganized` then gives half of the boxes random poses (thesis 5.2.2). Rows may start
-tilted and fall onto a neighbour (C^r / C^l once settled)."""
+tilted and fall onto a neighbour (C^r / C^l once settled). `leaning` adds rows of books
+that lean on a side wall and on each other (C^r / C^l), rare in the other two, for the
+arrangement detector's data (thesis 5.2.1)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from clutterbench.sim.families.base import Placement, SceneFamily, drop_on_top, random_xy
-from clutterbench.sim.families.shelved import place_row
-from clutterbench.sim.geometry import quat_from_axis_angle, random_quat
+from clutterbench.sim.families.base import (
+    GAP_M,
+    WALL_MARGIN_M,
+    Placement,
+    SceneFamily,
+    drop_on_top,
+    random_xy,
+)
+from clutterbench.sim.families.shelved import STANDING, place_row
+from clutterbench.sim.geometry import (
+    box_aabb_half_extents,
+    quat_from_axis_angle,
+    quat_mul,
+    quat_to_matrix,
+    random_quat,
+)
 from clutterbench.sim.physics import BoxWorld
+
+_CORNER_SIGNS = np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)], float)
 
 
 class Organized(SceneFamily):
@@ -27,38 +44,11 @@ class Organized(SceneFamily):
         slots = np.array_split(np.array(ordered, dtype=int), k)
         edges = np.linspace(s.width_m / 2, -s.width_m / 2, k + 1)
         groups: list[list[int]] = []
-        for g, (y0, y1) in zip(slots, zip(edges[:-1], edges[1:])):
+        for j, (g, (y0, y1)) in enumerate(zip(slots, zip(edges[:-1], edges[1:]))):
             if len(g) == 0:
                 continue
-            if rng.random() < 0.5:  # C^h: one stack in the middle of its slot
-                members = []
-                x = rng.uniform(0.35, 0.65) * s.depth_m
-                for i in g:
-                    yaw = quat_from_axis_angle([0, 0, 1], np.deg2rad(rng.uniform(-8, 8)))
-                    xy = np.array([x, 0.5 * (y0 + y1)]) + rng.uniform(-0.1, 0.1, 2) * sizes_m[i, :2]
-                    idx = drop_on_top(world, sizes_m[i], yaw, xy)
-                    if idx is None:  # the stack reached the top board: start another one
-                        idx = drop_on_top(
-                            world, sizes_m[i], yaw, random_xy(world, rng, 8, (0.3, 0.7))
-                        )
-                    if idx is not None:
-                        members.append(idx)
-                groups.append(members)
-            else:  # C^v: a row of standing boxes; disorganized rows lean one way
-                lean = 0.0
-                if self.disorder > 0 and rng.random() < 0.5:
-                    lean = rng.uniform(15, 35) * rng.choice([-1, 1])
-                placed, rest = place_row(world, sizes_m[g], rng, y0, y1, 0.01, lean)
-                for j in rest:
-                    idx = drop_on_top(
-                        world,
-                        sizes_m[g[j]],
-                        np.array([1.0, 0, 0, 0]),
-                        random_xy(world, rng, 8, (0.3, 0.7)),
-                    )
-                    if idx is not None:
-                        placed.append(idx)
-                groups.append(placed)
+            walls = (j == 0, j == k - 1)
+            groups.append(self.arrange_slot(world, sizes_m, g, y0, y1, rng, walls))
         for i in sorted(random_idx):
             drop_on_top(
                 world,
@@ -69,7 +59,135 @@ class Organized(SceneFamily):
             )
         return Placement(groups)
 
+    def arrange_slot(
+        self,
+        world: BoxWorld,
+        sizes_m: np.ndarray,
+        g: np.ndarray,
+        y0: float,
+        y1: float,
+        rng: np.random.Generator,
+        walls: tuple[bool, bool],
+    ) -> list[int]:
+        """Boxes `g` as one cluster between y0 > y1 (walls: whether the slot's left / right
+        edge is a side wall); returns the boxes placed."""
+        if rng.random() < 0.5:  # C^h: one stack in the middle of its slot
+            return self.stack(world, sizes_m, g, y0, y1, rng)
+        # C^v: a row of standing boxes; disorganized rows lean one way
+        lean = 0.0
+        if self.disorder > 0 and rng.random() < 0.5:
+            lean = rng.uniform(15, 35) * rng.choice([-1, 1])
+        placed, rest = place_row(world, sizes_m[g], rng, y0, y1, 0.01, lean)
+        return placed + self.drop_rest(world, sizes_m, g[rest], rng)
+
+    @staticmethod
+    def stack(
+        world: BoxWorld,
+        sizes_m: np.ndarray,
+        g: np.ndarray,
+        y0: float,
+        y1: float,
+        rng: np.random.Generator,
+    ) -> list[int]:
+        members = []
+        x = rng.uniform(0.35, 0.65) * world.shelf.depth_m
+        for i in g:
+            yaw = quat_from_axis_angle([0, 0, 1], np.deg2rad(rng.uniform(-8, 8)))
+            xy = np.array([x, 0.5 * (y0 + y1)]) + rng.uniform(-0.1, 0.1, 2) * sizes_m[i, :2]
+            idx = drop_on_top(world, sizes_m[i], yaw, xy)
+            if idx is None:  # the stack reached the top board: start another one
+                idx = drop_on_top(world, sizes_m[i], yaw, random_xy(world, rng, 8, (0.3, 0.7)))
+            if idx is not None:
+                members.append(idx)
+        return members
+
+    @staticmethod
+    def drop_rest(
+        world: BoxWorld, sizes_m: np.ndarray, rest: np.ndarray, rng: np.random.Generator
+    ) -> list[int]:
+        """What did not fit in a row lies flat on top of the scene."""
+        placed = []
+        for i in rest:
+            idx = drop_on_top(
+                world, sizes_m[i], np.array([1.0, 0, 0, 0]), random_xy(world, rng, 8, (0.3, 0.7))
+            )
+            if idx is not None:
+                placed.append(idx)
+        return placed
+
 
 class Disorganized(Organized):
     name = "disorganized"
     disorder = 0.5  # thesis 5.2.2: "half of these objects were then assigned random poses"
+
+
+def place_leaning_row(
+    world: BoxWorld,
+    sizes_m: np.ndarray,
+    rng: np.random.Generator,
+    side: int,
+    y_limit: float,
+    lean_deg: float,
+    max_gap_m: float = 0.003,
+) -> tuple[list[int], list[int]]:
+    """Stand boxes tilted `lean_deg` toward the side wall `side` (+1: the +y wall, the
+    image's left; -1: the -y wall, the image's right): the first one's top against the
+    wall, each next one face to face on the one before (parallel, bottom edge on the floor),
+    the row growing away from the wall up to y = y_limit. Returns (placed, left over)."""
+    s = world.shelf
+    # Rotating +a about x takes a standing box's top toward -y (sim/clusters.py).
+    quat = quat_mul(quat_from_axis_angle([1, 0, 0], np.deg2rad(-side * lean_deg)), STANDING)
+    R = quat_to_matrix(quat)
+    up = R[:, 1] * np.sign(R[2, 1])  # the standing box's width axis, pointing up
+    away = R[:, 2] * -side * np.sign(R[1, 2])  # its thickness axis, pointing off the wall
+    placed, rest = [], []
+    prev: tuple[np.ndarray, float] | None = None
+    for i, size in enumerate(sizes_m):
+        corners = (0.5 * size * _CORNER_SIGNS) @ R.T  # corner offsets from the centre
+        if prev is None:  # top corner at the wall, lowest corner just above the floor
+            y = side * (s.width_m / 2 - WALL_MARGIN_M) - side * np.max(side * corners[:, 1])
+            centre = np.array([0.0, y, GAP_M - corners[:, 2].min()])
+        else:
+            centre_prev, thick_prev = prev
+            gap = rng.uniform(0.0, max_gap_m)
+            centre = centre_prev + (0.5 * (thick_prev + size[2]) + gap) * away
+            # slide down along the faces until the lowest corner is just above the floor
+            centre += (GAP_M - centre[2] - corners[:, 2].min()) / up[2] * up
+        far = centre[1] + (corners[:, 1].max() if side < 0 else corners[:, 1].min())
+        if side * (far - y_limit) < 0 or centre[2] + corners[:, 2].max() > s.height_m - GAP_M:
+            rest.append(i)
+            continue
+        half = box_aabb_half_extents(size, quat)
+        centre[0] = rng.uniform(half[0] + 0.005, max(half[0] + 0.005, s.depth_m - half[0] - 0.005))
+        placed.append(world.add_box(size, np.concatenate([centre, quat])))
+        prev = (centre, float(size[2]))
+    return placed, rest
+
+
+class Leaning(Organized):
+    name = "leaning"
+    max_clusters = 3
+    disorder = 0.15
+    """A few random boxes, so that lean rows are not always clean."""
+    lean_prob = 0.8
+    """Probability that a slot at a side wall holds a row leaning on that wall."""
+    lean_range_deg = (20.0, 38.0)
+    """Tilt of a leaning row from vertical (under ~15 deg most boxes tip back upright)."""
+
+    def arrange_slot(
+        self,
+        world: BoxWorld,
+        sizes_m: np.ndarray,
+        g: np.ndarray,
+        y0: float,
+        y1: float,
+        rng: np.random.Generator,
+        walls: tuple[bool, bool],
+    ) -> list[int]:
+        sides = [side for side, wall in zip((1, -1), walls) if wall]
+        if not sides or rng.random() >= self.lean_prob:
+            return super().arrange_slot(world, sizes_m, g, y0, y1, rng, walls)
+        side = int(rng.choice(sides))
+        lean = rng.uniform(*self.lean_range_deg)
+        placed, rest = place_leaning_row(world, sizes_m[g], rng, side, y1 if side > 0 else y0, lean)
+        return placed + self.drop_rest(world, sizes_m, g[rest], rng)

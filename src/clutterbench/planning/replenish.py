@@ -1,0 +1,410 @@
+"""Shelf replenishment (thesis 5.2.3, Fig. 5.2): where a new box of known size can go, and
+what must be moved first, from one depth image, the arrangement detections and collapse maps.
+
+Frames. The thesis writes its candidates in the image: x to the right, y down, a cluster
+B_i = (x_i, y_i, w_i, h_i) (eq. 5.1). Every cluster here sits at its own depth, so its box is
+back-projected at that depth into the *image-aligned metric frame*: the same axes in metres
+on the plane through the cluster's front face (x_img = -y_shelf, y_img = -z_shelf, since the
+camera looks into the shelf along +x with the shelf's y to its left). The thesis' equations
+then hold as printed with w', h', g in metres, and a candidate is a place on the shelf.
+
+Left and right are the image's. Thesis eqs. (5.3) and (5.4) as printed put B^right at
+x_i - w_i/2 - ... (the image's left) while eq. (5.6) moves a blocker on B^right further
+toward +x, away from B_i only if B^right lies to the right: we take right = +x throughout
+(`candidate_rect`), so that both hold.
+
+The planner sees the depth image, the detections and the camera (never the simulator): which
+boxes a detection holds is the executor's business (trials/ch5.py grasps what is inside it).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from typing import Any, Literal
+
+import numpy as np
+
+from clutterbench.observation import Observation
+from clutterbench.perception.boxes import Detection
+
+Side = Literal["top", "left", "right"]
+SIDES_OF_CLASS: dict[str, tuple[Side, ...]] = {"C^h": ("top",), "C^v": ("left", "right")}
+"""Thesis 5.2.3: B^top on a stacked cluster, B^left / B^right beside a shelved one; leaning
+clusters (C^r, C^l) offer no place, they are obstacles to move (and set upright)."""
+BRANCHES = ("simple", "bimanual", "rearrange", "none")
+"""Thesis Fig. 5.2: simple replenishment, bimanual replenishment, bimanual rearrangement (a
+move first, then a new plan), or no plan (the episode gives up)."""
+SURFACE_MARGIN_M = 0.004
+"""A depth point within this of the shelf's floor, back or side boards is the shelf, not a
+box."""
+DROP_M = 0.002
+"""A placed box is let go this far above what it will rest on."""
+TOP_BAND_M = 0.005
+"""A cluster's top surface: its points within this of its highest one."""
+
+CollapseMap = Callable[[Observation, np.ndarray], np.ndarray]
+"""(observation, (H, W) bool target mask) -> (H, W) float collapse probability."""
+
+
+@dataclasses.dataclass(frozen=True)
+class WorkingSpace:
+    """The shelf interior the robot knows (thesis 5.2.3: W330 x D280 x H330 mm)."""
+
+    width_m: float = 0.330
+    depth_m: float = 0.280
+    height_m: float = 0.330
+
+
+@dataclasses.dataclass(frozen=True)
+class ReplenishParams:
+    """How the replenishment planner decides (thesis 5.2.3)."""
+
+    finger_m: float = 0.012
+    """g: thickness of the gripper's fingers, the margin around a placement (eqs. 5.2-5.9)."""
+    prob_threshold: float = 0.5
+    """A pixel of a collapse map is in the collapse region R_s when its probability is at
+    least this (thesis: "the predefined probability threshold")."""
+    iou_threshold: float = 0.1
+    """th: B_s is movable when IoU(B_j, R_s) < th for every other cluster j (eq. 5.5 text)."""
+    use_collapse: bool = True
+    """False: the thesis' "without collapse prediction" variant (every blocker is movable)."""
+    min_points: int = 3
+    """A candidate is occupied when at least this many depth points of boxes fall in it."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Cluster:
+    """A detection placed in the image-aligned metric frame at its own depth."""
+
+    index: int
+    cls: str
+    box_px: np.ndarray
+    """(4,) (x, y, w, h) pixels, thesis eq. (5.1)."""
+    rect_m: np.ndarray
+    """(4,) (x, y, w, h) metres in the image-aligned frame (x = -y_shelf, y = -z_shelf)."""
+    front_x_m: float
+    """Shelf x of its front face (median of its visible points)."""
+    top_x_m: float
+    """Shelf x of the middle of its top surface (the points within TOP_BAND_M of its top)."""
+    mask: np.ndarray
+    """(H, W) bool: the box-surface pixels inside its image box."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Candidate:
+    cluster: int
+    side: Side
+    rect_m: np.ndarray
+    """(4,) B_i^side in the image-aligned metric frame, thesis eqs. (5.2)-(5.4)."""
+    occupants: tuple[int, ...]
+    """Clusters with points inside it (-1: points of no cluster)."""
+    pose: np.ndarray
+    """(7,) where the new box is let go: [x, y, z, qw, qx, qy, qz] in the shelf frame."""
+
+    @property
+    def free(self) -> bool:
+        return not self.occupants
+
+
+@dataclasses.dataclass(frozen=True)
+class Move:
+    """Carry every box of a cluster by one rigid motion (thesis eqs. 5.5-5.6, 5.8-5.9)."""
+
+    cluster: int
+    box_px: np.ndarray
+    """(4,) the cluster's image box: what the robot grasps (the executor's business)."""
+    start_m: np.ndarray
+    """(2,) p^start in the image-aligned metric frame."""
+    goal_m: np.ndarray
+    """(2,) p^goal."""
+    upright: bool
+    """Rotate the cluster upright as it moves (C^r / C^l, thesis 5.2.3)."""
+
+    @property
+    def translation_m(self) -> np.ndarray:
+        """(3,) the motion in the shelf frame."""
+        d = self.goal_m - self.start_m
+        return np.array([0.0, -d[0], -d[1]])
+
+
+@dataclasses.dataclass(frozen=True)
+class Plan:
+    branch: str
+    """One of BRANCHES."""
+    candidate: Candidate | None
+    """Where the new box goes (None: rearrange / none)."""
+    move: Move | None
+    """bimanual: the blocker carried aside and held while the box is placed; rearrange: the
+    cluster carried aside and let go (then the planner looks again)."""
+    info: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+
+def new_box_extent_m(size_m: np.ndarray, side: Side) -> tuple[float, float]:
+    """(w', h') of a box of local extents (D, W, H) placed on `side`: lying flat on a stack
+    (width across, height up) or standing like a book beside a row (height across, width up)."""
+    _, w, h = (float(v) for v in size_m)
+    return (w, h) if side == "top" else (h, w)
+
+
+def candidate_rect(b: np.ndarray, side: Side, w_new: float, h_new: float, g: float) -> np.ndarray:
+    """B_i^side = (x, y, w, h) beside cluster box b = (x_i, y_i, w_i, h_i) (y down), thesis
+    eqs. (5.2)-(5.4), with right = +x (module docstring)."""
+    x, y, w, h = (float(v) for v in b)
+    if side == "top":  # eq. (5.2): on the stack, flush with its left edge
+        return np.array([x - w / 2 + w_new / 2, y - h / 2 - h_new / 2 - g, w_new + 2 * g, h_new])
+    if side == "left":  # eq. (5.4) mirrored: left of the row, resting where it rests
+        return np.array([x - w / 2 - w_new / 2 - g, y + h / 2 - h_new / 2, w_new + 2 * g, h_new])
+    if side == "right":  # eq. (5.3) mirrored
+        return np.array([x + w / 2 + w_new / 2 + g, y + h / 2 - h_new / 2, w_new + 2 * g, h_new])
+    raise ValueError(f"unknown side {side!r}")
+
+
+def move_goal(s: np.ndarray, side: Side, w_new: float, h_new: float, g: float) -> np.ndarray:
+    """p^goal of blocker B_s on candidate `side`, thesis eq. (5.6): aside by the new box's
+    width on left / right. On top the thesis lifts by h'/2 + h_s/2 + g; we lift by h' + g so
+    that the new box fits under whatever B_s's height."""
+    x, y, w, _ = (float(v) for v in s)
+    if side == "right":
+        return np.array([x + w_new / 2 + w / 2 + g, y])
+    if side == "left":
+        return np.array([x - w_new / 2 - w / 2 - g, y])
+    return np.array([x, y - h_new - g])
+
+
+def rearrange_goal(k: np.ndarray, s: np.ndarray, g: float) -> np.ndarray:
+    """p^goal of the obstacle B_k of a blocker B_s, thesis eq. (5.9): beside B_s, on B_k's
+    side of it."""
+    xk, yk, wk, _ = (float(v) for v in k)
+    xs, _, ws, _ = (float(v) for v in s)
+    if xk < xs:
+        return np.array([xs - ws / 2 - wk / 2 - g, yk])
+    return np.array([xs + ws / 2 + wk / 2 + g, yk])
+
+
+def rect_iou_mask(rect_px: np.ndarray, region: np.ndarray) -> float:
+    """IoU(B_j, R) of an image box (x, y, w, h) pixels and a (H, W) bool region."""
+    box = rect_mask(rect_px, region.shape)
+    union = np.logical_or(box, region).sum()
+    return float(np.logical_and(box, region).sum() / union) if union else 0.0
+
+
+def rect_mask(rect_px: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """(H, W) bool: the pixels whose centres lie in the box (x, y, w, h)."""
+    x, y, w, h = (float(v) for v in rect_px)
+    v, u = np.mgrid[0 : shape[0], 0 : shape[1]] + 0.5
+    return (np.abs(u - x) <= w / 2) & (np.abs(v - y) <= h / 2)
+
+
+def in_working_space(rect_m: np.ndarray, space: WorkingSpace, tol_m: float = 0.001) -> bool:
+    """Whether an image-aligned metric rectangle lies inside the shelf's interior face."""
+    x, y, w, h = (float(v) for v in rect_m)
+    return bool(
+        x - w / 2 >= -space.width_m / 2 - tol_m
+        and x + w / 2 <= space.width_m / 2 + tol_m
+        and -(y + h / 2) >= -tol_m
+        and -(y - h / 2) <= space.height_m + tol_m
+    )
+
+
+def box_points(obs: Observation, space: WorkingSpace) -> tuple[np.ndarray, np.ndarray]:
+    """((H, W, 3) shelf-frame point of every pixel, (H, W) bool: the point is on a box, not
+    on the shelf's boards or beyond)."""
+    pts = obs.camera.depth_to_points(obs.depth_m)
+    x, y, z = pts[..., 0], pts[..., 1], pts[..., 2]
+    m = SURFACE_MARGIN_M
+    on_box = (
+        np.isfinite(x)
+        & (x > -0.05)
+        & (x < space.depth_m - m)
+        & (np.abs(y) < space.width_m / 2 - m)
+        & (z > m)
+        & (z < space.height_m - m)
+    )
+    return pts, on_box
+
+
+def place_clusters(
+    obs: Observation, detections: Sequence[Detection], space: WorkingSpace
+) -> list[Cluster]:
+    """Every detection in the image-aligned metric frame: the extent of the box-surface points
+    seen inside its image box (the depth image back-projected), its front face at their
+    median depth. Boxes of one cluster stand at different depths, so corners back-projected
+    at one depth would put the nearer boxes' bottoms below the floor. A detection with no
+    such point is dropped."""
+    pts, on_box = box_points(obs, space)
+    out: list[Cluster] = []
+    for det in detections:
+        inside = rect_mask(det.box, obs.depth_m.shape) & on_box
+        if not inside.any():
+            continue
+        p = pts[inside]
+        x_img, y_img = -p[:, 1], -p[:, 2]  # image-aligned: x_img = -y_shelf, y_img = -z_shelf
+        x0, x1, y0, y1 = x_img.min(), x_img.max(), y_img.min(), y_img.max()
+        rect = np.array([(x0 + x1) / 2, (y0 + y1) / 2, x1 - x0, y1 - y0])
+        front = float(np.median(p[:, 0]))
+        top = p[p[:, 2] >= p[:, 2].max() - TOP_BAND_M, 0]
+        top_x = float((top.min() + top.max()) / 2)
+        box = np.asarray(det.box, float)
+        out.append(Cluster(len(out), det.cls, box, rect, front, top_x, inside))
+    return out
+
+
+def new_box_pose(
+    rect_m: np.ndarray, side: Side, size_m: np.ndarray, cluster: Cluster, space: WorkingSpace
+) -> np.ndarray:
+    """(7,) the new box let go at the candidate: centred across it, DROP_M above its bottom
+    (what it will rest on); flat and centred in depth on a stack's top surface, or standing
+    (width up, thickness across) with its front face flush with a row's."""
+    d = float(size_m[0])
+    _, h_new = new_box_extent_m(size_m, side)
+    x = cluster.top_x_m if side == "top" else cluster.front_x_m + d / 2
+    x = float(np.clip(x, d / 2 + 0.003, space.depth_m - d / 2 - 0.003))
+    y = -float(rect_m[0])
+    z = -(float(rect_m[1]) + float(rect_m[3]) / 2) + h_new / 2 + DROP_M
+    if side == "top":
+        q = np.array([1.0, 0.0, 0.0, 0.0])
+    else:  # standing: local y up, local z across (sim/families/shelved.py STANDING)
+        q = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])
+    return np.array([x, y, max(z, h_new / 2 + DROP_M), *q])
+
+
+def candidates(
+    obs: Observation,
+    clusters: Sequence[Cluster],
+    size_m: np.ndarray,
+    params: ReplenishParams,
+    space: WorkingSpace,
+) -> list[Candidate]:
+    """Every placement candidate inside the working space (thesis 5.2.3), with the clusters
+    whose box points fall inside it (the 3D region: the candidate's rectangle, from the
+    cluster's front face to the new box's depth behind it)."""
+    pts, on_box = box_points(obs, space)
+    owner = np.full(obs.depth_m.shape, -1, dtype=np.int64)
+    for c in clusters:
+        owner[c.mask & (owner < 0)] = c.index
+    out: list[Candidate] = []
+    g, d_new = params.finger_m, float(size_m[0])
+    for c in clusters:
+        for side in SIDES_OF_CLASS.get(c.cls, ()):
+            w_new, h_new = new_box_extent_m(size_m, side)
+            rect = candidate_rect(c.rect_m, side, w_new, h_new, g)
+            if not in_working_space(rect, space):
+                continue
+            x, y, w, h = rect
+            shrink = 0.001
+            inside = (
+                on_box
+                & (np.abs(-pts[..., 1] - x) <= w / 2 - shrink)
+                & (np.abs(-pts[..., 2] - y) <= h / 2 - shrink)
+                & (pts[..., 0] >= c.front_x_m - 0.01)
+                & (pts[..., 0] <= c.front_x_m + d_new + 0.01)
+            )
+            counts = np.bincount(owner[inside] + 1, minlength=len(clusters) + 1)
+            occupants = tuple(int(k) - 1 for k in np.nonzero(counts >= params.min_points)[0])
+            pose = new_box_pose(rect, side, size_m, c, space)
+            out.append(Candidate(c.index, side, rect, occupants, pose))
+    return out
+
+
+class ReplenishPlanner:
+    """Thesis Fig. 5.2: simple replenishment if a candidate is free; else bimanual
+    replenishment (move the one blocker B_s aside and hold it, if no other cluster's box
+    overlaps its collapse region R_s by IoU th or more); else bimanual rearrangement (move the
+    cluster B_k that overlaps R_s most aside, if that is safe, then look again).
+
+    `collapse_map` None or params.use_collapse False: the thesis' "without collapse
+    prediction" variant, every blocker movable."""
+
+    def __init__(
+        self,
+        params: ReplenishParams,
+        space: WorkingSpace,
+        collapse_map: CollapseMap | None = None,
+    ):
+        self.params, self.space, self.collapse_map = params, space, collapse_map
+
+    def _region(self, obs: Observation, cluster: Cluster) -> np.ndarray | None:
+        if self.collapse_map is None or not self.params.use_collapse:
+            return None
+        return self.collapse_map(obs, cluster.mask) >= self.params.prob_threshold
+
+    def _safe(self, region: np.ndarray | None, clusters: Sequence[Cluster], skip: set[int]) -> bool:
+        """IoU(B_j, R) < th for every cluster j not in `skip` (no region: always)."""
+        if region is None:
+            return True
+        return all(
+            rect_iou_mask(c.box_px, region) < self.params.iou_threshold
+            for c in clusters
+            if c.index not in skip
+        )
+
+    def plan(self, obs: Observation, detections: Sequence[Detection], size_m: np.ndarray) -> Plan:
+        clusters = place_clusters(obs, detections, self.space)
+        cands = candidates(obs, clusters, np.asarray(size_m, float), self.params, self.space)
+        info: dict[str, Any] = {
+            "clusters": [
+                {"cls": c.cls, "box_px": _r(c.box_px), "rect_m": _r(c.rect_m)} for c in clusters
+            ],
+            "candidates": [
+                {
+                    "cluster": c.cluster,
+                    "side": c.side,
+                    "rect_m": _r(c.rect_m),
+                    "occupants": list(c.occupants),
+                }
+                for c in cands
+            ],
+        }
+        for cand in cands:  # simple replenishment
+            if cand.free:
+                return Plan("simple", cand, None, info | {"candidate": cands.index(cand)})
+        regions: dict[int, np.ndarray | None] = {}
+        rearrange: Plan | None = None
+        g = self.params.finger_m
+        for n, cand in enumerate(cands):  # bimanual replenishment: one blocker
+            if len(cand.occupants) != 1 or cand.occupants[0] < 0:
+                continue  # thesis: one arm cannot hold two clusters aside
+            s = clusters[cand.occupants[0]]
+            if s.index == cand.cluster:
+                continue  # its own cluster fills it: nothing to move aside
+            w_new, h_new = new_box_extent_m(np.asarray(size_m, float), cand.side)
+            goal = move_goal(s.rect_m, cand.side, w_new, h_new, g)
+            moved = np.array([goal[0], goal[1], s.rect_m[2], s.rect_m[3]])
+            if not in_working_space(moved, self.space):
+                continue
+            if s.index not in regions:
+                regions[s.index] = self._region(obs, s)
+            region = regions[s.index]
+            move = Move(s.index, s.box_px, s.rect_m[:2].copy(), goal, s.cls in ("C^r", "C^l"))
+            if self._safe(region, clusters, {s.index, cand.cluster}):
+                return Plan("bimanual", cand, move, info | {"candidate": n, "blocker": s.index})
+            if rearrange is None and region is not None:  # eqs. (5.7)-(5.9)
+                others = [c for c in clusters if c.index not in (s.index, cand.cluster)]
+                if not others:
+                    continue
+                k = max(others, key=lambda c: (rect_iou_mask(c.box_px, region), -c.index))
+                if k.index not in regions:
+                    regions[k.index] = self._region(obs, k)
+                if not self._safe(regions[k.index], clusters, {s.index, cand.cluster, k.index}):
+                    continue
+                goal_k = rearrange_goal(k.rect_m, s.rect_m, g)
+                moved_k = np.array([goal_k[0], goal_k[1], k.rect_m[2], k.rect_m[3]])
+                if not in_working_space(moved_k, self.space):
+                    continue
+                move_k = Move(
+                    k.index, k.box_px, k.rect_m[:2].copy(), goal_k, k.cls in ("C^r", "C^l")
+                )
+                rearrange = Plan(
+                    "rearrange",
+                    None,
+                    move_k,
+                    info | {"candidate": n, "blocker": s.index, "obstacle": k.index},
+                )
+        if rearrange is not None:
+            return rearrange
+        return Plan("none", None, None, info)
+
+
+def _r(a: np.ndarray) -> list[float]:
+    return [round(float(v), 4) for v in a]

@@ -1,0 +1,192 @@
+"""Table 5.2: shelf replenishment success per scene type, our simulated trials beside the
+thesis' real-robot rows, and the failures broken down by the planner's branch.
+
+Rows are labelled '<method>/<scene type>' (report.table_5_2 in params.yaml); each maps to one
+trials_ch5 condition, and every method gets a total over its scene types. Rates are k/n with
+Wilson 95% intervals (trials.stats). The oracle simulates every candidate action, so a method
+succeeding where the oracle failed on the same scene is counted (it should not happen).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from clutterbench.errors import ClutterbenchError
+from clutterbench.io import write_text
+from clutterbench.report.tables import thesis_row, write_raw_csv
+from clutterbench.trials.stats import Rate, rate
+
+TABLE = "table_5_2"
+BRANCH_TABLE = f"{TABLE}_branches"
+SCENES = ("stacked", "shelved", "random")
+METHODS = {
+    "replenish": "with collapse prediction",
+    "no_collapse": "without collapse prediction",
+    "replenish_gt": "with collapse prediction, ground-truth clusters",
+    "random": "random placement candidate (floor)",
+    "oracle": "oracle: every candidate action simulated (ceiling)",
+}
+NOTE = (
+    "protocol: every step starts from a fresh world at the present state; a blocker is carried "
+    "aside and held (bimanual) or let go (rearrangement), the new box is let go at the "
+    "candidate, every held box is released and the scene settles, then the step is judged from "
+    "physics. Success: the new box rests inside the shelf within place_tol_m of its planned "
+    "place and no box other than the moved ones moved beyond the threshold or left the shelf "
+    "(a moved box must stay on the shelf); an episode ends at its first failed step, when the "
+    "box is placed, or when the planner has no plan (gave up, a failure). Intervals: Wilson 95%."
+)
+
+
+def _parse(row: str) -> tuple[str, str]:
+    method, _, scene = row.partition("/")
+    if not scene or method not in METHODS or scene not in SCENES:
+        raise ClutterbenchError(
+            f"report.table_5_2: row '{row}' must be '<method>/<scene type>' with method in "
+            f"{', '.join(METHODS)} and scene type in {', '.join(SCENES)}"
+        )
+    return method, scene
+
+
+def _thesis_text(figures: Mapping[str, Any], row: str) -> str | None:
+    t = thesis_row(figures, TABLE, row)
+    if "success" not in t:
+        return None
+    return f"{t['success']}/{t['trials']} ({100 * t['success_rate']:.1f}%)"
+
+
+def table_5_2(
+    by_condition: Mapping[str, Sequence[Mapping[str, Any]]],
+    rows: Mapping[str, str],
+    figures: Mapping[str, Any],
+    out_dir: Path,
+    scale: str,
+) -> pd.DataFrame:
+    """reports/tables/table_5_2.{md,csv} and table_5_2_branches.{md,csv}."""
+    cells: dict[str, dict[str, list[Mapping[str, Any]]]] = {}
+    for row, cond in rows.items():
+        method, scene = _parse(row)
+        if cond not in by_condition:
+            raise ClutterbenchError(
+                f"report.table_5_2.{row}: no trial records of condition '{cond}' "
+                "(run stage trials_ch5)"
+            )
+        cells.setdefault(method, {})[scene] = list(by_condition[cond])
+    oracle = cells.get("oracle", {})
+    oracle_ok = {
+        scene: {r["episode"]: bool(r["success"]) for r in recs} for scene, recs in oracle.items()
+    }
+    table_rows, raw = [], []
+    for method, scenes in cells.items():
+        line: dict[str, Any] = {"method": METHODS[method]}
+        all_recs: list[Mapping[str, Any]] = []
+        beats = 0
+        for scene in SCENES:
+            recs = scenes.get(scene, [])
+            all_recs += recs
+            r = rate(recs, "success") if recs else Rate(0, 0)
+            line[scene] = r.text()
+            line[f"{scene} (thesis)"] = _thesis_text(figures, f"{method}/{scene}")
+            raw.append({"method": method, "scene": scene, "success_k": r.k, "success_n": r.n})
+            known = oracle_ok.get(scene, {})
+            beats += sum(bool(x["success"]) and known.get(x["episode"]) is False for x in recs)
+        total = rate(all_recs, "success") if all_recs else Rate(0, 0)
+        line["total"] = total.text()
+        line["total (thesis)"] = _thesis_text(figures, f"{method}/total")
+        raw.append({"method": method, "scene": "total", "success_k": total.k, "success_n": total.n})
+        if oracle and method != "oracle":
+            o = [x for s in oracle.values() for x in s]
+            gap = 100 * (rate(o, "success").rate - total.rate) if o and all_recs else None
+            line["points below the oracle"] = f"{gap:.1f}" if gap is not None else "—"
+            line["episodes the oracle failed"] = beats
+        else:
+            line["points below the oracle"] = "—"
+            line["episodes the oracle failed"] = "—"
+        line["mean disturbed boxes"] = (
+            f"{sum(x['n_disturbed'] for x in all_recs) / len(all_recs):.2f}" if all_recs else "—"
+        )
+        table_rows.append(line)
+    frame = pd.DataFrame.from_records(table_rows)
+    thesis_cols = [c for c in frame.columns if c.endswith("(thesis)") and frame[c].notna().any()]
+    frame = frame.drop(
+        columns=[c for c in frame.columns if c.endswith("(thesis)") and c not in thesis_cols]
+    )
+    _write_md(
+        frame,
+        out_dir / f"{TABLE}.md",
+        f"Table 5.2: shelf replenishment success ({scale} scale, simulated)",
+        [
+            NOTE,
+            "(thesis) columns: the thesis' real-robot counts (Table 5.2); ours are simulated.",
+            "arrangement clusters from: "
+            + ", ".join(
+                sorted(
+                    {
+                        str(r.get("perception"))
+                        for s in cells.values()
+                        for v in s.values()
+                        for r in v
+                    }
+                )
+            )
+            + " (clusters: the generator's ground truth; detector: the trained detector).",
+            "episodes the oracle failed: scenes where the method succeeded but the oracle's "
+            "first successful action sequence was not found (its budget or the rearrangement "
+            "re-plan, which the oracle simulates as one fixed sequence).",
+        ],
+    )
+    write_raw_csv(raw, out_dir / f"{TABLE}.csv", counts=())
+    branches = branch_breakdown(cells)
+    _write_md(
+        branches,
+        out_dir / f"{BRANCH_TABLE}.md",
+        f"Table 5.2 by planner branch: where the episodes ended ({scale} scale)",
+        [
+            "branch: the plan that placed the box (or the last one executed); "
+            "ends: placed (success), collapse (another box moved), misplaced (the new box did "
+            "not rest at its place), gave_up (no plan)."
+        ],
+    )
+    write_text(out_dir / f"{BRANCH_TABLE}.csv", branches.to_csv(index=False))
+    return frame
+
+
+def branch_breakdown(
+    cells: Mapping[str, Mapping[str, Sequence[Mapping[str, Any]]]],
+) -> pd.DataFrame:
+    rows = []
+    for method, scenes in cells.items():
+        for scene in SCENES:
+            recs = scenes.get(scene, [])
+            groups: dict[str, list[Mapping[str, Any]]] = {}
+            for r in recs:
+                groups.setdefault(str(r["branch"]), []).append(r)
+            for branch in sorted(groups):
+                g = groups[branch]
+                row: dict[str, Any] = {
+                    "method": method,
+                    "scene": scene,
+                    "branch": branch,
+                    "episodes": len(g),
+                }
+                for end in ("placed", "collapse", "misplaced", "gave_up", "max_steps"):
+                    row[end] = sum(r["end"] == end for r in g)
+                rows.append(row)
+    return pd.DataFrame.from_records(rows)
+
+
+def _write_md(frame: pd.DataFrame, path: Path, title: str, notes: Sequence[str]) -> None:
+    header = list(frame.columns)
+    lines = [
+        f"# {title}",
+        "",
+        "| " + " | ".join(header) + " |",
+        "|" + "|".join("---" for _ in header) + "|",
+    ]
+    for _, r in frame.iterrows():
+        lines.append("| " + " | ".join("—" if pd.isna(r[h]) else str(r[h]) for h in header) + " |")
+    lines += [""] + [f"- {n}" for n in notes]
+    write_text(path, "\n".join(lines).rstrip() + "\n")

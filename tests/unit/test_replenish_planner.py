@@ -1,0 +1,77 @@
+"""Thesis 5.2.3 placement candidates and moves (eqs. 5.2-5.9), hand-computed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from clutterbench.planning.replenish import (
+    WorkingSpace,
+    candidate_rect,
+    in_working_space,
+    move_goal,
+    new_box_extent_m,
+    rearrange_goal,
+    rect_iou_mask,
+)
+
+B = np.array([0.0, -0.05, 0.10, 0.10])  # a cluster 10 cm wide and high, centred at x = 0
+G = 0.01
+
+
+def test_left_candidate_is_left_of_the_cluster_and_right_is_right():
+    left = candidate_rect(B, "left", 0.03, 0.08, G)
+    right = candidate_rect(B, "right", 0.03, 0.08, G)
+    # eq. (5.4)/(5.3) with right = +x: centres at x_i -/+ (w_i/2 + w'/2 + g)
+    assert left[0] == pytest.approx(-0.05 - 0.015 - 0.01)
+    assert right[0] == pytest.approx(0.05 + 0.015 + 0.01)
+    assert left[0] + left[2] / 2 <= B[0] - B[2] / 2 + 1e-12  # wholly left of the cluster
+    assert right[0] - right[2] / 2 >= B[0] + B[2] / 2 - 1e-12
+    # both rest where the cluster rests: bottoms at y_i + h_i / 2
+    for r in (left, right):
+        assert r[1] + r[3] / 2 == pytest.approx(B[1] + B[3] / 2)
+        assert r[2] == pytest.approx(0.03 + 2 * G) and r[3] == pytest.approx(0.08)
+
+
+def test_top_candidate_sits_above_flush_left():
+    top = candidate_rect(B, "top", 0.12, 0.03, G)
+    # eq. (5.2): x_i - w_i/2 + w'/2, y_i - h_i/2 - h'/2 - g (y down: above is smaller y)
+    assert top == pytest.approx([-0.05 + 0.06, -0.05 - 0.05 - 0.015 - 0.01, 0.12 + 2 * G, 0.03])
+    assert top[1] + top[3] / 2 < B[1] - B[3] / 2
+
+
+def test_move_goal_clears_the_candidate_side():
+    s = np.array([0.1, -0.05, 0.04, 0.1])
+    assert move_goal(s, "right", 0.03, 0.08, G)[0] == pytest.approx(0.1 + 0.015 + 0.02 + 0.01)
+    assert move_goal(s, "left", 0.03, 0.08, G)[0] == pytest.approx(0.1 - 0.015 - 0.02 - 0.01)
+    up = move_goal(s, "top", 0.12, 0.03, G)
+    assert up[0] == pytest.approx(0.1) and up[1] == pytest.approx(-0.05 - 0.03 - 0.01)
+
+
+def test_rearrange_goal_is_beside_the_blocker_on_its_side():
+    s = np.array([0.0, -0.05, 0.04, 0.1])
+    k_left, k_right = np.array([-0.1, -0.05, 0.06, 0.1]), np.array([0.1, -0.05, 0.06, 0.1])
+    assert rearrange_goal(k_left, s, G)[0] == pytest.approx(-0.02 - 0.03 - 0.01)  # eq. (5.9)
+    assert rearrange_goal(k_right, s, G)[0] == pytest.approx(0.02 + 0.03 + 0.01)
+
+
+def test_new_box_lies_on_a_stack_and_stands_beside_a_row():
+    size = np.array([0.1, 0.12, 0.03])  # (D, W, H)
+    assert new_box_extent_m(size, "top") == (0.12, 0.03)
+    assert new_box_extent_m(size, "left") == (0.03, 0.12)
+
+
+def test_working_space_bounds():
+    space = WorkingSpace(0.33, 0.28, 0.33)
+    assert in_working_space(np.array([0.0, -0.05, 0.1, 0.1]), space)
+    assert not in_working_space(np.array([0.14, -0.05, 0.1, 0.1]), space)  # past the side
+    assert not in_working_space(np.array([0.0, 0.02, 0.1, 0.1]), space)  # below the floor
+    assert not in_working_space(np.array([0.0, -0.3, 0.1, 0.1]), space)  # above the top
+
+
+def test_iou_of_a_box_and_a_region():
+    region = np.zeros((10, 10), dtype=bool)
+    region[0:4, 0:4] = True
+    assert rect_iou_mask(np.array([2.0, 2.0, 4.0, 4.0]), region) == pytest.approx(1.0)
+    assert rect_iou_mask(np.array([4.0, 2.0, 4.0, 4.0]), region) == pytest.approx(8 / 24)
+    assert rect_iou_mask(np.array([8.0, 8.0, 2.0, 2.0]), region) == 0.0
