@@ -62,7 +62,7 @@ def nms(
     kept: list[int] = []
     for i in order:
         same = [k for k in kept if classes[k] == classes[i]]
-        if not same or iou[i, same].max() < 2:
+        if not same or iou[i, same].max() <= iou_threshold:
             kept.append(int(i))
     return np.array(kept, dtype=np.int64)
 
