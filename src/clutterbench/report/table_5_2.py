@@ -16,8 +16,7 @@ from typing import Any
 import pandas as pd
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.io import write_text
-from clutterbench.report.tables import thesis_row, write_raw_csv
+from clutterbench.report.tables import thesis_row, write_raw_csv, write_table
 from clutterbench.trials.stats import Rate, rate
 
 TABLE = "table_5_2"
@@ -114,9 +113,11 @@ def table_5_2(
     frame = frame.drop(
         columns=[c for c in frame.columns if c.endswith("(thesis)") and c not in thesis_cols]
     )
-    _write_md(
+    write_table(
         frame,
-        out_dir / f"{TABLE}.md",
+        [],
+        out_dir,
+        TABLE,
         f"Table 5.2: shelf replenishment success ({scale} scale, simulated)",
         [
             NOTE,
@@ -140,9 +141,11 @@ def table_5_2(
     )
     write_raw_csv(raw, out_dir / f"{TABLE}.csv", counts=())
     branches = branch_breakdown(cells)
-    _write_md(
+    write_table(
         branches,
-        out_dir / f"{BRANCH_TABLE}.md",
+        [],
+        out_dir,
+        BRANCH_TABLE,
         f"Table 5.2 by planner branch: where the episodes ended ({scale} scale)",
         [
             "branch: the plan that placed the box (or the last one executed); "
@@ -150,7 +153,6 @@ def table_5_2(
             "not rest at its place), gave_up (no plan)."
         ],
     )
-    write_text(out_dir / f"{BRANCH_TABLE}.csv", branches.to_csv(index=False))
     return frame
 
 
@@ -176,17 +178,3 @@ def branch_breakdown(
                     row[end] = sum(r["end"] == end for r in g)
                 rows.append(row)
     return pd.DataFrame.from_records(rows)
-
-
-def _write_md(frame: pd.DataFrame, path: Path, title: str, notes: Sequence[str]) -> None:
-    header = list(frame.columns)
-    lines = [
-        f"# {title}",
-        "",
-        "| " + " | ".join(header) + " |",
-        "|" + "|".join("---" for _ in header) + "|",
-    ]
-    for _, r in frame.iterrows():
-        lines.append("| " + " | ".join("—" if pd.isna(r[h]) else str(r[h]) for h in header) + " |")
-    lines += [""] + [f"- {n}" for n in notes]
-    write_text(path, "\n".join(lines).rstrip() + "\n")
