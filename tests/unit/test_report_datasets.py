@@ -133,3 +133,41 @@ def test_tables_show_asked_beside_realized(gen, tmp_path):
         in (tmp_path / "tables/datasets_families.md").read_text()
     )
     assert "objects / scene asked" in (tmp_path / "tables/datasets.md").read_text()
+
+
+def test_cluster_classes_counted_per_split(tmp_path):
+    # scenes 0, 1 train, scene 2 test; scene 1's C^l cluster shows no pixel
+    classes = np.array([[0, 2, -1], [1, 3, -1], [1, 1, 2]], np.int8)
+    boxes = np.zeros((3, 3, 4), np.float32)
+    boxes[classes >= 0] = [10, 10, 4, 4]
+    boxes[1, 1] = 0
+    save_npz(
+        tmp_path / "gen/toy/shard-00000.npz",
+        {
+            **{k: v[:3] for k, v in SHARDS[0].items()},
+            "cluster_class": classes,
+            "cluster_bbox_px": boxes,
+            "config_hash": np.array("h"),
+        },
+    )
+    write_json(
+        tmp_path / "gen/toy/manifest.json",
+        {
+            "dataset": "toy",
+            "config_hash": "h",
+            "n_scenes": 3,
+            "shards": ["shard-00000.npz"],
+            "families": {"random": 2, "shelved": 1},
+            "rejected": by_reason(),
+        },
+    )
+    split = {"dataset": "toy", "config_hash": "h", "train": [0, 1], "val": [], "test": [2]}
+    write_json(tmp_path / "split/toy.json", split)
+    s = dataset_stats(tmp_path / "gen", tmp_path / "split", "toy", 0.005, pulls=False)
+    assert s["clusters"]["train"] == {"C^h": 1, "C^v": 1, "C^r": 1, "C^l": 0}
+    assert s["clusters"]["test"] == {"C^h": 0, "C^v": 2, "C^r": 1, "C^l": 0}
+    assert sum(s["clusters"]["val"].values()) == 0
+    datasets_table({"toy": s}, {"datasets": {"rows": []}}, tmp_path / "tables")
+    table = pd.read_csv(tmp_path / "tables/datasets_clusters.csv").set_index("split")
+    assert table.loc["test", "C^v"] == 2 and table.loc["train", "clusters"] == 3
+    assert table.loc["train", "scenes"] == 2 and "val" not in table.index  # no val scenes

@@ -18,8 +18,9 @@ import pandas as pd
 
 from clutterbench.data.config import DatasetConfig
 from clutterbench.data.labels import moved_matrix
-from clutterbench.data.shards import iter_shards, load_split, read_manifest
+from clutterbench.data.shards import ShardStore, iter_shards, load_split, read_manifest
 from clutterbench.errors import ClutterbenchError
+from clutterbench.perception.boxes import ARRANGEMENT_CLASSES
 from clutterbench.report.tables import Column, comparison_frame, thesis_row, write_table
 from clutterbench.sim.config import REJECT_REASONS
 
@@ -32,6 +33,7 @@ THESIS_DATASET = {
     "ch5": "ch5_collapse_map_train",
     "ch6": "ch6_cp_total",
     "ch6_test": "ch6_cp_test",
+    "ch5_arrangement": "ch5_yolo_arrangement",
 }
 
 COLUMNS = [
@@ -63,8 +65,17 @@ OBJECT_COLUMNS = [
     Column("scenes_asked", "scenes asked", "{:.1f}"),
 ]
 
+CLUSTER_COLUMNS = [
+    Column("dataset", "dataset", "{}"),
+    Column("split", "split", "{}"),
+    Column("scenes", "scenes", "{:d}"),
+    *[Column(c, c, "{:d}") for c in ARRANGEMENT_CLASSES],
+    Column("clusters", "clusters", "{:d}"),
+]
+
 # The per-scene arrays the statistics need (no images).
 READ_KEYS = ("n_objects", "family", "rejected", "removal_m")
+CLUSTER_KEYS = ("scene_index", "cluster_class", "cluster_bbox_px")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -147,6 +158,38 @@ def mix_stats(tally: Tally, ds: DatasetConfig | None) -> dict[str, Any]:
     }
 
 
+def cluster_counts(gen_dir: Path, name: str, split: Mapping[str, Any]) -> dict[str, Any] | None:
+    """Per split, the arrangement clusters (thesis 5.2.1) per class that some pixel shows, as
+    the detector sees them; None for shards without clusters."""
+    if "cluster_class" not in ShardStore(gen_dir, name, cache_shards=1).array_names():
+        return None
+    where = {int(i): part for part in ("train", "val", "test") for i in split[part]}
+    counts = {part: Counter() for part in ("train", "val", "test")}
+    for a in iter_shards(gen_dir, name, CLUSTER_KEYS):
+        for s, classes, boxes in zip(a["scene_index"], a["cluster_class"], a["cluster_bbox_px"]):
+            seen = (classes >= 0) & (boxes[:, 2] > 0) & (boxes[:, 3] > 0)
+            if int(s) in where:
+                counts[where[int(s)]].update(int(c) for c in classes[seen])
+    return {
+        part: {c: int(counts[part][k]) for k, c in enumerate(ARRANGEMENT_CLASSES)}
+        for part in counts
+    }
+
+
+def cluster_rows(name: str, s: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """Rows of the clusters table for one dataset's stats: one per split that has scenes
+    (none without clusters)."""
+    rows = []
+    for part, counts in (s.get("clusters") or {}).items():
+        if s[part] == 0:
+            continue
+        total = sum(counts.values())
+        rows.append(
+            {"dataset": name, "split": part, "scenes": s[part], **counts, "clusters": total}
+        )
+    return rows
+
+
 def dataset_stats(
     gen_dir: Path,
     split_dir: Path,
@@ -176,6 +219,7 @@ def dataset_stats(
         "rejected": int(sum(manifest["rejected"].values())),
         "rejected_by_reason": manifest["rejected"],
         "families": manifest["families"],
+        "clusters": cluster_counts(gen_dir, name, split),
         **mix_stats(tally, ds),
     }
 
@@ -234,6 +278,8 @@ def datasets_table(
             "thesis column: the dataset the thesis used for the same purpose.",
             "objects / scene asked: the mean of params' uniform n_objects range.",
             "realized mix: datasets_families.md (families, rejections), datasets_objects.md.",
+            "ch5_arrangement: the arrangement detector's data; its samples are its scenes (one "
+            "depth image each), its clusters per class in datasets_clusters.md.",
         ],
     )
     families = [r for name, s in stats.items() for r in family_rows(name, s)]
@@ -257,4 +303,17 @@ def datasets_table(
         "datasets_objects",
         "Boxes per scene: realized vs asked",
         notes=["scenes asked: expected count under params' uniform n_objects range."],
+    )
+    clusters = [r for name, s in stats.items() for r in cluster_rows(name, s)]
+    write_table(
+        records_frame(clusters, CLUSTER_COLUMNS),
+        CLUSTER_COLUMNS,
+        out_dir,
+        "datasets_clusters",
+        "Arrangement clusters per class and split (thesis 5.2.1)",
+        notes=[
+            "C^h stacked, C^v shelved (and every single box), C^r / C^l leaning right / left "
+            "in the image; classes from the settled tilt (sim/clusters.py).",
+            "clusters some pixel shows (the detector's ground truth); hidden ones not counted.",
+        ],
     )

@@ -165,29 +165,38 @@ def place_leaning_row(
 
 
 class Leaning(Organized):
+    """Two clusters side by side: on one side a row leaning on that side wall (C^l on the
+    left, C^r on the right; sometimes a row standing upright, C^v), on the other a stack
+    (C^h) or a standing row (C^v); what the leaning row has no room for goes on the stack.
+    No random boxes: clusters whose extent and class can be seen (the arrangement
+    detector's data, thesis 5.2.1)."""
+
     name = "leaning"
-    max_clusters = 3
-    disorder = 0.15
-    """A few random boxes, so that lean rows are not always clean."""
     lean_prob = 0.8
-    """Probability that a slot at a side wall holds a row leaning on that wall."""
+    """Probability that the row leans (else it stands upright)."""
     lean_range_deg = (20.0, 38.0)
     """Tilt of a leaning row from vertical (under ~15 deg most boxes tip back upright)."""
+    row_share = (0.5, 0.62)
+    """Range of the fraction of the shelf's width the row may take."""
 
-    def arrange_slot(
-        self,
-        world: BoxWorld,
-        sizes_m: np.ndarray,
-        g: np.ndarray,
-        y0: float,
-        y1: float,
-        rng: np.random.Generator,
-        walls: tuple[bool, bool],
-    ) -> list[int]:
-        sides = [side for side, wall in zip((1, -1), walls) if wall]
-        if not sides or rng.random() >= self.lean_prob:
-            return super().arrange_slot(world, sizes_m, g, y0, y1, rng, walls)
-        side = int(rng.choice(sides))
-        lean = rng.uniform(*self.lean_range_deg)
-        placed, rest = place_leaning_row(world, sizes_m[g], rng, side, y1 if side > 0 else y0, lean)
-        return placed + self.drop_rest(world, sizes_m, g[rest], rng)
+    def place(self, world: BoxWorld, sizes_m: np.ndarray, rng: np.random.Generator) -> Placement:
+        s = world.shelf
+        n = len(sizes_m)
+        side = int(rng.choice([-1, 1]))  # the row's wall: +1 the +y (image left) wall
+        wall = side * s.width_m / 2
+        split = wall - side * rng.uniform(*self.row_share) * s.width_m
+        row, other = np.arange(n)[: -(-n // 2)], np.arange(n)[-(-n // 2) :]
+        if rng.random() < self.lean_prob:
+            lean = rng.uniform(*self.lean_range_deg)
+            placed, rest = place_leaning_row(world, sizes_m[row], rng, side, split, lean)
+        else:
+            y0, y1 = (wall, split) if side > 0 else (split, wall)
+            placed, rest = place_row(world, sizes_m[row], rng, y0, y1, 0.005)
+        spill = row[rest]
+        y0, y1 = (split, -wall) if side > 0 else (-wall, split)
+        if len(spill) or rng.random() < 0.5:
+            rest_group = self.stack(world, sizes_m, np.concatenate([other, spill]), y0, y1, rng)
+        else:
+            kept, left_over = place_row(world, sizes_m[other], rng, y0, y1, 0.005)
+            rest_group = kept + self.drop_rest(world, sizes_m, other[left_over], rng)
+        return Placement([g for g in (placed, rest_group) if g])

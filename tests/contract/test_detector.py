@@ -1,0 +1,163 @@
+"""The arrangement detector (thesis 5.2.1): output shapes, decoding of hand-made heads, training
+targets, checkpoint round trip and one-line refusals of checkpoints it cannot use."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from clutterbench.collapse.detector import (
+    ArrangementDetector,
+    DetectorParams,
+    detector_loss,
+    heatmap_targets,
+    shift_image,
+)
+from clutterbench.errors import ClutterbenchError
+from clutterbench.models.checkpoint import save_checkpoint
+from clutterbench.models.collapse_map import CollapseMapConfig, CollapseMapNet
+from clutterbench.models.detector import (
+    STRIDE,
+    ArrangementNet,
+    DetectorConfig,
+    decode,
+    load_detector,
+    save_detector,
+)
+from clutterbench.models.vgg import VGGConfig
+from clutterbench.perception.boxes import ARRANGEMENT_CLASSES, Detection
+
+SIZE = 64
+CFG = DetectorConfig(input_size=SIZE, widths=(4, 4, 8, 8, 8), neck_channels=8)
+
+
+def tiny_net(seed: int = 0) -> ArrangementNet:
+    torch.manual_seed(seed)
+    return ArrangementNet(CFG).eval()
+
+
+def depth_images(n: int) -> np.ndarray:
+    return np.random.default_rng(0).uniform(0.5, 0.8, (n, SIZE, SIZE)).astype(np.float32)
+
+
+def test_forward_shapes():
+    out = tiny_net()(torch.from_numpy(depth_images(3))[:, None])
+    grid = SIZE // STRIDE
+    assert out["heatmap"].shape == (3, len(ARRANGEMENT_CLASSES), grid, grid)
+    assert out["size"].shape == (3, 2, grid, grid) and out["offset"].shape == (3, 2, grid, grid)
+    with pytest.raises(ValueError, match=r"\(B, 1, 64, 64\)"):
+        tiny_net()(torch.zeros(1, 1, 32, 32))
+
+
+def hand_made_heads(grid: int = 16) -> dict[str, torch.Tensor]:
+    """One confident C^r peak at cell (x 5, y 3) of size 20 x 10 px, offset (0.25, 0.5), and a
+    weak C^v peak elsewhere."""
+    heat = torch.full((1, 4, grid, grid), -10.0)
+    heat[0, 2, 3, 5] = 3.0  # sigmoid 0.953
+    heat[0, 1, 10, 10] = -2.0  # sigmoid 0.119
+    size = torch.zeros(1, 2, grid, grid)
+    size[0, :, 3, 5] = torch.log(torch.tensor([20.0, 10.0]))
+    offset = torch.zeros(1, 2, grid, grid)
+    offset[0, :, 3, 5] = torch.tensor([0.25, 0.5])
+    return {"heatmap": heat, "size": size, "offset": offset}
+
+
+def test_decode_hand_made_heads():
+    [(boxes, scores, classes)] = decode(hand_made_heads(), score_threshold=0.3)
+    assert boxes.shape == (1, 4) and scores.shape == (1,) and classes.tolist() == [2]
+    assert boxes[0] == pytest.approx([5.25 * STRIDE, 3.5 * STRIDE, 20.0, 10.0], abs=1e-5)
+    assert scores[0] == pytest.approx(torch.sigmoid(torch.tensor(3.0)).item(), abs=1e-6)
+    [(boxes, scores, classes)] = decode(hand_made_heads(), score_threshold=0.1)
+    assert classes.tolist() == [2, 1] and np.all(np.diff(scores) < 0)  # best first
+
+
+def test_targets_peak_at_the_centre_and_invert_decoding():
+    classes, boxes = [np.array([3])], [np.array([[21.0, 14.0, 20.0, 10.0]], np.float32)]
+    t = heatmap_targets(classes, boxes, 4, SIZE // STRIDE, alpha=0.54)
+    assert t["heatmap"].shape == (1, 4, 16, 16) and t["heatmap"][0, :3].max() == 0.0
+    assert t["heatmap"][0, 3, 3, 5] == 1.0 and (t["heatmap"][0, 3] == 1.0).sum() == 1
+    assert t["mask"][0].sum() == 1.0 and t["mask"][0, 3, 5] == 1.0
+    assert t["offset"][0, :, 3, 5] == pytest.approx([0.25, 0.5])
+    # targets as network outputs decode back to the box (logits: a peak where heat is 1)
+    heads = {
+        "heatmap": torch.from_numpy(np.where(t["heatmap"] == 1.0, 5.0, -5.0)),
+        "size": torch.from_numpy(t["size"]),
+        "offset": torch.from_numpy(t["offset"]),
+    }
+    [(decoded, _, cls)] = decode(heads, 0.3)
+    assert cls.tolist() == [3] and decoded[0] == pytest.approx(boxes[0][0], abs=1e-4)
+    tensors = {k: torch.from_numpy(v) for k, v in t.items()}
+    loss = detector_loss(heads, tensors, DetectorParams(net=CFG))
+    assert float(loss) < 0.01  # perfect heads cost (almost) nothing
+
+
+def test_shift_moves_image_and_boxes_together_and_cuts_at_the_border():
+    depth = np.zeros((16, 16), np.float32)
+    depth[4:8, 2:6] = 0.5  # a 4 x 4 patch, box centre (4, 6)
+    boxes = np.array([[4.0, 6.0, 4.0, 4.0], [1.0, 8.0, 2.0, 4.0]], np.float32)
+    out, moved, kept = shift_image(depth, boxes, 3, -2)
+    assert out.shape == depth.shape and np.array_equal(out[2:6, 5:9], depth[4:8, 2:6])
+    assert np.all(out[-2:] == out[-3])  # the uncovered rows repeat the edge
+    assert kept.tolist() == [True, True] and moved[0].tolist() == [7.0, 4.0, 4.0, 4.0]
+    # moved 3 px left, the second box keeps 0 of its 2 px width: dropped
+    _, moved, kept = shift_image(depth, boxes, -3, 0)
+    assert kept.tolist() == [True, False] and moved.tolist() == [[1.5, 6.0, 3.0, 4.0]]
+    _, same, _ = shift_image(depth, boxes, 0, 0)
+    assert np.array_equal(same, boxes)
+
+
+def test_detect_returns_detections_and_applies_the_thresholds():
+    net = tiny_net()
+    detector = ArrangementDetector(net, score_threshold=0.0, nms_iou=0.45)
+    dets = detector.detect(depth_images(1)[0])
+    assert dets and all(isinstance(d, Detection) for d in dets)
+    assert all(d.cls in ARRANGEMENT_CLASSES and d.box.shape == (4,) for d in dets)
+    assert [d.score for d in dets] == sorted((d.score for d in dets), reverse=True)
+    assert len(ArrangementDetector(net, score_threshold=1.0).detect(depth_images(1)[0])) == 0
+    with pytest.raises(ClutterbenchError, match="takes 64x64 depth images, got 128x128"):
+        detector.detect(np.zeros((128, 128), np.float32))
+    with pytest.raises(ClutterbenchError, match="float32"):
+        detector.detect(np.zeros((SIZE, SIZE)))
+
+
+def test_checkpoint_round_trip(tmp_path):
+    net = tiny_net(seed=3)
+    path = tmp_path / "best.pt"
+    save_detector(path, net, {"score_threshold": 0.2, "nms_iou": 0.5, "epoch": 7})
+    again, meta = load_detector(path)
+    assert again.cfg == CFG and meta["epoch"] == 7
+    for k, v in net.state_dict().items():
+        assert torch.equal(v, again.state_dict()[k]), k
+    loaded = ArrangementDetector.from_checkpoint(path)
+    assert (loaded.score_threshold, loaded.nms_iou) == (0.2, 0.5)
+    assert ArrangementDetector.from_checkpoint(path, score_threshold=0.4).score_threshold == 0.4
+    images = depth_images(2)
+    direct = ArrangementDetector(net, 0.2, 0.5).raw_batch(images)
+    for (b1, s1, c1), (b2, s2, c2) in zip(direct, loaded.raw_batch(images)):
+        assert np.array_equal(b1, b2) and np.array_equal(s1, s2) and np.array_equal(c1, c2)
+    save_detector(tmp_path / "again.pt", again, meta)
+    assert (tmp_path / "again.pt").read_bytes() == path.read_bytes()  # bytes: weights + config
+
+
+def test_foreign_and_broken_checkpoints_are_one_line(tmp_path):
+    collapse = tmp_path / "collapse.pt"
+    net = CollapseMapNet(CollapseMapConfig(input_size=64, encoder=VGGConfig(width=0.125)))
+    save_checkpoint(collapse, "collapse_map", net, {})
+    with pytest.raises(ClutterbenchError, match="not a clutterbench detector checkpoint"):
+        ArrangementDetector.from_checkpoint(collapse)
+    broken = tmp_path / "broken.pt"
+    broken.write_bytes(b"truncated")
+    with pytest.raises(ClutterbenchError, match="unreadable") as err:
+        ArrangementDetector.from_checkpoint(broken)
+    assert "\n" not in str(err.value)
+    with pytest.raises(ClutterbenchError, match="not found"):
+        ArrangementDetector.from_checkpoint(tmp_path / "missing.pt")
+    # weights saved under another config than the one stored beside them
+    payload = torch.load(collapse, weights_only=True)
+    good = tmp_path / "good.pt"
+    save_detector(good, tiny_net(), {})
+    mixed = torch.load(good, weights_only=True) | {"state_dict": payload["state_dict"]}
+    torch.save(mixed, tmp_path / "mixed.pt")
+    with pytest.raises(ClutterbenchError, match="do not fit its config"):
+        ArrangementDetector.from_checkpoint(tmp_path / "mixed.pt")
