@@ -41,6 +41,7 @@ def trials_ch5(params: dict, base: BaseConfig) -> None:
     prob = cfg.ch5.prob_threshold
     if prob is None:
         prob = val_threshold(cfg.ch5.model)
+    with_detector = any(c.perception == "detector" for c in cfg.ch5_conditions.values())
     jobs = []
     for name, cond in cfg.ch5_conditions.items():
         jobs += ch5_jobs(
@@ -55,6 +56,7 @@ def trials_ch5(params: dict, base: BaseConfig) -> None:
             cfg.mcap_images,
             prob,
             cond.stream.removeprefix("ch5_"),
+            with_detector,
         )
     results = run_episodes("trials_ch5", run_ch5_episode, jobs, cfg.workers)
     records = [r.record for r in results]

@@ -55,6 +55,17 @@ def test_rearrange_goal_is_beside_the_blocker_on_its_side():
     assert rearrange_goal(k_right, s, G)[0] == pytest.approx(0.02 + 0.03 + 0.01)
 
 
+def test_rearrange_goal_makes_room_for_the_blockers_own_move():
+    s = np.array([0.0, -0.05, 0.04, 0.1])
+    k_right = np.array([0.1, -0.05, 0.06, 0.1])
+    # B_s will move right to x = 0.05: B_k, on its right, goes beside that goal
+    assert rearrange_goal(k_right, s, G, np.array([0.05, -0.05]))[0] == pytest.approx(0.11)
+    # B_s moves left, away from B_k: eq. (5.9) as printed
+    assert rearrange_goal(k_right, s, G, np.array([-0.05, -0.05]))[0] == pytest.approx(0.06)
+    # a lift (no sideways motion): as printed
+    assert rearrange_goal(k_right, s, G, np.array([0.0, -0.1]))[0] == pytest.approx(0.06)
+
+
 def test_new_box_lies_on_a_stack_and_stands_beside_a_row():
     size = np.array([0.1, 0.12, 0.03])  # (D, W, H)
     assert new_box_extent_m(size, "top") == (0.12, 0.03)

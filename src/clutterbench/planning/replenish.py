@@ -42,6 +42,8 @@ DROP_M = 0.002
 """A placed box is let go this far above what it will rest on."""
 TOP_BAND_M = 0.005
 """A cluster's top surface: its points within this of its highest one."""
+SUPPORT_BAND_M = 0.015
+"""A candidate off the floor rests on the box points within this under its bottom."""
 
 CollapseMap = Callable[[Observation, np.ndarray], np.ndarray]
 """(observation, (H, W) bool target mask) -> (H, W) float collapse probability."""
@@ -87,6 +89,8 @@ class Cluster:
     """Shelf x of its front face (median of its visible points)."""
     top_x_m: float
     """Shelf x of the middle of its top surface (the points within TOP_BAND_M of its top)."""
+    top_span_m: np.ndarray
+    """(2,) image-aligned x extent of its top surface: where B^top can rest (eq. 5.2)."""
     mask: np.ndarray
     """(H, W) bool: the box-surface pixels inside its image box."""
 
@@ -98,7 +102,7 @@ class Candidate:
     rect_m: np.ndarray
     """(4,) B_i^side in the image-aligned metric frame, thesis eqs. (5.2)-(5.4)."""
     occupants: tuple[int, ...]
-    """Clusters with points inside it (-1: points of no cluster)."""
+    """Clusters with points inside it, most points first (-1: points of no cluster)."""
     pose: np.ndarray
     """(7,) where the new box is let go: [x, y, z, qw, qx, qy, qz] in the shelf frame."""
 
@@ -172,11 +176,17 @@ def move_goal(s: np.ndarray, side: Side, w_new: float, h_new: float, g: float) -
     return np.array([x, y - h_new - g])
 
 
-def rearrange_goal(k: np.ndarray, s: np.ndarray, g: float) -> np.ndarray:
+def rearrange_goal(
+    k: np.ndarray, s: np.ndarray, g: float, s_goal: np.ndarray | None = None
+) -> np.ndarray:
     """p^goal of the obstacle B_k of a blocker B_s, thesis eq. (5.9): beside B_s, on B_k's
-    side of it."""
+    side of it. Eq. (5.9) as printed measures from B_s's present place, from which B_s then
+    moves by eq. (5.6), into B_k when B_k lies on the side B_s moves to; given `s_goal`
+    (B_s's p^goal) B_k goes beside that goal in that case, so that B_s's move has room."""
     xk, yk, wk, _ = (float(v) for v in k)
     xs, _, ws, _ = (float(v) for v in s)
+    if s_goal is not None and (xk - xs) * (float(s_goal[0]) - xs) > 0:
+        xs = float(s_goal[0])
     if xk < xs:
         return np.array([xs - ws / 2 - wk / 2 - g, yk])
     return np.array([xs + ws / 2 + wk / 2 + g, yk])
@@ -243,10 +253,11 @@ def place_clusters(
         x0, x1, y0, y1 = x_img.min(), x_img.max(), y_img.min(), y_img.max()
         rect = np.array([(x0 + x1) / 2, (y0 + y1) / 2, x1 - x0, y1 - y0])
         front = float(np.median(p[:, 0]))
-        top = p[p[:, 2] >= p[:, 2].max() - TOP_BAND_M, 0]
-        top_x = float((top.min() + top.max()) / 2)
+        band = p[:, 2] >= p[:, 2].max() - TOP_BAND_M
+        top_x = float((p[band, 0].min() + p[band, 0].max()) / 2)
+        span = np.array([x_img[band].min(), x_img[band].max()])
         box = np.asarray(det.box, float)
-        out.append(Cluster(len(out), det.cls, box, rect, front, top_x, inside))
+        out.append(Cluster(len(out), det.cls, box, rect, front, top_x, span, inside))
     return out
 
 
@@ -278,7 +289,13 @@ def candidates(
 ) -> list[Candidate]:
     """Every placement candidate inside the working space (thesis 5.2.3), with the clusters
     whose box points fall inside it (the 3D region: the candidate's rectangle, from the
-    cluster's front face to the new box's depth behind it)."""
+    cluster's front face to the new box's depth behind it).
+
+    B^top spans the cluster's top surface, not its whole width: eq. (5.2) puts the box flush
+    with the cluster's left edge, off the stack where its top box is narrower than the boxes
+    under it. A candidate must also rest on something once its occupants are moved: the
+    floor, or box points other than its occupants' just under the middle of its bottom
+    (else a free candidate in mid-air beside a box on a stack would be "simple")."""
     pts, on_box = box_points(obs, space)
     owner = np.full(obs.depth_m.shape, -1, dtype=np.int64)
     for c in clusters:
@@ -288,20 +305,37 @@ def candidates(
     for c in clusters:
         for side in SIDES_OF_CLASS.get(c.cls, ()):
             w_new, h_new = new_box_extent_m(size_m, side)
-            rect = candidate_rect(c.rect_m, side, w_new, h_new, g)
+            b = c.rect_m
+            if side == "top":
+                b = np.array([c.top_span_m.mean(), b[1], np.ptp(c.top_span_m), b[3]])
+            rect = candidate_rect(b, side, w_new, h_new, g)
             if not in_working_space(rect, space):
                 continue
             x, y, w, h = rect
             shrink = 0.001
+            across = np.abs(-pts[..., 1] - x)
             inside = (
                 on_box
-                & (np.abs(-pts[..., 1] - x) <= w / 2 - shrink)
+                & (across <= w / 2 - shrink)
                 & (np.abs(-pts[..., 2] - y) <= h / 2 - shrink)
                 & (pts[..., 0] >= c.front_x_m - 0.01)
                 & (pts[..., 0] <= c.front_x_m + d_new + 0.01)
             )
             counts = np.bincount(owner[inside] + 1, minlength=len(clusters) + 1)
-            occupants = tuple(int(k) - 1 for k in np.nonzero(counts >= params.min_points)[0])
+            found = np.nonzero(counts >= params.min_points)[0]
+            found = found[np.argsort(-counts[found], kind="stable")]
+            occupants = tuple(int(k) - 1 for k in found)
+            bottom = y + h / 2
+            if -bottom > SUPPORT_BAND_M:  # not on the floor: box points under its middle
+                under = (
+                    on_box
+                    & (across <= w / 2 - g)
+                    & (-pts[..., 2] >= bottom - 0.002)
+                    & (-pts[..., 2] <= bottom + SUPPORT_BAND_M)
+                    & ~np.isin(owner, occupants)
+                )
+                if under.sum() < params.min_points:
+                    continue
             pose = new_box_pose(rect, side, size_m, c, space)
             out.append(Candidate(c.index, side, rect, occupants, pose))
     return out
@@ -363,9 +397,9 @@ class ReplenishPlanner:
         rearrange: Plan | None = None
         g = self.params.finger_m
         for n, cand in enumerate(cands):  # bimanual replenishment: one blocker
-            if len(cand.occupants) != 1 or cand.occupants[0] < 0:
-                continue  # thesis: one arm cannot hold two clusters aside
-            s = clusters[cand.occupants[0]]
+            if cand.occupants[0] < 0:
+                continue  # what fills it is no detected cluster: nothing to grasp
+            s = clusters[cand.occupants[0]]  # B_s: the cluster filling it most
             if s.index == cand.cluster:
                 continue  # its own cluster fills it: nothing to move aside
             w_new, h_new = new_box_extent_m(np.asarray(size_m, float), cand.side)
@@ -388,7 +422,7 @@ class ReplenishPlanner:
                     regions[k.index] = self._region(obs, k)
                 if not self._safe(regions[k.index], clusters, {s.index, cand.cluster, k.index}):
                     continue
-                goal_k = rearrange_goal(k.rect_m, s.rect_m, g)
+                goal_k = rearrange_goal(k.rect_m, s.rect_m, g, goal)
                 moved_k = np.array([goal_k[0], goal_k[1], k.rect_m[2], k.rect_m[3]])
                 if not in_working_space(moved_k, self.space):
                     continue

@@ -17,6 +17,9 @@ FAMILY_NAMES = (
     "disorganized",
     "pile",
     "leaning",
+    "replenish_stacked",
+    "replenish_shelved",
+    "replenish_random",
 )
 """Names of the scene families in sim/families (checked equal to its registry by a test)."""
 REJECT_REASONS = ("moving", "fell", "no_room", "overlap", "creeping")

@@ -97,8 +97,14 @@ def true_clusters(spec: SceneSpec, state: SceneState, physics: PhysicsConfig, ob
     return detections_from_clusters(classes, boxes)
 
 
-def perceive(job: dict[str, Any], spec: SceneSpec, state: SceneState, obs: Observation):
-    if job["cond"].perception == "clusters":
+def perceive(
+    job: dict[str, Any],
+    spec: SceneSpec,
+    state: SceneState,
+    obs: Observation,
+    perception: str | None = None,
+):
+    if (perception or job["cond"].perception) == "clusters":
         return true_clusters(spec, state, job["physics"], obs)
     from clutterbench.collapse.detector import ArrangementDetector
 
@@ -178,7 +184,9 @@ def execute(
         moved = members(obs, plan.move.box_px)
         if moved:
             shift = plan.move.translation_m
-            turn = upright_angle_rad(world, moved) if plan.move.upright else 0.0
+            # a gripper closing on standing boxes aligns them: a leaning cluster (C^r / C^l,
+            # thesis 5.2.3) and a lone leaning box (classed C^v) alike
+            turn = upright_angle_rad(world, moved)
             shift = shift + np.array([0.0, 0.0, floor_lift_m(world, moved, shift, turn)])
             world.carry_group(moved, shift, turn)
             if plan.branch == "rearrange":
@@ -252,7 +260,7 @@ def action_set(
     held, first = [], []
     g = params.finger_m
     for c in cands:
-        if len(c.occupants) != 1 or c.occupants[0] < 0 or c.occupants[0] == c.cluster:
+        if not c.occupants or c.occupants[0] < 0 or c.occupants[0] == c.cluster:
             continue
         s = clusters[c.occupants[0]]
         w_new, h_new = new_box_extent_m(size_m, c.side)
@@ -264,7 +272,7 @@ def action_set(
         for k in clusters:
             if k.index in (s.index, c.cluster):
                 continue
-            goal_k = rearrange_goal(k.rect_m, s.rect_m, g)
+            goal_k = rearrange_goal(k.rect_m, s.rect_m, g, goal)
             if not in_working_space(np.array([*goal_k, *k.rect_m[2:]]), space):
                 continue
             move_k = Move(k.index, k.box_px, k.rect_m[:2].copy(), goal_k, k.cls in ("C^r", "C^l"))
@@ -344,7 +352,10 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
             rng = policy_rng(job["seed"], cond.stream, job["index"], "ch5_random")
             plan = simple[int(rng.integers(len(simple)))] if simple else Plan("none", None, None)
         else:
-            seq, tried = oracle_choice(spec, state, obs, dets, size_m, rp, space, job)
+            views = [dets]
+            if job.get("oracle_detector"):  # the detector's actions too: no planner beats it
+                views.append(perceive(job, spec, state, obs, "detector"))
+            seq, tried = oracle_choice(spec, state, obs, views, size_m, rp, space, job)
             simulated += tried
             plan = seq[0]
             queued = seq[1:]
@@ -398,16 +409,16 @@ def oracle_choice(
     spec: SceneSpec,
     state: SceneState,
     obs: Observation,
-    dets: list[Detection],
+    views: list[list[Detection]],
     size_m: np.ndarray,
     rp: ReplenishParams,
     space: WorkingSpace,
     job: dict[str, Any],
 ) -> tuple[list[Plan], int]:
-    """The first action sequence (in action_set's order) that succeeds when simulated from
-    the present state exactly as it would be executed; none succeeds: the first one (it
-    fails), or no plan."""
-    options = action_set(obs, dets, size_m, rp, space)
+    """The first action sequence (in action_set's order, for each set of detections in
+    `views` in turn) that succeeds when simulated from the present state exactly as it would
+    be executed; none succeeds: the first one (it fails), or no plan."""
+    options = [seq for dets in views for seq in action_set(obs, dets, size_m, rp, space)]
     params: Ch5TrialParams = job["params"]
     physics: PhysicsConfig = job["physics"]
     tried = 0
@@ -498,7 +509,10 @@ def ch5_jobs(
     record_images: bool,
     prob_threshold: float,
     scene_type: str,
+    oracle_detector: bool = False,
 ) -> list[dict[str, Any]]:
+    """One job per episode; `oracle_detector`: an oracle also simulates the actions seen
+    through the detector (set when any condition perceives with it)."""
     return [
         {
             "condition": condition,
@@ -515,6 +529,7 @@ def ch5_jobs(
             "max_attempts": max_attempts,
             "record_images": record_images,
             "scene_type": scene_type,
+            "oracle_detector": oracle_detector,
         }
         for i in range(cond.episodes)
     ]

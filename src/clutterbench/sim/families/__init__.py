@@ -6,12 +6,24 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.sim.families.arrangement import Disorganized, Leaning, Organized
 from clutterbench.sim.families.base import Placement, SceneFamily
 from clutterbench.sim.families.random_drop import RandomDrop
+from clutterbench.sim.families.replenish import ReplenishRandom, ReplenishShelved, ReplenishStacked
 from clutterbench.sim.families.shelved import Shelved
 from clutterbench.sim.families.stacked import Pile, Stacked
 
 FAMILIES: dict[str, SceneFamily] = {
     f.name: f
-    for f in (Shelved(), Stacked(), RandomDrop(), Organized(), Disorganized(), Pile(), Leaning())
+    for f in (
+        Shelved(),
+        Stacked(),
+        RandomDrop(),
+        Organized(),
+        Disorganized(),
+        Pile(),
+        Leaning(),
+        ReplenishStacked(),
+        ReplenishShelved(),
+        ReplenishRandom(),
+    )
 }
 
 
