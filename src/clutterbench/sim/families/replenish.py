@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from clutterbench.sim.families.arrangement import _CORNER_SIGNS
 from clutterbench.sim.families.base import (
     GAP_M,
     WALL_MARGIN_M,
@@ -39,7 +40,6 @@ from clutterbench.sim.geometry import (
 )
 from clutterbench.sim.physics import BoxWorld
 
-_CORNER_SIGNS = np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)], float)
 FLAT = np.array([1.0, 0.0, 0.0, 0.0])
 
 
