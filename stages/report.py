@@ -19,6 +19,7 @@ from clutterbench.report.extraction import (
     rule_note,
     trial_params_note,
 )
+from clutterbench.report.fig_3_15 import fig_3_15_table
 from clutterbench.report.support import support_table
 from clutterbench.report.table_4_1 import table_4_1, table_4_1_target
 from clutterbench.report.table_4_2 import table_4_2
@@ -27,13 +28,15 @@ from clutterbench.report.tables import load_thesis_figures
 from clutterbench.stage import run_stage
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.records import read_records
+from clutterbench.trials.stats import aggregate_games
 
 
 def _json_key(path: Path, key: str):
-    """`key` of the JSON object in `path`, or one line naming the file and the support stage."""
+    """`key` of the JSON object in `path`, or one line naming the file and the stage to
+    rerun (the one that writes reports/<stage>/)."""
     data = read_json(path)
     if not isinstance(data, dict) or key not in data:
-        raise ClutterbenchError(f"{path}: no '{key}' in it; rerun the support stage")
+        raise ClutterbenchError(f"{path}: no '{key}' in it; rerun the {path.parent.name} stage")
     return data[key]
 
 
@@ -118,6 +121,17 @@ def report(params: dict, base: BaseConfig) -> None:
     for r in read_records(Path("reports/trials_ch5/records.jsonl")):
         ch5.setdefault(r["condition"], []).append(r)
     table_5_2(ch5, cfg.table_5_2, figures, Path("reports/tables"), base.scale)
+
+    games = read_records(Path("reports/trials_ch3/records.jsonl"))
+    fig_3_15_table(
+        aggregate_games(games),
+        games,
+        figures,
+        _json_key(Path("reports/train_slide/metrics.json"), "val"),
+        Path("reports/tables"),
+        Path("reports/tables/fig_3_15.png"),
+        base.scale,
+    )
 
 
 if __name__ == "__main__":

@@ -178,12 +178,17 @@ def load_section(
     params: Mapping[str, Any] | None = None,
     path: Path | str = "params.yaml",
 ) -> T:
-    """Load `params[section]` as `cls`, after choosing scale-dependent values by base.scale."""
+    """Load `params[section]` as `cls`, after choosing scale-dependent values by base.scale.
+    A dotted name ("yamakuzushi.pile") loads a subsection, so a stage depends on only the
+    params (and modules) it reads."""
     params = load_params(path) if params is None else params
     base = load_base(params)
-    if section not in params:
-        raise ClutterbenchError(f"{section}: section missing from params")
-    return parse(cls, resolve_scale(params[section], base.scale, section), section)
+    raw: Any = params
+    for part in section.split("."):
+        if not isinstance(raw, Mapping) or part not in raw:
+            raise ClutterbenchError(f"{section}: section missing from params")
+        raw = raw[part]
+    return parse(cls, resolve_scale(raw, base.scale, section), section)
 
 
 def load_base(params: Mapping[str, Any]) -> BaseConfig:

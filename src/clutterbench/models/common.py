@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import io
 from pathlib import Path
 from typing import Any
 
@@ -10,7 +11,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from clutterbench.config import as_dict, parse
 from clutterbench.errors import ClutterbenchError
+from clutterbench.io import atomic_path
 
 
 def normalise_depth(depth_m: torch.Tensor, near_m: float, far_m: float) -> torch.Tensor:
@@ -107,3 +110,39 @@ def fold_batchnorm(model: nn.Module) -> nn.Module:
             conv.bias = nn.Parameter((bias - bn.running_mean) * scale + bn.bias)
             seq[i + 1] = nn.Identity()
     return model
+
+
+def save_model_file(path: Path, fmt: str, model: nn.Module, meta: dict[str, Any]) -> None:
+    """Write a network that is not a collapse network atomically: format, its config
+    (`model.cfg`), training facts and weights; the bytes depend only on them."""
+    payload = {
+        "format": fmt,
+        "net": as_dict(model.cfg),
+        "meta": meta,
+        "state_dict": {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()},
+    }
+    buf = io.BytesIO()
+    torch.save(payload, buf)
+    with atomic_path(Path(path)) as tmp:
+        tmp.write_bytes(buf.getvalue())
+
+
+def load_model_file(
+    path: Path, fmt: str, config_cls: type, module_cls: type[nn.Module], what: str, hint: str
+) -> tuple[nn.Module, dict[str, Any]]:
+    """(model in eval mode, meta) rebuilt from a `save_model_file` file alone; one-line
+    errors for a missing, unreadable or foreign file, or weights that do not fit the stored
+    config. `what` names the file in errors ("detector checkpoint"), `hint` how to make it."""
+    path = Path(path)
+    payload = load_torch_file(path, what, hint)
+    if not isinstance(payload, dict) or payload.get("format") != fmt:
+        raise ClutterbenchError(f"checkpoint {path} is not a clutterbench {what}")
+    cfg = parse(config_cls, payload["net"], f"checkpoint {path}: net")
+    model = module_cls(cfg)
+    try:
+        model.load_state_dict(payload["state_dict"])
+    except RuntimeError:
+        raise ClutterbenchError(
+            f"checkpoint {path}: its weights do not fit its config; retrain it"
+        ) from None
+    return model.eval(), dict(payload.get("meta", {}))

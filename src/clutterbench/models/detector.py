@@ -12,7 +12,6 @@ cannot differ. Not a collapse network: it registers no arch and has its own chec
 from __future__ import annotations
 
 import dataclasses
-import io
 from pathlib import Path
 from typing import Any
 
@@ -21,14 +20,13 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from clutterbench.config import as_dict, bounded, parse
-from clutterbench.errors import ClutterbenchError
-from clutterbench.io import atomic_path
+from clutterbench.config import bounded
 from clutterbench.models.common import (
     check_size_and_depth_range,
     conv_bn_relu,
-    load_torch_file,
+    load_model_file,
     normalise_depth,
+    save_model_file,
 )
 
 FORMAT = "clutterbench.detector/1"
@@ -125,33 +123,17 @@ def decode(
 
 
 def save_detector(path: Path, model: ArrangementNet, meta: dict[str, Any]) -> None:
-    """Write atomically: format, config, training facts and weights; the bytes depend only on
-    them."""
-    payload = {
-        "format": FORMAT,
-        "net": as_dict(model.cfg),
-        "meta": meta,
-        "state_dict": {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()},
-    }
-    buf = io.BytesIO()
-    torch.save(payload, buf)
-    with atomic_path(Path(path)) as tmp:
-        tmp.write_bytes(buf.getvalue())
+    """Write atomically: format, config, training facts and weights."""
+    save_model_file(path, FORMAT, model, meta)
 
 
 def load_detector(path: Path) -> tuple[ArrangementNet, dict[str, Any]]:
-    """(model in eval mode, meta) rebuilt from the checkpoint alone; one-line errors for a
-    missing, unreadable or foreign file, or weights that do not fit the stored config."""
-    path = Path(path)
-    payload = load_torch_file(path, "detector checkpoint", "; run the detector stage first")
-    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
-        raise ClutterbenchError(f"checkpoint {path} is not a clutterbench detector checkpoint")
-    cfg = parse(DetectorConfig, payload["net"], f"checkpoint {path}: net")
-    model = ArrangementNet(cfg)
-    try:
-        model.load_state_dict(payload["state_dict"])
-    except RuntimeError:
-        raise ClutterbenchError(
-            f"checkpoint {path}: its weights do not fit its config; retrain it"
-        ) from None
-    return model.eval(), dict(payload.get("meta", {}))
+    """(model in eval mode, meta) rebuilt from the checkpoint alone (one-line errors)."""
+    return load_model_file(
+        path,
+        FORMAT,
+        DetectorConfig,
+        ArrangementNet,
+        "detector checkpoint",
+        "; run the detector stage first",
+    )

@@ -11,26 +11,10 @@ import time
 import numpy as np
 import sapien
 
-from clutterbench.errors import ClutterbenchError
 from clutterbench.observation import CameraModel, Observation
 from clutterbench.sim.config import CameraConfig
 from clutterbench.sim.physics import BoxWorld
-
-_RENDERER: sapien.render.SapienRenderer | None = None
-
-
-def ensure_renderer() -> sapien.render.SapienRenderer:
-    """The process-wide renderer (created on first use, never torn down)."""
-    global _RENDERER
-    if _RENDERER is None:
-        try:
-            _RENDERER = sapien.render.SapienRenderer()
-        except RuntimeError as exc:
-            raise ClutterbenchError(
-                f"SAPIEN found no Vulkan device ({exc}); install Mesa from bookworm-backports "
-                "(scripts/setup_system.sh)"
-            ) from None
-    return _RENDERER
+from clutterbench.sim.renderer import ensure_renderer
 
 
 def _camera(world: BoxWorld, cam: CameraConfig):

@@ -11,7 +11,6 @@ order; the parent writes `records.jsonl` (one JSON record per episode) and `epis
 from __future__ import annotations
 
 import dataclasses
-import multiprocessing as mp
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -20,7 +19,7 @@ import numpy as np
 
 from clutterbench.logs.mcap_episode import EpisodeWriter
 from clutterbench.observation import CameraModel
-from clutterbench.progress import progress_bar
+from clutterbench.parallel import map_in_workers
 
 EPISODE_GAP_S = 1.0
 """Simulated seconds left empty between two episodes on the condition's MCAP timeline."""
@@ -109,41 +108,11 @@ class EpisodeResult:
 EpisodeFn = Callable[[dict[str, Any]], EpisodeResult]
 
 
-def _worker_init(torch_threads: int) -> None:
-    from clutterbench.sim.render import ensure_renderer
-
-    ensure_renderer()
-    try:
-        import torch
-
-        torch.set_num_threads(torch_threads)
-    except ImportError:  # pragma: no cover - torch is a dependency
-        pass
-
-
-def _call(args: tuple[EpisodeFn, dict[str, Any]]) -> EpisodeResult:
-    fn, job = args
-    return fn(job)
-
-
 def run_episodes(
     label: str, fn: EpisodeFn, jobs: Sequence[dict[str, Any]], workers: int
 ) -> list[EpisodeResult]:
     """Run `fn` on every job (in worker processes when workers > 1), results in job order."""
-    results: list[EpisodeResult] = []
-    with progress_bar(label, total=len(jobs)) as advance:
-        if workers == 1 or len(jobs) <= 1:
-            _worker_init(1)
-            for job in jobs:
-                results.append(fn(job))
-                advance(1)
-        else:
-            ctx = mp.get_context("spawn")  # fresh processes: one renderer each, no forked GL
-            with ctx.Pool(min(workers, len(jobs)), _worker_init, (1,)) as pool:
-                for result in pool.imap(_call, [(fn, job) for job in jobs]):
-                    results.append(result)
-                    advance(1)
-    return results
+    return map_in_workers(label, fn, jobs, workers)
 
 
 def write_mcap(path: Path, results: Sequence[EpisodeResult], metadata: dict[str, str]) -> None:

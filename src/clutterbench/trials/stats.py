@@ -242,3 +242,31 @@ def aggregate(records: Sequence[Mapping[str, Any]], group_by: str = "condition")
         if c in ("episodes", "aborts", "aborts_before_motion") or c.endswith(("_k", "_n"))
     ]
     return frame.astype(dict.fromkeys(counts, "Int64"))
+
+
+def aggregate_games(records: Sequence[Mapping[str, Any]]) -> pd.DataFrame:
+    """Chapter 3 games (records with `pieces_removed`, `end` and per-slide `steps`): per
+    condition the `aggregate` columns (games with >= 1 piece as episode success, per-slide
+    success with the game-cluster bootstrap interval, slides per game), plus the mean pieces
+    per game with a game-bootstrap interval, observations per slide, and how games ended."""
+    frame = aggregate(records)
+    means, los, his, obs, ends = [], [], [], [], []
+    for variant in frame["condition"]:
+        mine = [r for r in records if r["condition"] == variant]
+        pieces = [(r["pieces_removed"], 1) for r in mine]
+        lo, hi = cluster_bootstrap_interval(pieces)
+        means.append(float(np.mean([p for p, _ in pieces])))
+        los.append(lo)
+        his.append(hi)
+        slides = [s for r in mine for s in r["steps"]]
+        obs.append(float(np.mean([s["observations"] for s in slides])) if slides else np.nan)
+        counts: dict[str, int] = {}
+        for r in mine:
+            counts[r["end"]] = counts.get(r["end"], 0) + 1
+        ends.append(", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+    frame["mean_pieces"] = means
+    frame["mean_pieces_lo"] = los
+    frame["mean_pieces_hi"] = his
+    frame["observations_per_slide"] = obs
+    frame["ends"] = ends
+    return frame

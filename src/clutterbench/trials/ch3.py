@@ -1,0 +1,286 @@
+"""Chapter 3 games of Yamakuzushi (thesis 3.5.2, Fig. 3.15): a pile, then target selection ->
+POMDP (observe or slide) -> slide, repeated until a slide fails or nothing is worth sliding.
+
+Every step starts from a fresh world built from the pile's present state (the canonical
+start); the planner sees the top camera's picture and, when the POMDP asks, the movable
+sensor's pictures from its chosen viewpoints; the slide is simulated and judged from physics
+(sim.pile.slide). Variants (trials.ch3_config.VARIANTS):
+- convnet: the ConvNet's best pieces (planning.yamakuzushi.convnet_targets), each through the
+  POMDP; the first the POMDP slides is slid. A piece refused by the POMDP is skipped; all
+  refused, or none above the ConvNet's threshold: the game ends (nothing worth sliding).
+- no_convnet: the same with the least-occluded pieces (the thesis' comparison).
+- random: a random candidate on a piece, slid at once (floor).
+- oracle: every visible piece in every direction simulated from the present state, the first
+  success kept (pieces from the highest down); none: the game ends (ceiling: it never makes a
+  failing slide).
+One record per game (its slides in `steps`); the stage writes one row per slide as well.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from clutterbench.data.slide_crops import ScanConfig
+from clutterbench.observation import Observation
+from clutterbench.planning import pomdp
+from clutterbench.planning.yamakuzushi import (
+    PomdpConfig,
+    Target,
+    convnet_targets,
+    least_occluded_targets,
+    random_targets,
+)
+from clutterbench.shogi_piece import PIECE_SIZE_M
+from clutterbench.trials.harness import EpisodeLog, EpisodeResult
+
+STEP_S = 1.0
+"""Simulated seconds between two logged steps of a game on the MCAP timeline."""
+_MODEL_CACHE: dict[str, Any] = {}
+
+
+def _convnet(path: str):
+    if path not in _MODEL_CACHE:
+        from clutterbench.models.slide_convnet import load_slide_convnet
+
+        _MODEL_CACHE[path] = load_slide_convnet(Path(path))[0]
+    return _MODEL_CACHE[path]
+
+
+def _scene_points(obs: Observation, piece: int) -> tuple[np.ndarray, np.ndarray]:
+    """(target points, other object points) of a view, board points left out."""
+    pts = obs.camera.depth_to_points(obs.depth_m)
+    target = obs.instance == piece + 1
+    others = (obs.instance > 0) & ~target
+    return pts[target].reshape(-1, 3), pts[others].reshape(-1, 3)
+
+
+def _eye(obs: Observation) -> np.ndarray:
+    return obs.camera.T_world_from_cam[:3, 3].copy()
+
+
+def run_pomdp(world, target: Target, top: Observation, cfg, log: EpisodeLog, t: float):
+    """The thesis' observe-or-slide loop (3.4) for one target: the belief starts uniform and
+    is updated with the top view; while observing at the best viewpoint is worth more than
+    sliding (eq. 3.3) and observations remain, the sensor moves there and the belief is
+    updated. Slid when the POMDP chooses to slide and the flat states hold at least
+    pomdp.min_flat_share of the belief; else refused. Returns (slide?, facts for the record,
+    time)."""
+    from clutterbench.sim.pile import view_observation
+
+    pc: PomdpConfig = cfg.pomdp
+    mine, others = _scene_points(top, target.piece)
+    centre = mine[:, :2].mean(axis=0) if len(mine) else np.asarray(target.start_xy)
+    views = [top]
+    b = pomdp.update_belief(
+        pomdp.uniform_belief(),
+        pomdp.state_weights(mine, centre, pc.e_th_m, eye_m=_eye(top), occluders=others),
+    )
+    eyes = pomdp.viewpoint_candidates(
+        [centre[0], centre[1], 0.0], pc.viewpoint_distances_m, pc.min_elevation_deg
+    )
+    visited: list[int] = []
+    decision = None
+    for _ in range(pc.max_observations + 1):
+        scene = np.concatenate([_scene_points(v, target.piece)[1] for v in views] + [mine])
+        grid = pomdp.occupancy_grid(scene, np.array([_eye(v) for v in views]), centre)
+        free = [k for k in range(len(eyes)) if k not in visited]
+        decision = pomdp.decide(
+            b,
+            eyes[free],
+            centre,
+            grid,
+            others,
+            reward=pc.reward,
+            alpha=pc.alpha,
+            beta=pc.beta,
+            e_th_m=pc.e_th_m,
+        )
+        log.json(t, "/planner/belief", {"piece": target.piece, "belief": b.tolist()})
+        if decision.kind == "slide" or len(visited) >= pc.max_observations:
+            break
+        k = free[decision.viewpoint]
+        visited.append(k)
+        view = view_observation(world, cfg.camera, eyes[k], np.array([*centre, 0.01]))
+        views.append(view)
+        t += STEP_S / 4
+        log.json(t, "/sensor/viewpoint", {"piece": target.piece, "eye_m": eyes[k].tolist()})
+        if log.record_images:
+            near, far = cfg.camera.near_m, cfg.camera.far_m
+            log.heatmap(t, "/sensor/depth", np.clip((view.depth_m - near) / (far - near), 0, 1))
+        seen, occ = _scene_points(view, target.piece)
+        b = pomdp.update_belief(
+            b, pomdp.state_weights(seen, centre, pc.e_th_m, eye_m=eyes[k], occluders=occ)
+        )
+    mass = pomdp.belief_mass(b)
+    flat = float(b[list(pomdp.SLIDABLE_STATES)].sum() / mass) if mass > 0 else 0.0
+    slide_it = decision.kind == "slide" and flat >= pc.min_flat_share
+    facts = {
+        "observations": len(visited),
+        "belief_mass": mass,
+        "flat_share": flat,
+        "most_likely_state": int(np.argmax(b)),
+        "pomdp_choice": decision.kind,
+        "slide_value": decision.slide_value,
+    }
+    return slide_it, facts, t
+
+
+def _oracle_choice(poses: np.ndarray, top: Observation, cfg) -> tuple[Target | None, Any, int]:
+    """The first successful slide of the visible pieces (highest first) x directions, each
+    simulated from a fresh world at `poses`; (target, its result, slides simulated)."""
+    from clutterbench.sim.pile import PileWorld, slide
+
+    n_dir = cfg.scan.n_directions
+    order = sorted(top.visible_boxes(cfg.select.min_visible_px), key=lambda k: -poses[k, 2])
+    tried = 0
+    for piece in order:
+        for d in range(n_dir):
+            tried += 1
+            world = PileWorld.from_poses(poses, cfg.pile)
+            result = slide(world, piece, d * 2 * np.pi / n_dir, cfg.slide)
+            if result.success:
+                start = (float(poses[piece, 0]), float(poses[piece, 1]))
+                return Target(piece, start, d), result, tried
+    return None, None, tried
+
+
+def _targets(variant: str, job: dict[str, Any], top: Observation, rng) -> list[Target]:
+    cfg = job["cfg"]
+    scan: ScanConfig = cfg.scan
+    if variant == "convnet":
+        return convnet_targets(_convnet(job["model"]), top, scan, cfg.select)
+    if variant == "no_convnet":
+        return least_occluded_targets(top, scan, cfg.select)
+    return random_targets(top, scan, cfg.select, rng)
+
+
+def run_ch3_game(job: dict[str, Any]) -> EpisodeResult:
+    """One game of one variant on the pile of `job["seed"]`."""
+    from clutterbench.sim.pile import PileWorld, generate_pile, slide, top_observation
+
+    cfg, variant = job["cfg"], job["variant"]
+    spec = generate_pile(cfg.pile, job["seed"])
+    poses = np.array(spec.poses, dtype=np.float64)
+    rng = np.random.default_rng(job["seed"] + 7)
+    log = EpisodeLog(record_images=job["mcap_images"])
+    steps: list[dict[str, Any]] = []
+    end = "max_slides"
+    t = 0.0
+    for step in range(cfg.games.max_slides):
+        if not np.isfinite(poses).all(axis=1).any():
+            end = "cleared"
+            break
+        world = PileWorld.from_poses(poses, cfg.pile, render=True)
+        top = top_observation(world, cfg.camera)
+        if step == 0:
+            sizes = np.tile(np.array(PIECE_SIZE_M), (len(poses), 1))
+            board = (
+                "board",
+                np.array([*np.asarray(cfg.pile.board_size_m) / 2, 0.005]),
+                np.array([0.0, 0.0, -0.005]),
+            )
+            log.scene(t, sizes, [board], top.camera, top.depth_m.shape)
+        log.poses(t, np.nan_to_num(poses), [k for k in range(len(poses)) if np.isnan(poses[k, 0])])
+        log.observation(t, top.depth_m, top.instance)
+        facts: dict[str, Any] = {}
+        chosen: Target | None = None
+        result = None
+        if variant == "oracle":
+            chosen, result, tried = _oracle_choice(poses, top, cfg)
+            facts = {"slides_simulated": tried}
+        else:
+            offered = _targets(variant, job, top, rng)
+            refused = []
+            for target in offered:
+                if variant == "random":
+                    chosen = target
+                    break
+                ok, facts, t = run_pomdp(world, target, top, cfg, log, t)
+                if ok:
+                    chosen = target
+                    break
+                refused.append({"piece": target.piece, **facts})
+            facts = {**facts, "offered": len(offered), "refused": refused}
+        if chosen is None:
+            end = "nothing_worth_sliding"
+            log.json(t, "/planner/decision", {"step": step, "action": "stop", **facts})
+            break
+        angle = chosen.angle_rad(cfg.scan.n_directions)
+        log.json(
+            t,
+            "/planner/decision",
+            {
+                "step": step,
+                "action": "slide",
+                "piece": chosen.piece,
+                "start_xy": list(chosen.start_xy),
+                "direction_deg": float(np.degrees(angle)),
+                "probability": chosen.probability,
+            },
+        )
+        if result is None:
+            result = slide(PileWorld.from_poses(poses, cfg.pile), chosen.piece, angle, cfg.slide)
+        t += STEP_S
+        after = np.array(result.poses_after, dtype=np.float64)
+        after[chosen.piece] = np.nan
+        steps.append(
+            {
+                "step": step,
+                "piece": chosen.piece,
+                "direction": chosen.direction,
+                "probability": chosen.probability,
+                "success": bool(result.success),
+                "target_out": bool(result.target_out),
+                "others_still": bool(result.others_still),
+                "moved": list(result.moved),
+                "max_displacement_m": float(np.nanmax(result.displacement_m, initial=0.0)),
+                "observations": int(facts.get("observations", 0)),
+                **{k: v for k, v in facts.items() if k in ("slides_simulated", "offered")},
+            }
+        )
+        log.json(t, "/trial/slide", steps[-1])
+        if not result.success:
+            end = "slide_failed"
+            break
+        poses = after
+    removed = sum(s["success"] for s in steps)
+    record = {
+        "condition": variant,
+        "game": job["game"],
+        "seed": job["seed"],
+        "n_pieces": int(len(spec.poses)),
+        "pieces_removed": int(removed),
+        "slides": len(steps),
+        "end": end,
+        "success": removed > 0,
+        "steps": steps,
+    }
+    return EpisodeResult(record=record, log=log)
+
+
+def ch3_jobs(cfg, seed_of, model: str | None) -> list[dict[str, Any]]:
+    """Every (variant, game) job; game g of every variant plays the pile of seed_of(g)."""
+    return [
+        {
+            "variant": v,
+            "game": g,
+            "seed": seed_of(g),
+            "cfg": cfg,
+            "model": model,
+            "mcap_images": cfg.games.mcap_images,
+        }
+        for v in cfg.games.variants
+        for g in range(cfg.games.n_games)
+    ]
+
+
+def slide_rows(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per slide: the game's variant, index and seed beside the slide's facts."""
+    return [
+        {"condition": r["condition"], "game": r["game"], "seed": r["seed"], **s}
+        for r in records
+        for s in r["steps"]
+    ]
