@@ -30,6 +30,7 @@ from clutterbench.models.collapse_map import CollapseMapConfig, CollapseMapNet
 from clutterbench.models.vgg import VGGConfig
 from clutterbench.report.config import ReportConfig
 from clutterbench.sim.config import SimConfig
+from clutterbench.trials.ch3_config import Ch3Config
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.records import read_records
 
@@ -138,6 +139,22 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
         assert len(frame) == rows and frame["success_rate"].between(0, 1).all(), table
     t42 = pd.read_csv(a / "reports/tables/table_4_2.csv")
     assert len(t42) == 4
+    # chapter 3: every variant's games, one row per slide, one MCAP per variant, Fig. 3.15
+    ch3 = load_section(Ch3Config, "yamakuzushi", params)
+    games = read_records(a / "reports/trials_ch3/records.jsonl")
+    assert len(games) == len(ch3.games.variants) * ch3.games.n_games
+    slides = read_records(a / "reports/trials_ch3/slides.jsonl")
+    assert len(slides) == sum(len(g["steps"]) for g in games)
+    for g in games:  # a game ends at its first failed slide
+        assert all(s["success"] for s in g["steps"][:-1])
+        assert g["pieces_removed"] == sum(s["success"] for s in g["steps"])
+    for variant in ch3.games.variants:
+        topics = read_episode(a / "data/trials_ch3" / variant / "episodes.mcap")["topics"]
+        assert topics["/trial/outcome"] == ch3.games.n_games
+    fig = pd.read_csv(a / "reports/tables/fig_3_15.csv")
+    assert len(fig) == len(ch3.games.variants)
+    assert (a / "reports/tables/fig_3_15.png").stat().st_size > 1000
+    assert (a / "reports/train_slide/candidates.png").stat().st_size > 1000
     status = run(["dvc", "status"], a).stdout
     assert "changed" not in status
 
@@ -145,7 +162,8 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
 def test_same_params_give_byte_identical_data_and_tables(repro_twice):
     a, b = repro_twice
     trees = ("data", "models", "reports/train", "reports/evaluate", "reports/tables")
-    for tree in (*trees, "reports/support", "reports/trials", "reports/trials_ch4"):
+    more = ("reports/support", "reports/trials", "reports/trials_ch4", "reports/trials_ch3")
+    for tree in (*trees, *more, "reports/train_slide", "reports/slides"):
         assert digest_tree(a / tree) == digest_tree(b / tree), tree
 
 

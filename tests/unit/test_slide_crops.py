@@ -67,3 +67,15 @@ def test_piece_under_reads_the_instance_at_board_points():
     instance = np.where(xy[..., 0] > 0.05, 3, 0).astype(np.uint8)
     obs = Observation(np.full((size, size), HEIGHT_M, np.float32), instance, cam)
     assert list(piece_under(obs, np.array([[0.1, 0.0], [-0.1, 0.02]]))) == [2, -1]
+
+
+def test_piece_under_with_a_margin_leaves_out_edges():
+    size = 128
+    cam = top_camera(size)
+    xy = board_xy(cam, size)
+    instance = np.where(xy[..., 0] > 0.05, 3, 0).astype(np.uint8)
+    obs = Observation(np.full((size, size), HEIGHT_M, np.float32), instance, cam)
+    px_m = 0.4 / size
+    points = np.array([[0.05 + 1.5 * px_m, 0.0], [0.05 + 6 * px_m, 0.0]])
+    assert list(piece_under(obs, points)) == [2, 2]
+    assert list(piece_under(obs, points, margin_px=3)) == [-1, 2]

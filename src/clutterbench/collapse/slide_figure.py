@@ -93,7 +93,7 @@ def candidates_figure(model, seeds: Sequence[int], pile, camera, scan, path: Pat
         world = PileWorld.from_spec(generate_pile(pile, seed), pile, render=True)
         obs = top_observation(world, camera)
         cands = raster_candidates(scan)
-        on = np.nonzero(piece_under(obs, cands.start_xy) >= 0)[0]
+        on = np.nonzero(piece_under(obs, cands.start_xy, scan.edge_margin_px) >= 0)[0]
         crops = slide_crops(height_image(obs), obs.camera, subset(cands, on), scan)
         probs = np.zeros(len(cands))
         probs[on] = success_probability(model, crops).numpy()

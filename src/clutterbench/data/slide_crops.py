@@ -39,6 +39,10 @@ class ScanConfig:
     """Side of a crop in pixels (thesis 227); the ConvNet's input size."""
     start_row_fraction: float = bounded(0.75, gt=0.0, le=1.0)
     """Where the start point sits in a crop, as a fraction of its height from the top."""
+    edge_margin_px: int = bounded(2, ge=0)
+    """A candidate counts only when its start point is at least this many top-view pixels
+    inside a piece's visible mask: on an edge, which piece the finger presses is a guess
+    (for the labels and for the planner alike)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,14 +73,27 @@ def raster_candidates(scan: ScanConfig) -> Candidates:
     )
 
 
-def piece_under(obs: Observation, points_xy: np.ndarray) -> np.ndarray:
+def interior(instance: np.ndarray, margin_px: int) -> np.ndarray:
+    """The instance image with every object's mask eroded by `margin_px` pixels (0 where
+    eroded away): a start point there is on that object, not on its edge."""
+    if margin_px <= 0:
+        return instance
+    kernel = np.ones((2 * margin_px + 1, 2 * margin_px + 1), np.uint8)
+    out = np.zeros_like(instance)
+    for k in np.unique(instance[instance > 0]):
+        out[cv2.erode((instance == k).astype(np.uint8), kernel) > 0] = k
+    return out
+
+
+def piece_under(obs: Observation, points_xy: np.ndarray, margin_px: int = 0) -> np.ndarray:
     """(K,) the object seen (from the top camera) at each board point: instance - 1, or -1
-    where the board shows."""
+    where the board shows or, with `margin_px`, within that many pixels of an object's
+    edge."""
     u, v, _ = obs.camera.world_to_pixel(np.column_stack([points_xy, np.zeros(len(points_xy))]))
     h, w = obs.instance.shape
     cols = np.clip(np.floor(u).astype(np.int64), 0, w - 1)
     rows = np.clip(np.floor(v).astype(np.int64), 0, h - 1)
-    return obs.instance[rows, cols].astype(np.int64) - 1
+    return interior(obs.instance, margin_px)[rows, cols].astype(np.int64) - 1
 
 
 def height_image(obs: Observation) -> np.ndarray:

@@ -69,7 +69,7 @@ def label_pile(job: dict[str, Any]) -> dict[str, np.ndarray]:
     world = PileWorld.from_spec(spec, pile_cfg, render=True)
     obs = top_observation(world, cam)
     cands = raster_candidates(scan)
-    pieces = piece_under(obs, cands.start_xy)
+    pieces = piece_under(obs, cands.start_xy, scan.edge_margin_px)
     hit = np.nonzero(pieces >= 0)[0]
     slides = sorted({(int(pieces[k]), int(cands.direction[k])) for k in hit})
     rng = np.random.default_rng(job["seed"])

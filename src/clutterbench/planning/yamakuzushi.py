@@ -6,8 +6,9 @@ A target is ranked per piece: the candidates of one piece share its pose, so whe
 POMDP (planning.pomdp) finds a piece not worth sliding, the next piece is tried.
 
 - `convnet_targets`: the raster scan (10 x 10 start points x 8 directions = 800), each
-  candidate on a piece scored by the ConvNet; per piece its best candidate; pieces by that
-  probability (thesis: "the one with the highest probability in our ConvNet is selected").
+  candidate on a piece scored by the ConvNet; each (piece, direction) slide scored by its
+  best candidate (thesis: "the one with the highest probability in our ConvNet is
+  selected") or their mean (select.score); per piece its best slide; pieces by that score.
 - `least_occluded_targets`: without the ConvNet (thesis 3.5.2): pieces by visible area in the
   top view, largest first, slid from the centre of what is seen of them, away from the pile
   (the direction of the raster nearest to the line from the pile's centre through the piece).
@@ -17,6 +18,7 @@ POMDP (planning.pomdp) finds a piece not worth sliding, the next piece is tried.
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 import numpy as np
 
@@ -56,6 +58,11 @@ class SelectConfig:
     """Pieces offered to the POMDP per step, best first; all refused ends the game."""
     min_visible_px: int = bounded(20, ge=1)
     """A piece with fewer visible top-view pixels is not a target (a sliver)."""
+    score: Literal["best", "mean"] = "best"
+    """ConvNet variant: a (piece, direction) slide scores its best candidate's probability
+    (the thesis: the candidate of highest probability wins) or the mean over its candidates
+    (every start point on the piece slides the same piece the same way; the mean is less
+    lifted by one lucky crop)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,7 +105,7 @@ def convnet_targets(model, obs: Observation, scan: ScanConfig, sel: SelectConfig
     from clutterbench.models.slide_convnet import success_probability
 
     cands = raster_candidates(scan)
-    pieces = piece_under(obs, cands.start_xy)
+    pieces = piece_under(obs, cands.start_xy, scan.edge_margin_px)
     seen = set(_visible_pieces(obs, sel.min_visible_px))
     on = np.array([k for k in range(len(cands)) if int(pieces[k]) in seen], dtype=np.int64)
     if not len(on):
@@ -106,12 +113,17 @@ def convnet_targets(model, obs: Observation, scan: ScanConfig, sel: SelectConfig
     probs = success_probability(
         model, slide_crops(height_image(obs), obs.camera, subset(cands, on), scan)
     ).numpy()
+    by_slide: dict[tuple[int, int], list[int]] = {}
+    for i, k in enumerate(on):
+        by_slide.setdefault((int(pieces[k]), int(cands.direction[k])), []).append(i)
     best: dict[int, Target] = {}
-    for k, p in zip(on, probs):
-        piece = int(pieces[k])
-        if piece not in best or p > best[piece].probability:
+    for (piece, d), rows in by_slide.items():
+        p = probs[rows]
+        score = float(p.max() if sel.score == "best" else p.mean())
+        if piece not in best or score > best[piece].probability:
+            k = on[rows[int(np.argmax(p))]]
             start = (float(cands.start_xy[k, 0]), float(cands.start_xy[k, 1]))
-            best[piece] = Target(piece, start, int(cands.direction[k]), float(p))
+            best[piece] = Target(piece, start, d, score)
     ranked = sorted(best.values(), key=lambda t: (-t.probability, t.piece))
     return [t for t in ranked if t.probability >= sel.min_probability][: sel.max_targets]
 
@@ -139,7 +151,7 @@ def random_targets(
 ) -> list[Target]:
     """One uniformly random raster candidate on a visible piece (empty when none)."""
     cands = raster_candidates(scan)
-    pieces = piece_under(obs, cands.start_xy)
+    pieces = piece_under(obs, cands.start_xy, scan.edge_margin_px)
     seen = set(_visible_pieces(obs, sel.min_visible_px))
     on = [k for k in range(len(cands)) if int(pieces[k]) in seen]
     if not on:

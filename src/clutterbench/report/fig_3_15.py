@@ -23,6 +23,7 @@ TABLE = "fig_3_15"
 VARIANTS = {
     "convnet": ("with ConvNet (thesis method)", "with_convnet"),
     "no_convnet": ("without ConvNet: least-occluded piece", "without_convnet"),
+    "convnet_no_pomdp": ("ConvNet's best piece slid at once, no POMDP", None),
     "random": ("random candidate, slid at once (floor)", None),
     "oracle": ("oracle: every slide simulated, first success (ceiling)", None),
 }

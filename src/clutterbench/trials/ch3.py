@@ -9,6 +9,7 @@ sensor's pictures from its chosen viewpoints; the slide is simulated and judged 
   POMDP; the first the POMDP slides is slid. A piece refused by the POMDP is skipped; all
   refused, or none above the ConvNet's threshold: the game ends (nothing worth sliding).
 - no_convnet: the same with the least-occluded pieces (the thesis' comparison).
+- convnet_no_pomdp: the ConvNet's best piece slid at once (the POMDP's share).
 - random: a random candidate on a piece, slid at once (floor).
 - oracle: every visible piece in every direction simulated from the present state, the first
   success kept (pieces from the highest down); none: the game ends (ceiling: it never makes a
@@ -38,6 +39,9 @@ from clutterbench.trials.harness import EpisodeLog, EpisodeResult
 
 STEP_S = 1.0
 """Simulated seconds between two logged steps of a game on the MCAP timeline."""
+DIGITS = 6
+"""POMDP values are recorded to this many decimals: open3d's ICP sums in parallel, so their
+last bits may differ from run to run; six decimals keep the records byte-identical."""
 _MODEL_CACHE: dict[str, Any] = {}
 
 
@@ -98,7 +102,8 @@ def run_pomdp(world, target: Target, top: Observation, cfg, log: EpisodeLog, t: 
             beta=pc.beta,
             e_th_m=pc.e_th_m,
         )
-        log.json(t, "/planner/belief", {"piece": target.piece, "belief": b.tolist()})
+        belief = [round(float(v), DIGITS) for v in b]
+        log.json(t, "/planner/belief", {"piece": target.piece, "belief": belief})
         if decision.kind == "slide" or len(visited) >= pc.max_observations:
             break
         k = free[decision.viewpoint]
@@ -119,11 +124,11 @@ def run_pomdp(world, target: Target, top: Observation, cfg, log: EpisodeLog, t: 
     slide_it = decision.kind == "slide" and flat >= pc.min_flat_share
     facts = {
         "observations": len(visited),
-        "belief_mass": mass,
-        "flat_share": flat,
+        "belief_mass": round(mass, DIGITS),
+        "flat_share": round(flat, DIGITS),
         "most_likely_state": int(np.argmax(b)),
         "pomdp_choice": decision.kind,
-        "slide_value": decision.slide_value,
+        "slide_value": round(decision.slide_value, DIGITS),
     }
     return slide_it, facts, t
 
@@ -134,23 +139,28 @@ def _oracle_choice(poses: np.ndarray, top: Observation, cfg) -> tuple[Target | N
     from clutterbench.sim.pile import PileWorld, slide
 
     n_dir = cfg.scan.n_directions
-    order = sorted(top.visible_boxes(cfg.select.min_visible_px), key=lambda k: -poses[k, 2])
+    visible = top.visible_boxes(cfg.select.min_visible_px)
+    order = sorted(visible, key=lambda k: -poses[k, 2])
+    centre = poses[visible, :2].mean(axis=0) if visible else np.zeros(2)
     tried = 0
     for piece in order:
-        for d in range(n_dir):
+        # directions nearest to "away from the pile" first: the likely successes come early
+        away = np.arctan2(*(poses[piece, :2] - centre)[::-1])
+        gap = [abs(np.angle(np.exp(1j * (d * 2 * np.pi / n_dir - away)))) for d in range(n_dir)]
+        for d in np.argsort(gap, kind="stable"):
             tried += 1
             world = PileWorld.from_poses(poses, cfg.pile)
-            result = slide(world, piece, d * 2 * np.pi / n_dir, cfg.slide)
+            result = slide(world, piece, int(d) * 2 * np.pi / n_dir, cfg.slide)
             if result.success:
                 start = (float(poses[piece, 0]), float(poses[piece, 1]))
-                return Target(piece, start, d), result, tried
+                return Target(piece, start, int(d)), result, tried
     return None, None, tried
 
 
 def _targets(variant: str, job: dict[str, Any], top: Observation, rng) -> list[Target]:
     cfg = job["cfg"]
     scan: ScanConfig = cfg.scan
-    if variant == "convnet":
+    if variant in ("convnet", "convnet_no_pomdp"):
         return convnet_targets(_convnet(job["model"]), top, scan, cfg.select)
     if variant == "no_convnet":
         return least_occluded_targets(top, scan, cfg.select)
@@ -167,6 +177,7 @@ def run_ch3_game(job: dict[str, Any]) -> EpisodeResult:
     rng = np.random.default_rng(job["seed"] + 7)
     log = EpisodeLog(record_images=job["mcap_images"])
     steps: list[dict[str, Any]] = []
+    stop: dict[str, Any] = {}
     end = "max_slides"
     t = 0.0
     for step in range(cfg.games.max_slides):
@@ -195,17 +206,18 @@ def run_ch3_game(job: dict[str, Any]) -> EpisodeResult:
             offered = _targets(variant, job, top, rng)
             refused = []
             for target in offered:
-                if variant == "random":
+                if variant in ("random", "convnet_no_pomdp"):
                     chosen = target
                     break
                 ok, facts, t = run_pomdp(world, target, top, cfg, log, t)
                 if ok:
                     chosen = target
                     break
-                refused.append({"piece": target.piece, **facts})
+                refused.append({"piece": target.piece, "probability": target.probability, **facts})
             facts = {**facts, "offered": len(offered), "refused": refused}
         if chosen is None:
             end = "nothing_worth_sliding"
+            stop = {"offered": facts.get("offered", 0), "refused": facts.get("refused", [])}
             log.json(t, "/planner/decision", {"step": step, "action": "stop", **facts})
             break
         angle = chosen.angle_rad(cfg.scan.n_directions)
@@ -257,6 +269,7 @@ def run_ch3_game(job: dict[str, Any]) -> EpisodeResult:
         "end": end,
         "success": removed > 0,
         "steps": steps,
+        "stop": stop,
     }
     return EpisodeResult(record=record, log=log)
 

@@ -13,10 +13,11 @@ from clutterbench.data.slides import SlideDataConfig
 from clutterbench.planning.yamakuzushi import PomdpConfig, SelectConfig
 from clutterbench.sim.pile_config import PileCameraConfig, PileConfig, SlideConfig
 
-VARIANTS = ("convnet", "no_convnet", "random", "oracle")
+VARIANTS = ("convnet", "no_convnet", "convnet_no_pomdp", "random", "oracle")
 """The games of Fig. 3.15: the thesis' method (ConvNet, then the POMDP); without the ConvNet
-(the least-occluded piece, then the POMDP); a random candidate slid at once (floor); every
-candidate slide simulated from the present state, the first success kept (ceiling)."""
+(the least-occluded piece, then the POMDP); the ConvNet's best piece slid at once, without
+the POMDP (its share); a random candidate slid at once (floor); every candidate slide
+simulated from the present state, the first success kept (ceiling)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -24,7 +25,9 @@ class GamesConfig:
     n_games: int = bounded(100, ge=1)
     """Games per variant (thesis 15); the same piles (seed stream ch3_games) for every
     variant."""
-    variants: tuple[Literal["convnet", "no_convnet", "random", "oracle"], ...] = VARIANTS
+    variants: tuple[
+        Literal["convnet", "no_convnet", "convnet_no_pomdp", "random", "oracle"], ...
+    ] = VARIANTS
     """Variants played."""
     max_slides: int = bounded(10, ge=1)
     """A game ends after this many slides at most (a pile has at most 10 pieces)."""

@@ -1,0 +1,50 @@
+"""Chapter 3 games: the episode protocol (a game ends at its first failed slide), the oracle
+(it never makes a failing slide), and the record's counts agree with its slides."""
+
+import dataclasses
+
+import pytest
+
+from clutterbench.data.slides import pile_seed
+from clutterbench.parallel import worker_init
+from clutterbench.trials.ch3 import ch3_jobs, run_ch3_game
+from clutterbench.trials.ch3_config import Ch3Config
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    worker_init(1)
+    base = Ch3Config()
+    games = dataclasses.replace(
+        base.games, n_games=2, variants=("oracle", "random", "no_convnet"), max_slides=3
+    )
+    return dataclasses.replace(base, games=games)
+
+
+@pytest.fixture(scope="module")
+def games(cfg):
+    jobs = ch3_jobs(cfg, lambda g: pile_seed(0, "ch3_test", g), None)
+    return [run_ch3_game(job).record for job in jobs]
+
+
+def test_oracle_never_makes_a_failing_slide(games):
+    oracle = [g for g in games if g["condition"] == "oracle"]
+    assert oracle and all(s["success"] for g in oracle for s in g["steps"])
+    assert all(g["pieces_removed"] >= 1 for g in oracle)
+
+
+def test_a_game_ends_at_its_first_failed_slide_and_counts_its_successes(games, cfg):
+    for g in games:
+        assert all(s["success"] for s in g["steps"][:-1])
+        assert g["pieces_removed"] == sum(s["success"] for s in g["steps"])
+        assert len(g["steps"]) <= cfg.games.max_slides
+        if g["steps"] and not g["steps"][-1]["success"]:
+            assert g["end"] == "slide_failed"
+        assert g["end"] in ("slide_failed", "nothing_worth_sliding", "max_slides", "cleared")
+
+
+def test_variants_play_the_same_piles(games):
+    seeds = {}
+    for g in games:
+        seeds.setdefault(g["game"], set()).add((g["seed"], g["n_pieces"]))
+    assert all(len(s) == 1 for s in seeds.values())
