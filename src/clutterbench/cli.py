@@ -917,3 +917,64 @@ def replenish(
 
 if __name__ == "__main__":
     main()
+
+
+@app.command("yamakuzushi")
+def yamakuzushi(
+    seed: Annotated[int, typer.Option("--seed", metavar="N", help="The pile's seed.")] = 0,
+    variant: Annotated[
+        str,
+        typer.Option("--variant", help="convnet | no_convnet | convnet_no_pomdp | random | oracle"),
+    ] = "convnet",
+    model: Annotated[
+        Path | None,
+        typer.Option("--model", help="Slide ConvNet [default: models/slide_convnet/best.pt]."),
+    ] = None,
+    mcap: Annotated[
+        Path | None, typer.Option("--mcap", help="Write the game as MCAP (Foxglove).")
+    ] = None,
+) -> None:
+    """Play one Yamakuzushi game (thesis ch. 3) on the pile of --seed: print each slide (the
+    piece, direction, ConvNet probability, sensor moves, outcome judged from physics) and how
+    the game ended, as JSON lines. Params: `yamakuzushi` of the project's params.yaml."""
+    with _user_errors():
+        import dataclasses
+
+        from clutterbench.config import load_section
+        from clutterbench.parallel import worker_init
+        from clutterbench.trials.ch3 import run_ch3_game
+        from clutterbench.trials.ch3_config import VARIANTS, Ch3Config
+        from clutterbench.trials.harness import write_mcap
+
+        if variant not in VARIANTS:
+            raise ClutterbenchError(f"--variant {variant!r}: not one of {', '.join(VARIANTS)}")
+        params = _project_params()
+        cfg = load_section(Ch3Config, "yamakuzushi", params) if params else Ch3Config()
+        path = None
+        if variant in ("convnet", "convnet_no_pomdp"):
+            path = _require_file(
+                _default_path(model, "models/slide_convnet/best.pt"),
+                "--model",
+                "dvc repro train_slide",
+            )
+        if mcap is not None:
+            _check_out_file(mcap, "--mcap", "game.mcap")
+        cfg = dataclasses.replace(
+            cfg, games=dataclasses.replace(cfg.games, mcap_images=mcap is not None)
+        )
+        worker_init(1)
+        job = {
+            "variant": variant,
+            "game": 0,
+            "seed": seed,
+            "cfg": cfg,
+            "model": None if path is None else str(path),
+            "mcap_images": mcap is not None,
+        }
+        result = run_ch3_game(job)
+        for step in result.record["steps"]:
+            typer.echo(json.dumps(step))
+        head = {k: v for k, v in result.record.items() if k != "steps"}
+        typer.echo(json.dumps(head))
+        if mcap is not None:
+            write_mcap(mcap, [result], {"condition": variant, "seed": str(seed)})

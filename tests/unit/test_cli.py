@@ -385,3 +385,19 @@ def test_plan_runs_the_oracle_and_random_planners_without_a_checkpoint(tmp_path,
     out = json.loads(result.output.strip().splitlines()[-1])
     assert out["inferred_edges"] is None and out["true_edges"]
     assert out["execute"]["planner"] == planner and out["execute"]["steps"]
+
+
+def test_yamakuzushi_plays_one_game_and_prints_each_slide() -> None:
+    result = runner.invoke(app, ["yamakuzushi", "--seed", "3", "--variant", "random"])
+    assert result.exit_code == 0, result.output
+    lines = [json.loads(line) for line in result.output.splitlines() if line.startswith("{")]
+    head = lines[-1]
+    assert head["seed"] == 3 and head["condition"] == "random"
+    assert len(lines) - 1 == head["slides"] >= 1
+    assert head["pieces_removed"] == sum(s["success"] for s in lines[:-1])
+
+
+def test_yamakuzushi_unknown_variant_is_a_one_line_error() -> None:
+    result = runner.invoke(app, ["yamakuzushi", "--variant", "best"])
+    assert result.exit_code == 2
+    assert "--variant 'best'" in result.output and len(result.output.strip().splitlines()) == 1

@@ -258,6 +258,8 @@ def run_ch3_game(job: dict[str, Any]) -> EpisodeResult:
             end = "slide_failed"
             break
         poses = after
+    if end == "max_slides" and not np.isfinite(poses).all(axis=1).any():
+        end = "cleared"
     removed = sum(s["success"] for s in steps)
     record = {
         "condition": variant,
