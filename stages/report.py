@@ -5,7 +5,7 @@ from pathlib import Path
 import pandas as pd
 
 from clutterbench.collapse.config import EvaluateConfig
-from clutterbench.config import BaseConfig, load_section
+from clutterbench.config import BaseConfig, load_section, resolve_scale
 from clutterbench.data.config import GenerateConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import read_json, write_json
@@ -123,6 +123,8 @@ def report(params: dict, base: BaseConfig) -> None:
     table_5_2(ch5, cfg.table_5_2, figures, Path("reports/tables"), base.scale)
 
     games = read_records(Path("reports/trials_ch3/records.jsonl"))
+    ch3 = resolve_scale(params.get("yamakuzushi", {}), base.scale, "yamakuzushi")
+    select, pomdp = ch3.get("select", {}), ch3.get("pomdp", {})
     fig_3_15_table(
         aggregate_games(games),
         games,
@@ -131,6 +133,13 @@ def report(params: dict, base: BaseConfig) -> None:
         Path("reports/tables"),
         Path("reports/tables/fig_3_15.png"),
         base.scale,
+        [
+            f"targets: pieces whose ConvNet probability is at least "
+            f"{select.get('min_probability')}, best first; the POMDP observes at most "
+            f"{pomdp.get('max_observations')} times per piece; a piece no state fits (belief "
+            f"mass below {pomdp.get('min_mass')}) is: {pomdp.get('when_no_state_fits')} "
+            "(yamakuzushi.pomdp.when_no_state_fits, chosen on validation piles)"
+        ],
     )
 
 

@@ -7,18 +7,15 @@ contract (image size, dataset labels) does not match what it is asked to evaluat
 from __future__ import annotations
 
 import dataclasses
-import io
 from pathlib import Path
 from typing import Any
 
 import torch
 from torch import nn
 
-from clutterbench.config import as_dict
 from clutterbench.errors import ClutterbenchError
-from clutterbench.io import atomic_path
 from clutterbench.models import build_model, parse_net_config
-from clutterbench.models.common import load_torch_file
+from clutterbench.models.common import load_torch_file, write_model_payload
 
 FORMAT = "clutterbench.collapse/1"
 
@@ -40,17 +37,7 @@ class Checkpoint:
 
 def save_checkpoint(path: Path, arch: str, model: nn.Module, meta: dict[str, Any]) -> None:
     """Write atomically; the bytes depend only on the weights and the config."""
-    payload = {
-        "format": FORMAT,
-        "arch": arch,
-        "net": as_dict(model.cfg),
-        "meta": meta,
-        "state_dict": {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()},
-    }
-    buf = io.BytesIO()
-    torch.save(payload, buf)
-    with atomic_path(Path(path)) as tmp:
-        tmp.write_bytes(buf.getvalue())
+    write_model_payload(path, {"format": FORMAT, "arch": arch}, model, meta)
 
 
 def load_checkpoint(path: Path) -> Checkpoint:

@@ -115,8 +115,16 @@ def fold_batchnorm(model: nn.Module) -> nn.Module:
 def save_model_file(path: Path, fmt: str, model: nn.Module, meta: dict[str, Any]) -> None:
     """Write a network that is not a collapse network atomically: format, its config
     (`model.cfg`), training facts and weights; the bytes depend only on them."""
+    write_model_payload(path, {"format": fmt}, model, meta)
+
+
+def write_model_payload(
+    path: Path, head: dict[str, Any], model: nn.Module, meta: dict[str, Any]
+) -> None:
+    """torch.save of `head` + the model's config (`model.cfg`), `meta` and weights, written
+    atomically: the bytes depend only on them (every checkpoint format writes this way)."""
     payload = {
-        "format": fmt,
+        **head,
         "net": as_dict(model.cfg),
         "meta": meta,
         "state_dict": {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()},

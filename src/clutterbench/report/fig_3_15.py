@@ -62,6 +62,7 @@ def fig_3_15_table(
     out_dir: Path,
     figure_path: Path,
     scale: str,
+    notes: Sequence[str] = (),
 ) -> pd.DataFrame:
     """reports/tables/fig_3_15.{md,csv} and the histogram of pieces removed per game."""
     from clutterbench.report.tables import Column
@@ -102,7 +103,7 @@ def fig_3_15_table(
         raw.append({"variant": s["condition"], **{k: v for k, v in s.items() if k != "condition"}})
     frame = pd.DataFrame.from_records(rows)
     columns = [Column(c, c, "{}") for c in frame.columns]
-    notes = [NOTE, f"scale: {scale}; {int(summary['episodes'].max())} games per variant"]
+    notes = [NOTE, *notes, f"scale: {scale}; {int(summary['episodes'].max())} games per variant"]
     if convnet_val is not None:
         notes.append(
             f"slide ConvNet on validation piles: accuracy {convnet_val['accuracy']:.3f}, "

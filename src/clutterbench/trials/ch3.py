@@ -121,13 +121,18 @@ def run_pomdp(world, target: Target, top: Observation, cfg, log: EpisodeLog, t: 
         )
     mass = pomdp.belief_mass(b)
     flat = float(b[list(pomdp.SLIDABLE_STATES)].sum() / mass) if mass > 0 else 0.0
-    slide_it = decision.kind == "slide" and flat >= pc.min_flat_share
+    no_fit = mass < pc.min_mass
+    if no_fit:
+        slide_it = pc.when_no_state_fits == "slide"
+    else:
+        slide_it = decision.kind == "slide" and flat >= pc.min_flat_share
     facts = {
         "observations": len(visited),
         "belief_mass": round(mass, DIGITS),
         "flat_share": round(flat, DIGITS),
         "most_likely_state": int(np.argmax(b)),
         "pomdp_choice": decision.kind,
+        "no_state_fits": bool(no_fit),
         "slide_value": round(decision.slide_value, DIGITS),
     }
     return slide_it, facts, t
