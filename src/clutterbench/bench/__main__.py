@@ -1,4 +1,5 @@
 """`python -m clutterbench.bench` (`make bench`): run every part in order -> reports/bench/.
+`python -m clutterbench.bench ch3` runs the named parts only.
 
 A new part is one line in PARTS: a name and a callable taking no arguments.
 """
@@ -11,6 +12,7 @@ from clutterbench.bench.grouped import bench_grouped
 from clutterbench.bench.models import bench_models
 from clutterbench.bench.sim import bench_replay, bench_sim
 from clutterbench.bench.trials import bench_trials
+from clutterbench.bench.yamakuzushi import bench_ch3
 
 
 def _sim() -> dict:
@@ -26,13 +28,19 @@ PARTS: list[tuple[str, Callable[[], object]]] = [
     ("models", bench_models),  # models.json, models.md (with the memory part)
     ("grouped", bench_grouped),  # grouped.json, grouped.md (needs data and trained models)
     ("trials", bench_trials),  # trials.json, trials.md (needs trained models)
+    ("ch3", bench_ch3),  # ch3.json, ch3.md (the ConvNet line needs models/slide_convnet)
 ]
 
 
-def main() -> None:
-    for _name, part in PARTS:
-        part()
+def main(names: list[str] | None = None) -> None:
+    known = dict(PARTS)
+    for name in names or list(known):
+        if name not in known:
+            raise SystemExit(f"error: no bench part {name!r} (parts: {', '.join(known)})")
+        known[name]()
 
 
 if __name__ == "__main__":
-    main()
+    import sys
+
+    main(sys.argv[1:])
