@@ -938,8 +938,6 @@ def yamakuzushi(
     piece, direction, ConvNet probability, sensor moves, outcome judged from physics) and how
     the game ended, as JSON lines. Params: `yamakuzushi` of the project's params.yaml."""
     with _user_errors():
-        import dataclasses
-
         from clutterbench.config import load_section
         from clutterbench.parallel import worker_init
         from clutterbench.trials.ch3 import run_ch3_game
@@ -959,9 +957,6 @@ def yamakuzushi(
             )
         if mcap is not None:
             _check_out_file(mcap, "--mcap", "game.mcap")
-        cfg = dataclasses.replace(
-            cfg, games=dataclasses.replace(cfg.games, mcap_images=mcap is not None)
-        )
         worker_init(1)
         job = {
             "variant": variant,
