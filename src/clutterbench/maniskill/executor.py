@@ -1,0 +1,313 @@
+"""The arm-level executor: Pandas in a ManiSkill scene execute a planner's pull, the second
+executor of the trials beside BoxWorld's kinematic one (trials/protocol.execute_pull).
+
+One step, from a fresh scene at the step's state (the canonical start, as the kinematic
+executor): the holding arm (if any) approaches its box's front face and takes hold, then the
+pulling arm does; the pull raises the box by the grasp lift and draws it out toward the
+camera in the planner's increments along straight tool paths (mplib screw motions), the
+planner's `go_on` checked before each; out of the shelf, the box leaves the scene (as the
+kinematic executor's lift-out); the pulling arm goes back to its ready pose; the scene
+settles with the holding arm still holding (the *held* judgement); the holding arm lets go
+and goes back; the scene settles again. The same PullResult comes out as from the
+kinematic executor, so the same judge (trials/protocol.judge_pull) decides the step.
+
+The grasp is suction-like: when the tool's tip has come within `arm.attach_tolerance_m` of
+the face, the box is held rigidly in the tool's frame (kinematic, following the tool every
+physics step) until released. What the kinematic executor assumes away is measured here and
+named in `ArmStep.outcome`: a face out of the arm's reach (`unreachable`), a path that would
+leave the joint limits or hit the shelf (`planning_failed`), a tool stopped by other boxes
+before the face (`no_contact`); and `arm_contacts`, the boxes an arm touched other than the
+ones it holds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from clutterbench.maniskill.config import ArmConfig
+from clutterbench.maniskill.motion import (
+    face_pose,
+    make_planner,
+    plan_joint_line,
+    plan_line,
+    shelf_points,
+    tool_quat,
+)
+from clutterbench.sim.config import PhysicsConfig
+from clutterbench.sim.geometry import box_aabb_half_extents
+from clutterbench.sim.physics import CONTACT_SEPARATION_M, PULL_CLEARANCE_M
+from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.protocol import PullResult, SceneState
+
+ARM_OUTCOMES = ("ok", "unreachable", "planning_failed", "no_contact")
+"""How an arm's part of a step ended: done; no joint state puts the tool at the box's face;
+no straight path there inside the joint limits and clear of the shelf; the tool stopped
+short of the face (other boxes in the way)."""
+PULL_ARM, HOLD_ARM = 0, 1
+"""The arms' indices when the pulled box is right of the held one (or nothing is held)."""
+
+
+@dataclasses.dataclass
+class ArmStep:
+    """What the arms did in one step (beside the PullResult that is judged)."""
+
+    outcome: str = "ok"
+    """One of ARM_OUTCOMES (the first arm that failed)."""
+    failed_arm: str | None = None
+    """"pull" or "hold": which arm's approach failed (None when none did)."""
+    arm_contacts: list[int] = dataclasses.field(default_factory=list)
+    """Boxes an arm touched other than the ones it pulls or holds (sorted)."""
+    pull_arm: int = 0
+    """Which Panda pulled (0: the one on the camera's right; with two, the one on the pulled
+    box's side)."""
+    retract_failed: list[int] = dataclasses.field(default_factory=list)
+    """Arms that found no path back to their ready pose (they stay where they let go)."""
+    control_steps: int = 0
+    """Control steps simulated (each 1 / arm.control_freq_hz seconds)."""
+    joint_log: list[tuple[float, list[list[float]]]] = dataclasses.field(default_factory=list)
+    """(time s from the step's start, each arm's 7 joint positions), at every control step."""
+    pose_log: list[tuple[float, np.ndarray]] = dataclasses.field(default_factory=list)
+    """(time s, (N, 7) box poses), after each motion."""
+
+    def record(self, dt_s: float) -> dict[str, Any]:
+        """The step record's arm fields."""
+        return {
+            "arm_outcome": self.outcome,
+            "arm_failed": self.failed_arm,
+            "arm_contacts": self.arm_contacts,
+            "arm_retract_failed": self.retract_failed,
+            "arm_s": round(self.control_steps * dt_s, 3),
+        }
+
+
+class ArmExecutor:
+    """Executes pulls with one Panda, or two when `bimanual` (a holding arm): one ManiSkill
+    env per executor (made on the first step), rebuilt at every step's state."""
+
+    def __init__(self, physics: PhysicsConfig, arm: ArmConfig, bimanual: bool):
+        self.physics, self.cfg, self.bimanual = physics, arm, bimanual
+        self.env = None
+        self.planners: list = []
+        self._shelf = None
+
+    # -- set-up -----------------------------------------------------------------------------
+    def _start(self, spec: SceneSpec, state: SceneState, box: int, hold: int | None) -> None:
+        options = {
+            "spec": spec,
+            "poses": state.poses,
+            "removed": tuple(sorted(state.removed)),
+            "target": box,
+            "hold": hold,
+        }
+        if self.env is None:
+            import gymnasium as gym
+
+            import clutterbench.maniskill  # noqa: F401  (registers the tasks)
+
+            name = "ClutterShelfBimanual-v1" if self.bimanual else "ClutterShelfExtract-v1"
+            self.env = gym.make(
+                name,
+                spec=spec,
+                target=box,
+                hold=hold,
+                poses=state.poses,
+                removed=options["removed"],
+                physics=self.physics,
+                arm=self.cfg,
+                obs_mode="none",
+                reward_mode="none",
+            )
+            self.u = self.env.unwrapped
+            self.planners = [
+                make_planner(agent, base, self.cfg.joint_speed_scale)
+                for agent, base in zip(self.u.agents, self.u.arm_bases(), strict=True)
+            ]
+            self.uids = list(self.u.agent.agents_dict) if self.bimanual else None
+        self.env.reset(options={"reconfigure": True} | options)
+        if self._shelf != spec.shelf:
+            cloud = shelf_points(spec.shelf)
+            for planner in self.planners:
+                planner.update_point_cloud(cloud, radius=self.cfg.collision_clearance_m)
+            self._shelf = spec.shelf
+        self.targets = [np.asarray(q, dtype=np.float64) for q in self.u.ready_qpos()]
+        self.dt_s = 1.0 / self.cfg.control_freq_hz
+        scene = self.u.scene.sub_scenes[0]
+        self._scene = scene
+        self._box_of = {b.entity.per_scene_id: k for k, b in enumerate(self.u.bodies)}
+        self._arm_of = {
+            link._objs[0].entity.per_scene_id: i
+            for i, agent in enumerate(self.u.agents)
+            for link in agent.robot.get_links()
+        }
+
+    # -- control ----------------------------------------------------------------------------
+    def _qpos(self, arm: int) -> np.ndarray:
+        return self.u.agents[arm].robot.get_qpos()[0].numpy().astype(np.float64)
+
+    def _step(self, step: ArmStep) -> None:
+        actions = [q.astype(np.float32) for q in self.targets]
+        self.env.step(
+            actions[0] if not self.bimanual else dict(zip(self.uids, actions, strict=True))
+        )
+        step.control_steps += 1
+        step.joint_log.append(
+            (
+                step.control_steps * self.dt_s,
+                [self._qpos(i).round(5).tolist() for i in range(len(self.targets))],
+            )
+        )
+        held = {self.u.target} | ({self.u.hold} if self.u.hold is not None else set())
+        touched = set(step.arm_contacts)
+        for c in self._scene.get_contacts():
+            a, b = (body.entity.per_scene_id for body in c.bodies)
+            arm_box = (a in self._arm_of and b in self._box_of and self._box_of[b] not in held) or (
+                b in self._arm_of and a in self._box_of and self._box_of[a] not in held
+            )
+            if arm_box and min(p.separation for p in c.points) < CONTACT_SEPARATION_M:
+                touched.add(self._box_of[b] if b in self._box_of else self._box_of[a])
+        step.arm_contacts = sorted(touched)
+
+    def _follow(self, arm: int, path: np.ndarray, step: ArmStep) -> None:
+        for q in path:
+            self.targets[arm] = np.asarray(q[:7], dtype=np.float64)
+            self._step(step)
+        for _ in range(3):  # let the PD controller close the last gap
+            self._step(step)
+
+    def _line(self, arm: int, pose: np.ndarray, step: ArmStep, check_shelf: bool) -> str:
+        status, path = plan_line(self.planners[arm], pose, self._qpos(arm), self.dt_s, check_shelf)
+        if status == "ok":
+            self._follow(arm, path, step)
+        return status
+
+    def _home(self, arm: int, step: ArmStep) -> None:
+        """Back to the ready pose: straight out of the shelf (to the entry plane), then
+        straight to the ready pose; a joint-space line if a straight path fails."""
+        tip = np.asarray(self.u.tcp_pose(arm).p, dtype=np.float64)
+        out = np.hstack(
+            [[min(tip[0], -self.cfg.entry_clearance_m), tip[1], tip[2]], tool_quat(arm)]
+        )
+        ok = self._line(arm, out, step, check_shelf=False) == "ok"
+        if not ok or self._line(arm, self.u.ready_poses()[arm], step, check_shelf=True) != "ok":
+            ready = self.u.ready_qpos()[arm]
+            status, path = plan_joint_line(
+                self.planners[arm], ready, self._qpos(arm), self.dt_s, False
+            )
+            if status == "ok":
+                self._follow(arm, path, step)
+            else:  # the arm stays where it is (it holds nothing now); named, not hidden
+                step.retract_failed.append(arm)
+
+    def _settle(self, step: ArmStep) -> None:
+        still, limit = 0, int(np.ceil(self.physics.action_settle_max_s / self.dt_s))
+        prev = self.u.box_poses()[:, :3]
+        for _ in range(limit):
+            self._step(step)
+            now = self.u.box_poses()[:, :3]
+            speed = np.nan_to_num(np.linalg.norm(now - prev, axis=1), nan=0.0) / self.dt_s
+            still = still + 1 if speed.max(initial=0.0) < self.physics.rest_linear_m_s else 0
+            prev = now
+            if still >= self.cfg.settle_control_steps:
+                break
+
+    def _reach(self, arm: int, box: int, step: ArmStep) -> str:
+        """Approach `box`'s front face and take hold of it -> an ARM_OUTCOMES name."""
+        face = self.u.front_face_m(box)
+        entry = face.copy()
+        entry[0] = min(face[0], 0.0) - self.cfg.entry_clearance_m
+        status = self._line(arm, face_pose(entry, 0.0, arm), step, check_shelf=True)
+        if status != "ok":
+            return status
+        status = self._line(
+            arm, face_pose(face, self.cfg.contact_gap_m, arm), step, check_shelf=True
+        )
+        if status != "ok":
+            return status
+        tip = np.asarray(self.u.tcp_pose(arm).p, dtype=np.float64)
+        face = self.u.front_face_m(box)  # the box may have been pushed on the way
+        if (
+            np.linalg.norm(tip - (face - [self.cfg.contact_gap_m, 0.0, 0.0]))
+            > self.cfg.attach_tolerance_m
+        ):
+            return "no_contact"
+        self.u.attach(arm, box)
+        return "ok"
+
+    def _travel_m(self, box: int) -> float:
+        pose = self.u.box_poses()[box]
+        return float(
+            pose[0]
+            + box_aabb_half_extents(self.u.scene_spec.sizes_m[box], pose[3:])[0]
+            + PULL_CLEARANCE_M
+        )
+
+    # -- one step ----------------------------------------------------------------------------
+    def execute_pull(
+        self,
+        spec: SceneSpec,
+        state: SceneState,
+        box: int,
+        hold: int | None,
+        increment_m: float,
+        lift_m: float,
+        go_on: Callable[[int, np.ndarray], bool] | None = None,
+    ) -> tuple[PullResult, ArmStep, SceneState]:
+        """Pull `box` out while `hold` is held, from a fresh scene at `state`; before each
+        increment `go_on(k, poses)` (k increments done, (N, 7) box poses now) may stop it.
+        -> the PullResult (judged as the kinematic executor's), what the arms did, and the
+        state the step left."""
+        if hold is not None and not self.bimanual:
+            raise ValueError("a held box needs the bimanual executor")
+        self._start(spec, state, box, hold)
+        step = ArmStep()
+        step.pose_log.append((0.0, self.u.box_poses()))
+        pull_arm, hold_arm = PULL_ARM, HOLD_ARM
+        if hold is not None and state.poses[box, 1] > state.poses[hold, 1]:
+            pull_arm, hold_arm = HOLD_ARM, PULL_ARM  # the arm on each box's side takes it
+        step.pull_arm = pull_arm
+        order = ([(hold_arm, hold)] if hold is not None else []) + [(pull_arm, box)]
+        increments, aborted = 0, False
+        for arm, k in order:
+            outcome = self._reach(arm, k, step)
+            if outcome != "ok":
+                step.outcome, step.failed_arm = outcome, "hold" if arm == hold_arm else "pull"
+                break
+        if step.outcome == "ok":
+            start = np.asarray(self.u.tcp_pose(pull_arm).p, dtype=np.float64)
+            q_tool = np.asarray(self.u.tcp_pose(pull_arm).q, dtype=np.float64)
+            if lift_m > 0.0:
+                start = start + [0.0, 0.0, lift_m]
+                self._line(pull_arm, np.hstack([start, q_tool]), step, check_shelf=False)
+            travel, pulled = self._travel_m(box), 0.0
+            while pulled < travel - 1e-9:
+                if go_on is not None and not go_on(increments, self.u.box_poses()):
+                    aborted = True
+                    break
+                pulled += min(increment_m, travel - pulled)
+                goal = np.hstack([start - [pulled, 0.0, 0.0], q_tool])
+                if self._line(pull_arm, goal, step, check_shelf=False) != "ok":
+                    step.outcome, step.failed_arm = "planning_failed", "pull"
+                    aborted = True
+                    break
+                increments += 1
+            step.pose_log.append((step.control_steps * self.dt_s, self.u.box_poses()))
+            if aborted:
+                self.u.detach(pull_arm)
+            else:
+                self.u.park(box)
+        self.u.detach(pull_arm)
+        self._home(pull_arm, step)
+        self._settle(step)
+        held_disp, _ = self.u.displacements()
+        if hold is not None:
+            self.u.detach(hold_arm)
+            self._home(hold_arm, step)
+            self._settle(step)
+        disp, on_shelf = self.u.displacements()
+        step.pose_log.append((step.control_steps * self.dt_s, self.u.box_poses()))
+        result = PullResult(increments, aborted, box in self.u.removed, held_disp, disp, on_shelf)
+        return result, step, SceneState(self.u.box_poses(), frozenset(self.u.removed))

@@ -1,0 +1,178 @@
+"""Motion planning for the Pandas: one mplib planner per arm (as ManiSkill's motion-planning
+solutions build it), straight-line (screw) paths, the tool's pose for a box's front face.
+
+Every path here is deterministic: screw motions follow the Jacobian from the current joint
+state, and inverse kinematics starts from the current joint state only (mplib's random
+restarts are not used), so the same step plans the same path in every process.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from transforms3d.quaternions import axangle2quat, qmult
+
+from clutterbench.sim.shelf import Shelf
+
+TOOL_INTO_SHELF_Q = qmult(axangle2quat([0.0, 1.0, 0.0], -np.pi / 2), [0.0, 1.0, 0.0, 0.0])
+"""The tool's orientation [w, x, y, z] when it points into the shelf (+x): the Panda's
+pointing-down hand pitched up by 90 degrees (its z onto the world's x, its x up)."""
+MOVE_GROUP = "panda_hand_tcp"
+
+
+def tool_quat(arm: int) -> np.ndarray:
+    """Arm `arm`'s tool orientation pointing into the shelf: the second (mirrored) arm's is
+    turned half a turn about the rod."""
+    if arm == 0:
+        return TOOL_INTO_SHELF_Q
+    return qmult(TOOL_INTO_SHELF_Q, [0.0, 0.0, 0.0, 1.0])
+
+
+def base_quat(pitch_deg: float) -> np.ndarray:
+    """A base's orientation [w, x, y, z]: facing the shelf (+x), leaning back by `pitch_deg`."""
+    return axangle2quat([0.0, 1.0, 0.0], -np.deg2rad(pitch_deg))
+
+
+def make_planner(agent, base_pose: np.ndarray, speed_scale: float):
+    """An mplib planner for `agent` (a ManiSkill Panda) with its base at `base_pose`
+    [x, y, z, qw, qx, qy, qz]."""
+    import mplib
+
+    planner = mplib.Planner(
+        urdf=agent.urdf_path,
+        srdf=agent.urdf_path.replace(".urdf", ".srdf"),
+        user_link_names=[link.get_name() for link in agent.robot.get_links()],
+        user_joint_names=[j.get_name() for j in agent.robot.get_active_joints()],
+        move_group=MOVE_GROUP,
+    )
+    planner.set_base_pose(np.asarray(base_pose, dtype=np.float64))
+    planner.joint_vel_limits = np.asarray(planner.joint_vel_limits) * speed_scale
+    planner.joint_acc_limits = np.asarray(planner.joint_acc_limits) * speed_scale
+    return planner
+
+
+def shelf_points(shelf: Shelf, spacing_m: float = 0.01) -> np.ndarray:
+    """(K, 3) points on the surfaces of the shelf's boards: mplib's collision world."""
+    pts = []
+    for _, half, centre in shelf.boards():
+        axes = [
+            np.arange(-h, h + 1e-9, spacing_m) if h > spacing_m else np.array([-h, h]) for h in half
+        ]
+        for k in range(3):  # the two faces normal to axis k
+            others = [a for j, a in enumerate(axes) if j != k]
+            u, v = np.meshgrid(*others, indexing="ij")
+            for sign in (-1.0, 1.0):
+                face = np.zeros((u.size, 3))
+                face[:, k] = sign * half[k]
+                face[:, [j for j in range(3) if j != k]] = np.stack([u.ravel(), v.ravel()], 1)
+                pts.append(face + centre)
+    return np.concatenate(pts)
+
+
+def face_pose(front_face_m: np.ndarray, offset_m: float, arm: int = 0) -> np.ndarray:
+    """Arm `arm`'s tool pose `offset_m` in front of a box's front-face point, pointing into it."""
+    p = np.asarray(front_face_m, dtype=np.float64) - np.array([offset_m, 0.0, 0.0])
+    return np.hstack([p, tool_quat(arm)])
+
+
+IK_STARTS = 12
+"""Joint states inverse kinematics starts from: the current one, then this many more drawn
+from a fixed seed (mplib's own restarts are unseeded)."""
+
+
+def solve_ik(
+    planner, pose: np.ndarray, qpos: np.ndarray, most_room: bool = False
+) -> np.ndarray | None:
+    """Joint positions putting the tool at `pose` (world frame), searched from `qpos` and
+    then from IK_STARTS fixed joint states (deterministic), or None when the pose is out of
+    reach (or every solution collides with the robot itself). `most_room`: of all the
+    solutions found, the one farthest from its joint limits (a pose paths start from);
+    otherwise the first."""
+    goal = planner.transform_goal_to_wrt_base(pose)
+    lo, hi = np.asarray(planner.joint_limits, dtype=np.float64).T
+    rng = np.random.default_rng(0)
+    starts = [np.asarray(qpos, dtype=np.float64)]
+    starts += [np.hstack([rng.uniform(lo, hi), qpos[len(lo) :]]) for _ in range(IK_STARTS)]
+    best, room = None, -np.inf
+    for start in starts:
+        status, results = planner.IK(goal, start, n_init_qpos=1)
+        if status == "Success" and results:
+            if not most_room:
+                return results[0]
+            q = results[0][: len(lo)]
+            margin = float(np.min(np.minimum(q - lo, hi - q) / (hi - lo)))
+            if margin > room:
+                best, room = results[0], margin
+    return best
+
+
+def plan_joint_line(planner, goal_q: np.ndarray, qpos: np.ndarray, dt_s: float, check_shelf: bool):
+    """A straight line in joint space from `qpos` to `goal_q` (the arm's joints), timed
+    within the velocity and acceleration limits -> (status, (T, 7) joint positions or None);
+    status "planning_failed" when a point of it hits the shelf or the robot itself."""
+    q0, q1 = np.asarray(qpos[:7], dtype=np.float64), np.asarray(goal_q[:7], dtype=np.float64)
+    n = max(2, int(np.ceil(np.abs(q1 - q0).max() / 0.05)) + 1)
+    path = q0 + np.linspace(0.0, 1.0, n)[:, None] * (q1 - q0)
+    planner.planning_world.set_use_point_cloud(check_shelf)
+    planner.planning_world.set_use_attach(False)
+    for q in path:
+        planner.planning_world.set_qpos_all(q)
+        if planner.planning_world.collide():
+            return "planning_failed", None
+    if np.abs(q1 - q0).max() < 1e-6:
+        return "ok", path[-1:]
+    return _timed(planner, path, dt_s)
+
+
+def _timed(planner, path: np.ndarray, dt_s: float):
+    """The path timed within the joint velocity and acceleration limits (TOPP-RA), sampled
+    at the control rate -> ("ok", (T, 7)), or ("planning_failed", None) when it cannot be."""
+    try:
+        _, pos, _, _, _ = planner.TOPP(path, dt_s)
+    except RuntimeError:  # mplib: "Fail to parameterize path"
+        return "planning_failed", None
+    return "ok", np.asarray(pos)
+
+
+LINE_STEP_M = 0.01
+"""Straight tool paths are followed through waypoints this far apart."""
+MAX_JOINT_JUMP_RAD = 0.35
+"""Two consecutive waypoints of a straight path whose joint states differ more than this
+are a branch switch of the inverse kinematics, not a path."""
+
+
+def plan_line(planner, pose: np.ndarray, qpos: np.ndarray, dt_s: float, check_shelf: bool):
+    """A straight tool path to `pose` from the joint state `qpos`: waypoints every
+    LINE_STEP_M, each solved by inverse kinematics from the one before (a continuous,
+    deterministic path), timed within the joint limits -> (status, (T, 7) joint positions at
+    the control rate or None). status: "ok", "unreachable" (no joint state puts the tool at
+    the goal), "planning_failed" (the line leaves the joint limits, jumps branches, or hits
+    the shelf or the robot itself)."""
+    planner.planning_world.set_use_point_cloud(check_shelf)
+    planner.planning_world.set_use_attach(False)
+    q = np.asarray(qpos, dtype=np.float64)
+    planner.pinocchio_model.compute_forward_kinematics(q)
+    start = np.asarray(planner.pinocchio_model.get_link_pose(planner.link_name_2_idx[MOVE_GROUP]))
+    goal_base = planner.transform_goal_to_wrt_base(pose)
+    n = max(1, int(np.ceil(np.linalg.norm(goal_base[:3] - start[:3]) / LINE_STEP_M)))
+    q0, q1 = start[3:], np.asarray(goal_base[3:], dtype=np.float64)
+    if np.dot(q0, q1) < 0:
+        q1 = -q1
+    path = [q[:7].copy()]
+    for k in range(1, n + 1):
+        t = k / n
+        quat = (1 - t) * q0 + t * q1
+        waypoint = np.hstack([(1 - t) * start[:3] + t * goal_base[:3], quat / np.linalg.norm(quat)])
+        status, results = planner.IK(waypoint, q, n_init_qpos=1)
+        if (
+            status != "Success"
+            or not results
+            or np.abs(results[0][:7] - q[:7]).max() > MAX_JOINT_JUMP_RAD
+        ):
+            if k == n or solve_ik(planner, pose, q) is None:
+                return "unreachable", None
+            return "planning_failed", None
+        q = np.asarray(results[0], dtype=np.float64)
+        path.append(q[:7].copy())
+    if len(path) < 2 or np.abs(path[-1] - path[0]).max() < 1e-6:
+        return "ok", np.asarray(path[-1:])
+    return _timed(planner, np.asarray(path), dt_s)

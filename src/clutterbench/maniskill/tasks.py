@@ -1,0 +1,373 @@
+"""ManiSkill 3 tasks built from any SceneSpec: the shelf, its boxes at their settled poses and
+the project's depth camera, with one Panda (`ClutterShelfExtract-v1`) or two
+(`ClutterShelfBimanual-v1`), each with a rod tool (ManiSkill's `panda_stick`), standing in
+front of the shelf, on the CPU backend.
+
+    import gymnasium as gym
+    import clutterbench.maniskill  # registers the tasks
+    env = gym.make("ClutterShelfExtract-v1", spec=spec, target=2, obs_mode="state",
+                   reward_mode="none", render_backend="none")
+
+`evaluate()` judges the scene as the project's judge does (trials/protocol.py), with the
+same function: `target_out` (the target is out of the shelf, in front of its opening),
+`others_still` (no box but the target and the held one moved beyond the threshold or left
+the shelf, measured from the episode's start), `released` (no tool holds a box) and
+`success` (all three). The sparse reward is `success`.
+
+Physics is the project's (sim.physics): the same timestep, friction, restitution and
+density, and PhysX's solver and contact settings left at SAPIEN's defaults, which every
+BoxWorld of the process uses (a ManiSkill env sets them process-wide).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import sapien
+import torch
+from mani_skill.envs.sapien_env import BaseEnv
+from mani_skill.sensors.camera import CameraConfig as MsCameraConfig
+from mani_skill.utils.registration import register_env
+from mani_skill.utils.structs.types import DefaultMaterialsConfig, SceneConfig, SimConfig
+from sapien import physx
+
+from clutterbench.errors import ClutterbenchError
+from clutterbench.maniskill.config import ArmConfig
+from clutterbench.maniskill.motion import base_quat, make_planner, solve_ik, tool_quat
+from clutterbench.sim.config import PhysicsConfig
+from clutterbench.sim.geometry import box_aabb_half_extents
+from clutterbench.sim.physics import ROOM_FLOOR_BELOW_SHELF_M
+from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.protocol import moved_others
+
+PARK_POSE = sapien.Pose([0.0, 0.0, -50.0])
+"""Where a box taken out of the scene is kept (kinematic, touching nothing), as BoxWorld."""
+FOLDED_QPOS = np.array([0.0, np.pi / 8, 0.0, -5 * np.pi / 8, 0.0, 3 * np.pi / 4, np.pi / 4])
+"""The Panda's rest keyframe (ManiSkill's): where inverse kinematics for the ready pose
+starts."""
+MIRROR_SIGNS = np.array([-1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0])
+MIRROR_OFFSETS = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -np.pi / 2])
+"""A Panda's joint state mirrored in its base's x-z plane: q -> q * signs + offsets (the
+hand is mounted at -45 degrees about the last joint; the mirror image of the tool is the
+tool turned half a turn about its rod, which the rod does not feel: tool_quat)."""
+ROBOT = "panda_stick"
+"""ManiSkill's Panda with a 10 cm rod (8 mm radius) instead of fingers: its tip (the TCP) is
+the suction tool that pulls, and the thesis' support rod that holds."""
+
+
+def _sapien_physx_defaults() -> SceneConfig:
+    """PhysX settings as every BoxWorld of this process finds them (SAPIEN's defaults)."""
+    shape, body, scene = physx.get_shape_config(), physx.get_body_config(), physx.get_scene_config()
+    return SceneConfig(
+        gravity=np.asarray(scene.gravity, dtype=np.float64),
+        bounce_threshold=scene.bounce_threshold,
+        sleep_threshold=body.sleep_threshold,
+        contact_offset=shape.contact_offset,
+        rest_offset=shape.rest_offset,
+        solver_position_iterations=body.solver_position_iterations,
+        solver_velocity_iterations=body.solver_velocity_iterations,
+        enable_pcm=scene.enable_pcm,
+        enable_tgs=scene.enable_tgs,
+        enable_ccd=scene.enable_ccd,
+        enable_enhanced_determinism=scene.enable_enhanced_determinism,
+        enable_friction_every_iteration=scene.enable_friction_every_iteration,
+    )
+
+
+class ClutterShelfEnv(BaseEnv):
+    """The shelf scene of a SceneSpec with Pandas in front of it (see the module's doc).
+
+    kwargs: `spec` (SceneSpec, required), `target` (the box to take out), `hold` (the box a
+    second arm holds, or None), `poses` ((N, 7) start poses, default the spec's) and
+    `removed` (boxes already out), `physics` (PhysicsConfig), `arm` (ArmConfig),
+    `moved_threshold_m`. `reset(options=...)` takes the same keys (with `reconfigure=True`
+    when the boxes change) to start another scene or step in the same env."""
+
+    SUPPORTED_ROBOTS = ["panda_stick", ("panda_stick", "panda_stick")]
+    SUPPORTED_OBS_MODES = ("none", "state", "state_dict", "sensor_data", "depth+segmentation")
+    N_ARMS = 1
+
+    def __init__(
+        self,
+        *args: Any,
+        spec: SceneSpec | None = None,
+        target: int = 0,
+        hold: int | None = None,
+        poses: np.ndarray | None = None,
+        removed: tuple[int, ...] = (),
+        physics: PhysicsConfig | None = None,
+        arm: ArmConfig | None = None,
+        moved_threshold_m: float = 0.005,
+        **kwargs: Any,
+    ):
+        if spec is None:
+            raise ClutterbenchError("ClutterShelf env: spec= (a SceneSpec) is required")
+        physics, arm = physics or PhysicsConfig(), arm or ArmConfig()
+        self.physics, self.arm_cfg = physics, arm
+        self.moved_threshold_m = moved_threshold_m
+        self._set_scene(spec, target, hold, poses, removed)
+        substeps = 1.0 / (physics.timestep_s * arm.control_freq_hz)
+        if abs(substeps - round(substeps)) > 1e-6:
+            raise ClutterbenchError(
+                f"arm.control_freq_hz {arm.control_freq_hz}: must divide the physics rate "
+                f"1 / sim.physics.timestep_s = {1 / physics.timestep_s:g} Hz"
+            )
+        self.attached: dict[int, tuple[int, sapien.Pose]] = {}
+        """arm index -> (box, box pose in the tool frame): boxes a tool holds."""
+        uids = ROBOT if self.N_ARMS == 1 else (ROBOT,) * self.N_ARMS
+        kwargs.setdefault("sim_backend", "physx_cpu")
+        kwargs.setdefault("render_backend", "none")
+        kwargs.setdefault("control_mode", "pd_joint_pos")
+        super().__init__(*args, robot_uids=uids, **kwargs)
+
+    def _set_scene(self, spec, target, hold, poses, removed) -> None:
+        if not 0 <= target < spec.n or (hold is not None and not 0 <= hold < spec.n):
+            raise ClutterbenchError(
+                f"target {target} / hold {hold}: the spec has boxes 0..{spec.n - 1}"
+            )
+        self.scene_spec, self.target, self.hold = spec, int(target), hold
+        self.start_poses = np.asarray(spec.poses if poses is None else poses, dtype=np.float64)
+        self.start_removed = frozenset(int(k) for k in removed)
+
+    # -- ManiSkill hooks -------------------------------------------------------------------
+    @property
+    def _default_sim_config(self) -> SimConfig:
+        m = physx.get_default_material()
+        return SimConfig(
+            sim_freq=int(round(1.0 / self.physics.timestep_s)),
+            control_freq=self.arm_cfg.control_freq_hz,
+            scene_config=_sapien_physx_defaults(),
+            default_materials_config=DefaultMaterialsConfig(
+                m.static_friction, m.dynamic_friction, m.restitution
+            ),
+        )
+
+    @property
+    def _default_sensor_configs(self):
+        cam = self.scene_spec.camera
+        return [
+            MsCameraConfig(
+                "shelf_camera",
+                sapien.Pose(cam.position_m(self.scene_spec.shelf.height_m)),
+                cam.image_size,
+                cam.image_size,
+                np.deg2rad(cam.fovy_deg),
+                cam.near_m,
+                cam.far_m,
+            )
+        ]
+
+    def arm_bases(self) -> list[np.ndarray]:
+        """Each arm's base pose [x, y, z, qw, qx, qy, qz] (arm.*_base_m, arm.base_pitch_deg)."""
+        q = base_quat(self.arm_cfg.base_pitch_deg)
+        x, y, z = self.arm_cfg.base_m
+        return [np.hstack([[x, y, z], q]), np.hstack([[x, -y, z], q])][: self.N_ARMS]
+
+    def _load_agent(self, options: dict) -> None:
+        super()._load_agent(options, [sapien.Pose(b[:3], b[3:]) for b in self.arm_bases()])
+
+    def _load_scene(self, options: dict) -> None:
+        for key in ("spec", "target", "hold", "poses", "removed"):
+            if key in options:
+                self._set_scene(
+                    options.get("spec", self.scene_spec),
+                    options.get("target", self.target),
+                    options.get("hold", self.hold),
+                    options.get("poses"),
+                    options.get("removed", ()),
+                )
+                break
+        spec, phys = self.scene_spec, self.physics
+        material = physx.PhysxMaterial(
+            phys.static_friction, phys.dynamic_friction, phys.restitution
+        )
+        floor = self.scene.create_actor_builder()
+        floor.add_box_collision(half_size=[3.0, 3.0, 0.01], material=material)
+        floor.initial_pose = sapien.Pose([0.0, 0.0, -ROOM_FLOOR_BELOW_SHELF_M - 0.01])
+        floor.build_static(name="room_floor")
+        for name, half, centre in spec.shelf.boards():
+            b = self.scene.create_actor_builder()
+            b.add_box_collision(half_size=half, material=material)
+            b.add_box_visual(half_size=half)
+            b.initial_pose = sapien.Pose(centre)
+            b.build_static(name=f"shelf_{name}")
+        self.boxes = []
+        for k in range(spec.n):
+            b = self.scene.create_actor_builder()
+            half = np.asarray(spec.sizes_m[k], dtype=np.float64) / 2
+            b.add_box_collision(
+                half_size=half, material=material, density=spec.density(k, phys.density_kg_m3)
+            )
+            b.add_box_visual(half_size=half)
+            b.initial_pose = self._pose(k)
+            self.boxes.append(b.build(name=f"box_{k}"))
+        self.bodies = [
+            box._objs[0].find_component_by_type(physx.PhysxRigidDynamicComponent)
+            for box in self.boxes
+        ]
+
+    def _pose(self, k: int) -> sapien.Pose:
+        if k in self.start_removed:
+            return PARK_POSE
+        p = self.start_poses[k]
+        return sapien.Pose(p[:3], p[3:])
+
+    def _initialize_episode(self, env_idx: torch.Tensor, options: dict) -> None:
+        self.attached = {}
+        for k, body in enumerate(self.bodies):
+            body.set_kinematic(k in self.start_removed)
+            body.entity.set_pose(self._pose(k))
+            if k in self.start_removed:
+                body.set_kinematic_target(PARK_POSE)
+            else:
+                body.set_linear_velocity(np.zeros(3))
+                body.set_angular_velocity(np.zeros(3))
+        self.removed = set(self.start_removed)
+        self.reference = self.start_poses[:, :3].copy()
+        for agent, qpos in zip(self.agents, self.ready_qpos(), strict=True):
+            agent.reset(qpos)
+
+    @property
+    def agents(self) -> list:
+        return list(self.agent.agents) if self.N_ARMS > 1 else [self.agent]
+
+    def ready_poses(self) -> list[np.ndarray]:
+        """Each arm's tool pose between steps (arm.ready_tool_m, in line with its base)."""
+        x, z = self.arm_cfg.ready_tool_m
+        return [np.hstack([[x, b[1], z], tool_quat(i)]) for i, b in enumerate(self.arm_bases())]
+
+    def ready_qpos(self) -> list[np.ndarray]:
+        """Each arm's joint positions at its ready pose (solved once per env): the first
+        arm's by inverse kinematics, the second's its mirror image (the Panda's joint limits
+        are not mirror-symmetric, so a separate solution could start on a worse branch)."""
+        if getattr(self, "_ready", None) is None or len(self._ready) != self.N_ARMS:
+            base, pose = self.arm_bases()[0], self.ready_poses()[0]
+            q = solve_ik(make_planner(self.agents[0], base, 1.0), pose, FOLDED_QPOS)
+            if q is None:
+                raise ClutterbenchError(
+                    f"arm.ready_tool_m {pose[:3].tolist()}: out of reach of the arm at "
+                    f"{base[:3].tolist()}"
+                )
+            q = np.asarray(q[:7], dtype=np.float64)
+            self._ready = [q, q * MIRROR_SIGNS + MIRROR_OFFSETS][: self.N_ARMS]
+        return self._ready
+
+    def _before_simulation_step(self) -> None:
+        # The suction-like grasp: a held box follows its tool rigidly, every physics step.
+        for i, (k, rel) in self.attached.items():
+            tcp = self.agents[i].tcp._objs[0].entity_pose
+            self.bodies[k].set_kinematic_target(tcp * rel)
+
+    # -- grasp ------------------------------------------------------------------------------
+    def tcp_pose(self, arm: int) -> sapien.Pose:
+        return self.agents[arm].tcp._objs[0].entity_pose
+
+    def attach(self, arm: int, box: int) -> None:
+        """Arm `arm`'s tool takes hold of `box` where both are now (kinematic from now)."""
+        body = self.bodies[box]
+        body.set_kinematic(True)
+        body.set_kinematic_target(body.entity.pose)
+        self.attached[arm] = (box, self.tcp_pose(arm).inv() * body.entity.pose)
+
+    def detach(self, arm: int) -> int | None:
+        """Arm `arm` lets its box go (dynamic again, at rest: an opening grasp throws
+        nothing) -> the box, or None when it held none."""
+        if arm not in self.attached:
+            return None
+        box, _ = self.attached.pop(arm)
+        if box not in self.removed:
+            body = self.bodies[box]
+            body.set_kinematic(False)
+            body.set_linear_velocity(np.zeros(3))
+            body.set_angular_velocity(np.zeros(3))
+            for other in self.bodies:
+                if not other.kinematic:
+                    other.wake_up()
+        return box
+
+    def park(self, box: int) -> None:
+        """Take `box` out of the scene (kinematic, far below the floor), as BoxWorld.park."""
+        for arm, (k, _) in list(self.attached.items()):
+            if k == box:
+                self.attached.pop(arm)
+        body = self.bodies[box]
+        body.set_kinematic(True)
+        body.set_kinematic_target(PARK_POSE)
+        body.entity.set_pose(PARK_POSE)
+        self.removed.add(box)
+
+    # -- the scene's state and its judgement --------------------------------------------------
+    def box_poses(self) -> np.ndarray:
+        """(N, 7) poses [x, y, z, qw, qx, qy, qz] (a box out of the scene: its parking pose,
+        as BoxWorld.poses)."""
+        out = np.empty((self.scene_spec.n, 7))
+        for k, body in enumerate(self.bodies):
+            pose = body.entity.pose
+            out[k, :3], out[k, 3:] = pose.p, pose.q
+        return out
+
+    def front_face_m(self, box: int) -> np.ndarray:
+        """The centre of `box`'s face toward the camera (its AABB's front, at its centre)."""
+        pose = self.box_poses()[box]
+        half = box_aabb_half_extents(self.scene_spec.sizes_m[box], pose[3:])
+        return np.array([pose[0] - half[0], pose[1], pose[2]])
+
+    def displacements(self) -> tuple[np.ndarray, np.ndarray]:
+        """(N,) each box's displacement from the episode's start (NaN: out of the scene)
+        and (N,) whether its centre is inside the shelf (False when out)."""
+        poses = self.box_poses()
+        disp = np.linalg.norm(poses[:, :3] - self.reference, axis=1)
+        disp[sorted(self.removed)] = np.nan
+        on_shelf = self.scene_spec.shelf.contains(poses[:, :3])
+        on_shelf[sorted(self.removed)] = False
+        return disp, on_shelf
+
+    def evaluate(self) -> dict[str, torch.Tensor]:
+        disp, on_shelf = self.displacements()
+        k = self.target
+        manipulated = {k} | ({self.hold} if self.hold is not None else set())
+        n, _ = moved_others(disp, on_shelf, manipulated, self.start_removed, self.moved_threshold_m)
+        if self.hold is not None and self.hold not in self.removed and not on_shelf[self.hold]:
+            n += 1  # the held box fell off the shelf
+        if k in self.removed:
+            out = True
+        else:
+            pose = self.box_poses()[k]
+            out = bool(
+                pose[0] + box_aabb_half_extents(self.scene_spec.sizes_m[k], pose[3:])[0] < 0.0
+            )
+        released = not self.attached
+        flags = {
+            "target_out": out,
+            "others_still": n == 0,
+            "released": released,
+            "success": out and n == 0 and released,
+        }
+        return {name: torch.tensor([v]) for name, v in flags.items()}
+
+    def compute_sparse_reward(self, obs: Any, action: Any, info: dict) -> torch.Tensor:
+        return info["success"].float()
+
+    def _get_obs_extra(self, info: dict) -> dict[str, torch.Tensor]:
+        poses = self.box_poses()
+        return {
+            "box_poses": torch.as_tensor(poses, dtype=torch.float32).reshape(1, -1),
+            "box_out": torch.as_tensor([[k in self.removed for k in range(self.scene_spec.n)]]),
+            "target": torch.tensor([self.target]),
+        }
+
+
+@register_env("ClutterShelfExtract-v1", max_episode_steps=2000)
+class ClutterShelfExtractEnv(ClutterShelfEnv):
+    """Take a target box out of a shelf scene with one Panda (thesis ch. 4-6 pulls)."""
+
+    N_ARMS = 1
+
+
+@register_env("ClutterShelfBimanual-v1", max_episode_steps=2000)
+class ClutterShelfBimanualEnv(ClutterShelfEnv):
+    """The same with two Pandas: the first pulls, the second holds a box in place (thesis
+    ch. 6 bimanual steps, ch. 4 extract-while-support)."""
+
+    N_ARMS = 2
