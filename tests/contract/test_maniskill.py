@@ -113,11 +113,6 @@ def test_an_unreachable_face_is_an_abort_never_a_success(stack3, physics):
     assert not end.removed
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 22 open: the mirrored (left) Panda's straight approach into the shelf is "
-    "refused by its shelf-collision check (planning_failed), so no bimanual step completes yet",
-)
 def test_the_held_box_is_released_before_the_judge(physics):
     """Bimanual: one Panda holds the left box while the other pulls the right one out; the
     holder lets go (and the box is dynamic again) before the final displacements are read."""

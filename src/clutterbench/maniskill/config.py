@@ -13,7 +13,7 @@ class ArmConfig:
     control_freq_hz: int = bounded(20, ge=1)
     """Joint-position commands per second (each control step runs 1 / (timestep_s *
     control_freq_hz) physics steps: sim.physics.timestep_s must divide it)."""
-    base_m: tuple[float, float, float] = (-0.62, -0.2, 0.25)
+    base_m: tuple[float, float, float] = (-0.62, -0.3, 0.25)
     """Where the first Panda's base stands (shelf frame: x into the shelf, y to the camera's
     left, z up; the shelf opening is x = 0, its floor z = 0), facing the shelf (+x); a
     second Panda stands mirrored (y negated). With two, the one on the pulled box's side

@@ -30,12 +30,12 @@ import numpy as np
 
 from clutterbench.maniskill.config import ArmConfig
 from clutterbench.maniskill.motion import (
+    TOOL_ROLLS_DEG,
     face_pose,
     make_planner,
     plan_joint_line,
     plan_line,
     shelf_points,
-    tool_quat,
 )
 from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.geometry import box_aabb_half_extents
@@ -48,7 +48,8 @@ ARM_OUTCOMES = ("ok", "unreachable", "planning_failed", "no_contact")
 no straight path there inside the joint limits and clear of the shelf; the tool stopped
 short of the face (other boxes in the way)."""
 PULL_ARM, HOLD_ARM = 0, 1
-"""The arms' indices when the pulled box is right of the held one (or nothing is held)."""
+"""The arms' indices when the pulled box is right of the held one (or, nothing held, right of
+the shelf's middle); otherwise they swap, so that no arm reaches across the other."""
 
 
 @dataclasses.dataclass
@@ -189,7 +190,7 @@ class ArmExecutor:
         straight to the ready pose; a joint-space line if a straight path fails."""
         tip = np.asarray(self.u.tcp_pose(arm).p, dtype=np.float64)
         out = np.hstack(
-            [[min(tip[0], -self.cfg.entry_clearance_m), tip[1], tip[2]], tool_quat(arm)]
+            [[min(tip[0], -self.cfg.entry_clearance_m), tip[1], tip[2]], self.u.tcp_pose(arm).q]
         )
         ok = self._line(arm, out, step, check_shelf=False) == "ok"
         if not ok or self._line(arm, self.u.ready_poses()[arm], step, check_shelf=True) != "ok":
@@ -215,18 +216,33 @@ class ArmExecutor:
                 break
 
     def _reach(self, arm: int, box: int, step: ArmStep) -> str:
-        """Approach `box`'s front face and take hold of it -> an ARM_OUTCOMES name."""
+        """Approach `box`'s front face and take hold of it -> an ARM_OUTCOMES name. The tool
+        turns about its rod as TOOL_ROLLS_DEG lists until both straight paths (to the entry
+        point, then to the face) are planned; the first turn's failure is the outcome when
+        none is."""
         face = self.u.front_face_m(box)
         entry = face.copy()
         entry[0] = min(face[0], 0.0) - self.cfg.entry_clearance_m
-        status = self._line(arm, face_pose(entry, 0.0, arm), step, check_shelf=True)
-        if status != "ok":
-            return status
-        status = self._line(
-            arm, face_pose(face, self.cfg.contact_gap_m, arm), step, check_shelf=True
-        )
-        if status != "ok":
-            return status
+        planner, first = self.planners[arm], None
+        for roll in TOOL_ROLLS_DEG:
+            status, to_entry = plan_line(
+                planner, face_pose(entry, 0.0, arm, roll), self._qpos(arm), self.dt_s, True
+            )
+            if status == "ok":
+                status, to_face = plan_line(
+                    planner,
+                    face_pose(face, self.cfg.contact_gap_m, arm, roll),
+                    to_entry[-1],
+                    self.dt_s,
+                    True,
+                )
+            if status == "ok":
+                break
+            first = first or status
+        else:
+            return first
+        self._follow(arm, to_entry, step)
+        self._follow(arm, to_face, step)
         tip = np.asarray(self.u.tcp_pose(arm).p, dtype=np.float64)
         face = self.u.front_face_m(box)  # the box may have been pushed on the way
         if (
@@ -266,7 +282,11 @@ class ArmExecutor:
         step = ArmStep()
         step.pose_log.append((0.0, self.u.box_poses()))
         pull_arm, hold_arm = PULL_ARM, HOLD_ARM
-        if hold is not None and state.poses[box, 1] > state.poses[hold, 1]:
+        if self.bimanual and (
+            state.poses[box, 1] > state.poses[hold, 1]
+            if hold is not None
+            else state.poses[box, 1] > 0.0
+        ):
             pull_arm, hold_arm = HOLD_ARM, PULL_ARM  # the arm on each box's side takes it
         step.pull_arm = pull_arm
         order = ([(hold_arm, hold)] if hold is not None else []) + [(pull_arm, box)]

@@ -19,12 +19,22 @@ pointing-down hand pitched up by 90 degrees (its z onto the world's x, its x up)
 MOVE_GROUP = "panda_hand_tcp"
 
 
-def tool_quat(arm: int) -> np.ndarray:
-    """Arm `arm`'s tool orientation pointing into the shelf: the second (mirrored) arm's is
-    turned half a turn about the rod."""
-    if arm == 0:
-        return TOOL_INTO_SHELF_Q
-    return qmult(TOOL_INTO_SHELF_Q, [0.0, 0.0, 0.0, 1.0])
+TOOL_ROLLS_DEG = (225.0, 180.0, 270.0, 135.0, 90.0, 315.0, 45.0, 0.0)
+"""Turns of the first arm's tool about its rod from TOOL_INTO_SHELF_Q, in the order an
+approach tries them (the rod does not feel the turn, the wrist does: it sits off the rod's
+axis). 225: the wrist outward of the rod and low, away from the other arm, from which
+straight paths reached every face of a test grid over the shelf (36 of 36; 25-34 for the
+others but one); a face low and deep puts that wrist into the shelf's floor, so the next
+turns (wrist up, then sideways) are tried in turn."""
+
+
+def tool_quat(arm: int, roll_deg: float = TOOL_ROLLS_DEG[0]) -> np.ndarray:
+    """Arm `arm`'s tool orientation pointing into the shelf, turned `roll_deg` about the rod.
+    The second arm's joint state is the mirror image of the first's, which puts its tool at
+    the mirrored turn plus half a turn (the hand is mounted at -45 degrees about the last
+    joint)."""
+    roll = np.deg2rad(roll_deg) if arm == 0 else np.pi - np.deg2rad(roll_deg)
+    return qmult(TOOL_INTO_SHELF_Q, axangle2quat([0.0, 0.0, 1.0], roll))
 
 
 def base_quat(pitch_deg: float) -> np.ndarray:
@@ -68,10 +78,13 @@ def shelf_points(shelf: Shelf, spacing_m: float = 0.01) -> np.ndarray:
     return np.concatenate(pts)
 
 
-def face_pose(front_face_m: np.ndarray, offset_m: float, arm: int = 0) -> np.ndarray:
-    """Arm `arm`'s tool pose `offset_m` in front of a box's front-face point, pointing into it."""
+def face_pose(
+    front_face_m: np.ndarray, offset_m: float, arm: int = 0, roll_deg: float = TOOL_ROLLS_DEG[0]
+) -> np.ndarray:
+    """Arm `arm`'s tool pose `offset_m` in front of a box's front-face point, pointing into it
+    (turned `roll_deg` about the rod)."""
     p = np.asarray(front_face_m, dtype=np.float64) - np.array([offset_m, 0.0, 0.0])
-    return np.hstack([p, tool_quat(arm)])
+    return np.hstack([p, tool_quat(arm, roll_deg)])
 
 
 IK_STARTS = 12
