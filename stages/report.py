@@ -10,6 +10,7 @@ from clutterbench.data.config import GenerateConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import read_json, write_json
 from clutterbench.platform_info import environment
+from clutterbench.report.arm_table import arm_table
 from clutterbench.report.collapse import RunSources, collapse_table
 from clutterbench.report.config import ReportConfig
 from clutterbench.report.datasets import dataset_stats, datasets_table
@@ -121,6 +122,20 @@ def report(params: dict, base: BaseConfig) -> None:
     for r in read_records(Path("reports/trials_ch5/records.jsonl")):
         ch5.setdefault(r["condition"], []).append(r)
     table_5_2(ch5, cfg.table_5_2, figures, Path("reports/tables"), base.scale)
+
+    trials_cfg = load_section(TrialsConfig, "trials", params)
+    if trials_cfg.arm_conditions:
+        of = {name: arm.of for name, arm in trials_cfg.arm_conditions.items()}
+        arm_records = {
+            name: read_records(Path(f"reports/trials_arm/{name}/records.jsonl")) for name in of
+        }
+        kinematic = {
+            o: read_records(Path(f"reports/trials/{o}/records.jsonl"))
+            if o in trials_cfg.conditions
+            else by_condition.get(o, [])
+            for o in of.values()
+        }
+        arm_table(arm_records, kinematic, of, Path("reports/tables"), base.scale)
 
     games = read_records(Path("reports/trials_ch3/records.jsonl"))
     ch3 = resolve_scale(params.get("yamakuzushi", {}), base.scale, "yamakuzushi")

@@ -11,11 +11,10 @@ from pathlib import Path
 
 from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.errors import ClutterbenchError
-from clutterbench.io import read_json, write_json
-from clutterbench.planning.support import SupportParams
+from clutterbench.io import write_json
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
-from clutterbench.trials.ch6 import ch6_jobs, load_planners, run_ch6_episode
+from clutterbench.trials.ch6 import ch6_jobs, chosen_support, load_planners, run_ch6_episode
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.harness import run_episodes, write_mcap
 from clutterbench.trials.records import write_records
@@ -24,16 +23,6 @@ from clutterbench.trials.stats import aggregate
 THRESHOLDS = Path("reports/support/thresholds.json")
 OUT = Path("reports/trials")
 DATA = Path("data/trials")
-
-
-def support_params(rule: str) -> SupportParams:
-    chosen = read_json(THRESHOLDS)
-    try:
-        return SupportParams(**chosen["chosen"][rule])
-    except (KeyError, TypeError) as exc:
-        raise ClutterbenchError(
-            f"{THRESHOLDS}: no usable thresholds for rule '{rule}' ({exc}); rerun the support stage"
-        ) from None
 
 
 def trials(params: dict, base: BaseConfig) -> None:
@@ -55,7 +44,7 @@ def trials(params: dict, base: BaseConfig) -> None:
             raise ClutterbenchError(f"models/{model}/best.pt missing; run train@{model}")
     jobs, about = [], {}
     for name, cond in conditions.items():
-        support = support_params(cond.rule)
+        support = chosen_support(THRESHOLDS, cond.rule)
         cp_max = cfg.ch6.cp_max if cfg.ch6.cp_max is not None else support.score_threshold
         jobs += ch6_jobs(
             name,

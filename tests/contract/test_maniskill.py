@@ -130,3 +130,24 @@ def test_the_held_box_is_released_before_the_judge(physics):
     assert result.extracted and end.removed == frozenset({0})
     step = judge_pull(result, 0, 1, frozenset(), THR)
     assert step["success"]
+
+
+def test_an_arm_that_gave_up_after_moving_a_box_is_a_judged_failure():
+    """An approach that stopped short (no increment pulled) but knocked a box over is a
+    failed step (the episode ends in collapse), never an abort that disturbed nothing; one
+    that moved nothing is the abort."""
+    from clutterbench.trials.arm import judge_arm_step
+    from clutterbench.trials.protocol import PullResult, episode_end
+
+    still = np.zeros(3)
+    knocked = np.array([0.0, 0.03, 0.0])
+    on_shelf = np.ones(3, dtype=bool)
+    quiet = judge_arm_step(
+        PullResult(0, False, False, still, still, on_shelf), 0, None, frozenset(), THR
+    )
+    assert not quiet["judged"] and quiet["success"] is None
+    hit = judge_arm_step(
+        PullResult(0, False, False, knocked, knocked, on_shelf), 0, None, frozenset(), THR
+    )
+    assert hit["judged"] and hit["success"] is False and hit["n_disturbed"] == 1
+    assert episode_end(hit, False, True) == "collapse"

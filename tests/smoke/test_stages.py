@@ -155,6 +155,17 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     assert len(fig) == len(ch3.games.variants)
     assert (a / "reports/tables/fig_3_15.png").stat().st_size > 1000
     assert (a / "reports/train_slide/candidates.png").stat().st_size > 1000
+    # arm-level conditions: the Pandas' records, joint states in the MCAP, the comparison
+    trials = load_section(TrialsConfig, "trials", params)
+    for name, arm in trials.arm_conditions.items():
+        recs = read_records(a / "reports/trials_arm" / name / "records.jsonl")
+        assert len(recs) == arm.episodes and all(r["executor"] == "arm" for r in recs)
+        steps = [s for r in recs for s in r.get("steps", [r])]
+        assert steps and all("arm_outcome" in s for s in steps), name
+        topics = read_episode(a / "data/trials_arm" / name / "episodes.mcap")["topics"]
+        assert topics.get("/arm/joint_states", 0) > 0, name
+    arm_vs = pd.read_csv(a / "reports/tables/arm_vs_kinematic.csv")
+    assert list(arm_vs["condition"]) == list(trials.arm_conditions)
     status = run(["dvc", "status"], a).stdout
     assert "changed" not in status
 
@@ -163,6 +174,7 @@ def test_same_params_give_byte_identical_data_and_tables(repro_twice):
     a, b = repro_twice
     trees = ("data", "models", "reports/train", "reports/evaluate", "reports/tables")
     more = ("reports/support", "reports/trials", "reports/trials_ch4", "reports/trials_ch3")
+    more += ("reports/trials_arm",)
     for tree in (*trees, *more, "reports/train_slide", "reports/slides"):
         assert digest_tree(a / tree) == digest_tree(b / tree), tree
 

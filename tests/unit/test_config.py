@@ -98,3 +98,27 @@ def test_masks_classes_and_loss_must_fit(model, message):
     ok = {"net": {"n_masks": 2, "n_classes": 4}, "loss": "ce"}
     net = parse(TrainConfig, {"models": {"m": {**MODEL, **ok}}}, "train").models["m"].net
     assert (net.n_masks, net.n_classes) == (2, 4)
+
+
+@pytest.mark.parametrize(
+    ("arm_conditions", "message"),
+    [
+        ({"x_arm": {"of": "nope"}}, "arm_conditions.x_arm.of: unknown condition 'nope'"),
+        ({"x_arm": {"of": "k", "episodes": 9}}, "arm_conditions.x_arm.episodes: 9 is more"),
+        ({"x_arm": {"of": "k", "executor": "arm"}}, "executor: unknown key"),
+    ],
+)
+def test_bad_arm_conditions_name_the_key(arm_conditions, message):
+    """An arm-level condition repeats a kinematic one it names, on no more episodes."""
+    from clutterbench.trials.config import TrialsConfig
+
+    data = {
+        "streams": {"s": {"families": {"random": 1}}},
+        "conditions": {"k": {"planner": "multi_step", "stream": "s", "episodes": 5}},
+        "arm_conditions": arm_conditions,
+    }
+    with pytest.raises(ClutterbenchError, match=message.replace(".", r"\.")) as info:
+        parse(TrialsConfig, data, "trials")
+    assert "\n" not in str(info.value)
+    ok = {**data, "arm_conditions": {"x_arm": {"of": "k", "episodes": 5}}}
+    assert parse(TrialsConfig, ok, "trials").arm_conditions["x_arm"].of == "k"

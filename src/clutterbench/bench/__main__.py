@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from clutterbench.bench.arm import bench_arm
 from clutterbench.bench.grouped import bench_grouped
 from clutterbench.bench.models import bench_models
 from clutterbench.bench.sim import bench_replay, bench_sim
@@ -29,6 +30,7 @@ PARTS: list[tuple[str, Callable[[], object]]] = [
     ("grouped", bench_grouped),  # grouped.json, grouped.md (needs data and trained models)
     ("trials", bench_trials),  # trials.json, trials.md (needs trained models)
     ("ch3", bench_ch3),  # ch3.json, ch3.md (the ConvNet line needs models/slide_convnet)
+    ("arm", bench_arm),  # arm.json, arm.md (ManiSkill Pandas vs the kinematic pull)
 ]
 
 

@@ -30,8 +30,11 @@ import numpy as np
 
 from clutterbench.maniskill.config import ArmConfig
 from clutterbench.maniskill.motion import (
+    NEAR_LINKS,
+    SIDE_BY_SIDE_ROLLS_DEG,
     TOOL_ROLLS_DEG,
     face_pose,
+    link_points,
     make_planner,
     plan_joint_line,
     plan_line,
@@ -47,6 +50,8 @@ ARM_OUTCOMES = ("ok", "unreachable", "planning_failed", "no_contact")
 """How an arm's part of a step ended: done; no joint state puts the tool at the box's face;
 no straight path there inside the joint limits and clear of the shelf; the tool stopped
 short of the face (other boxes in the way)."""
+FACE_MARGIN_M = 0.02
+"""With two arms at work, each takes its box this far in from the face's edge on its side."""
 PULL_ARM, HOLD_ARM = 0, 1
 """The arms' indices when the pulled box is right of the held one (or, nothing held, right of
 the shelf's middle); otherwise they swap, so that no arm reaches across the other."""
@@ -73,6 +78,8 @@ class ArmStep:
     """(time s from the step's start, each arm's 7 joint positions), at every control step."""
     pose_log: list[tuple[float, np.ndarray]] = dataclasses.field(default_factory=list)
     """(time s, (N, 7) box poses), after each motion."""
+    on_shelf_held: np.ndarray | None = None
+    """(N,) each box's centre inside the shelf, settled with the holding arm still holding."""
 
     def record(self, dt_s: float) -> dict[str, Any]:
         """The step record's arm fields."""
@@ -130,10 +137,19 @@ class ArmExecutor:
             self.uids = list(self.u.agent.agents_dict) if self.bimanual else None
         self.env.reset(options={"reconfigure": True} | options)
         if self._shelf != spec.shelf:
-            cloud = shelf_points(spec.shelf)
+            self._shelf_cloud = shelf_points(spec.shelf)
             for planner in self.planners:
-                planner.update_point_cloud(cloud, radius=self.cfg.collision_clearance_m)
+                planner.update_point_cloud(self._shelf_cloud, radius=self.cfg.collision_clearance_m)
             self._shelf = spec.shelf
+        if self.bimanual and not hasattr(self, "_arm_points"):
+            self._arm_points = [
+                {
+                    link.get_name(): link_points(link._objs[0])
+                    for link in agent.robot.get_links()
+                    if link.get_name() in NEAR_LINKS
+                }
+                for agent in self.u.agents
+            ]
         self.targets = [np.asarray(q, dtype=np.float64) for q in self.u.ready_qpos()]
         self.dt_s = 1.0 / self.cfg.control_freq_hz
         scene = self.u.scene.sub_scenes[0]
@@ -179,7 +195,28 @@ class ArmExecutor:
         for _ in range(3):  # let the PD controller close the last gap
             self._step(step)
 
+    def _see_other_arm(self, arm: int) -> None:
+        """Arm `arm`'s planner sees the shelf and, with two arms, the other arm where it is
+        now (points on its links' surfaces): no path is planned through the other arm."""
+        if not self.bimanual:
+            return
+        clouds = [self._shelf_cloud]
+        for other, links in enumerate(self._arm_points):
+            if other == arm:
+                continue
+            for link in self.u.agents[other].robot.get_links():  # rebuilt with each scene
+                if link.get_name() not in links:
+                    continue
+                pts = links[link.get_name()]
+                m = link._objs[0].entity_pose.to_transformation_matrix()
+                clouds.append(pts @ m[:3, :3].T + m[:3, 3])
+        self.planners[arm].update_point_cloud(
+            np.concatenate(clouds), radius=self.cfg.collision_clearance_m
+        )
+
     def _line(self, arm: int, pose: np.ndarray, step: ArmStep, check_shelf: bool) -> str:
+        if check_shelf:
+            self._see_other_arm(arm)
         status, path = plan_line(self.planners[arm], pose, self._qpos(arm), self.dt_s, check_shelf)
         if status == "ok":
             self._follow(arm, path, step)
@@ -215,16 +252,30 @@ class ArmExecutor:
             if still >= self.cfg.settle_control_steps:
                 break
 
-    def _reach(self, arm: int, box: int, step: ArmStep) -> str:
+    def _face_point(self, arm: int, box: int, aside: bool) -> np.ndarray:
+        """Where arm `arm` takes `box`: its front face's centre, or with `aside` (another arm
+        works beside it) that face's edge on the arm's own side, FACE_MARGIN_M in, so the two
+        tools and wrists stay apart (the grasp holds a box wherever on its face)."""
+        face = self.u.front_face_m(box)
+        if aside:
+            pose = self.u.box_poses()[box]
+            half = box_aabb_half_extents(self.u.scene_spec.sizes_m[box], pose[3:])[1]
+            side = -1.0 if arm == 0 else 1.0  # arm 0 stands right of the shelf (y < 0)
+            face[1] += side * max(half - FACE_MARGIN_M, 0.0)
+        return face
+
+    def _reach(self, arm: int, box: int, step: ArmStep, aside: bool = False) -> str:
         """Approach `box`'s front face and take hold of it -> an ARM_OUTCOMES name. The tool
         turns about its rod as TOOL_ROLLS_DEG lists until both straight paths (to the entry
         point, then to the face) are planned; the first turn's failure is the outcome when
-        none is."""
-        face = self.u.front_face_m(box)
+        none is. `aside` (another arm works beside this one): the face's edge on the arm's
+        side (_face_point), and the turns of SIDE_BY_SIDE_ROLLS_DEG."""
+        face = self._face_point(arm, box, aside)
         entry = face.copy()
         entry[0] = min(face[0], 0.0) - self.cfg.entry_clearance_m
+        self._see_other_arm(arm)
         planner, first = self.planners[arm], None
-        for roll in TOOL_ROLLS_DEG:
+        for roll in SIDE_BY_SIDE_ROLLS_DEG if aside else TOOL_ROLLS_DEG:
             status, to_entry = plan_line(
                 planner, face_pose(entry, 0.0, arm, roll), self._qpos(arm), self.dt_s, True
             )
@@ -244,7 +295,7 @@ class ArmExecutor:
         self._follow(arm, to_entry, step)
         self._follow(arm, to_face, step)
         tip = np.asarray(self.u.tcp_pose(arm).p, dtype=np.float64)
-        face = self.u.front_face_m(box)  # the box may have been pushed on the way
+        face = self._face_point(arm, box, aside)  # the box may have been pushed on the way
         if (
             np.linalg.norm(tip - (face - [self.cfg.contact_gap_m, 0.0, 0.0]))
             > self.cfg.attach_tolerance_m
@@ -292,7 +343,7 @@ class ArmExecutor:
         order = ([(hold_arm, hold)] if hold is not None else []) + [(pull_arm, box)]
         increments, aborted = 0, False
         for arm, k in order:
-            outcome = self._reach(arm, k, step)
+            outcome = self._reach(arm, k, step, aside=hold is not None)
             if outcome != "ok":
                 step.outcome, step.failed_arm = outcome, "hold" if arm == hold_arm else "pull"
                 break
@@ -322,7 +373,7 @@ class ArmExecutor:
         self.u.detach(pull_arm)
         self._home(pull_arm, step)
         self._settle(step)
-        held_disp, _ = self.u.displacements()
+        held_disp, step.on_shelf_held = self.u.displacements()
         if hold is not None:
             self.u.detach(hold_arm)
             self._home(hold_arm, step)

@@ -28,6 +28,11 @@ others but one); a face low and deep puts that wrist into the shelf's floor, so 
 turns (wrist up, then sideways) are tried in turn."""
 
 
+SIDE_BY_SIDE_ROLLS_DEG = (270.0, 90.0, 225.0, 315.0, 135.0, 45.0, 180.0, 0.0)
+"""The same turns when the other arm works beside this one: the hand's wide side (its y,
+where fingers would open) upright first, so that the two hands fit side by side."""
+
+
 def tool_quat(arm: int, roll_deg: float = TOOL_ROLLS_DEG[0]) -> np.ndarray:
     """Arm `arm`'s tool orientation pointing into the shelf, turned `roll_deg` about the rod.
     The second arm's joint state is the mirror image of the first's, which puts its tool at
@@ -76,6 +81,52 @@ def shelf_points(shelf: Shelf, spacing_m: float = 0.01) -> np.ndarray:
                 face[:, [j for j in range(3) if j != k]] = np.stack([u.ravel(), v.ravel()], 1)
                 pts.append(face + centre)
     return np.concatenate(pts)
+
+
+ARM_POINT_SPACING_M = 0.008
+"""Spacing of the points standing for the other arm in a planner's collision world (below
+the rod's 16 mm diameter, so no path slips between them)."""
+NEAR_LINKS = (
+    "panda_link3",
+    "panda_link4",
+    "panda_link5",
+    "panda_link6",
+    "panda_link7",
+    "panda_hand",
+)
+"""The links of the other arm a path can meet (the ones near its base cannot)."""
+
+
+def link_points(link_component, spacing_m: float = ARM_POINT_SPACING_M) -> np.ndarray:
+    """(K, 3) points on the surfaces of a SAPIEN link's collision shapes (convex meshes and
+    cylinders), in the link's frame; deterministic (a fixed seed)."""
+    rng = np.random.default_rng(0)
+    out = []
+    for shape in link_component.get_collision_shapes():
+        local = shape.get_local_pose().to_transformation_matrix()
+        if hasattr(shape, "get_triangles"):
+            v = np.asarray(shape.get_vertices(), dtype=np.float64) * np.asarray(shape.get_scale())
+            tri = v[np.asarray(shape.get_triangles())]
+            area = 0.5 * np.linalg.norm(
+                np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1
+            )
+            n = np.maximum(1, np.ceil(area / spacing_m**2).astype(int))
+            which = np.repeat(np.arange(len(tri)), n)
+            a, b = rng.random((2, len(which)))
+            flip = a + b > 1.0
+            a[flip], b[flip] = 1.0 - a[flip], 1.0 - b[flip]
+            t = tri[which]
+            pts = t[:, 0] + a[:, None] * (t[:, 1] - t[:, 0]) + b[:, None] * (t[:, 2] - t[:, 0])
+        elif hasattr(shape, "get_half_length"):  # a cylinder along its x axis
+            r, h = shape.get_radius(), shape.get_half_length()
+            xs = np.arange(-h, h + 1e-9, spacing_m)
+            angles = np.arange(0.0, 2 * np.pi, spacing_m / max(r, 1e-3))
+            x, ang = np.meshgrid(xs, angles, indexing="ij")
+            pts = np.stack([x.ravel(), r * np.cos(ang.ravel()), r * np.sin(ang.ravel())], 1)
+        else:
+            continue
+        out.append(pts @ local[:3, :3].T + local[:3, 3])
+    return np.concatenate(out) if out else np.zeros((0, 3))
 
 
 def face_pose(

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from clutterbench.errors import ClutterbenchError
+from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.perception.depth_segmentation import shelf_roi
 from clutterbench.perception.masks import Segmentation, match_segments, segment
@@ -44,6 +45,7 @@ from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.config import Ch4ConditionConfig, Ch4TrialParams, SceneStreamConfig
 from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
+from clutterbench.trials.protocol import SceneState
 from clutterbench.trials.scenes import draw_target, draw_trial_spec, policy_rng
 
 RISKS_LOGGED = 8
@@ -129,13 +131,73 @@ def pull_outcome(
     disp = world.displacements()
     on_shelf = spec.shelf.contains(world.positions())
     out = extract in world.removed
+    return judge_ch4_pull(
+        spec.n, extract, support, threshold_m, disp_held, on_shelf_held, disp, on_shelf, out
+    )
+
+
+def arm_pull_outcome(
+    spec: SceneSpec,
+    physics: PhysicsConfig,
+    extract: int,
+    support: int | None,
+    threshold_m: float,
+    job: dict[str, Any],
+    log: EpisodeLog,
+) -> dict[str, Any]:
+    """pull_outcome with the Pandas (executor: arm): one straight pull, no lift (as the
+    kinematic pull), the support held by the second arm; judged the same way."""
+    from clutterbench.trials.arm import arm_pull
+
+    done = arm_pull(
+        spec,
+        SceneState.start(spec),
+        extract,
+        support,
+        float("inf"),
+        0.0,
+        physics,
+        job["arm"],
+        log,
+        0.0,
+    )
+    r = done.result
+    log.poses(done.elapsed_s, done.state.poses, done.state.removed)
+    out = judge_ch4_pull(
+        spec.n,
+        extract,
+        support,
+        threshold_m,
+        r.displacement_held_m,
+        done.on_shelf_held,
+        r.displacement_m,
+        r.on_shelf,
+        r.extracted,
+    )
+    reached = done.fields["arm_outcome"] == "ok"  # an arm that never took hold did nothing
+    return out | {"executed": reached, "aborted_before_motion": not reached} | done.fields
+
+
+def judge_ch4_pull(
+    n: int,
+    extract: int,
+    support: int | None,
+    threshold_m: float,
+    disp_held: np.ndarray,
+    on_shelf_held: np.ndarray,
+    disp: np.ndarray,
+    on_shelf: np.ndarray,
+    out: bool,
+) -> dict[str, Any]:
+    """A ch. 4 pull's judgement from the boxes' displacements and shelf membership, while the
+    support was held and after its release (thesis 4.3.3)."""
 
     def judge(d: np.ndarray, shelf: np.ndarray, others: list[int]) -> tuple[int, int]:
         return sum(not shelf[k] for k in others), sum(d[k] > threshold_m for k in others)
 
     # Left the shelf: any box but the pulled one (the released support too). Moved: the
     # boxes other than the manipulated ones (the support may settle lower once released).
-    others = [k for k in range(spec.n) if k != extract]
+    others = [k for k in range(n) if k != extract]
     still = [k for k in others if k != support]
     left = int(judge(disp, on_shelf, others)[0])
     moved = int(judge(disp, on_shelf, still)[1])
@@ -283,7 +345,17 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
     decision |= {"extract": chosen[0], "support": chosen[1], "boxes": [x_box, s_box]}
     finite = risk is not None and np.isfinite(risk)
     log.json(0.0, DECISION_TOPIC, decision | {"risk": round(risk, 4) if finite else None})
-    if x_box is not None:
+    if x_box is not None and cond.executor == "arm":
+        out = arm_pull_outcome(
+            spec,
+            physics,
+            x_box,
+            s_box if s_box != x_box else None,
+            params.moved_threshold_m,
+            job,
+            log,
+        )
+    elif x_box is not None:
         out = pull_outcome(
             spec,
             physics,
@@ -308,8 +380,8 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
             "success_held": False,
             "strict_success_held": False,
         }
-    t_end = world.steps_taken * physics.timestep_s
-    log.poses(t_end, world.poses(), world.removed)
+    if cond.executor != "arm" or x_box is None:  # the arm's pull logged its own poses
+        log.poses(world.steps_taken * physics.timestep_s, world.poses(), world.removed)
     out.pop("displacement_m", None)
     out.pop("displacement_held_m", None)
     if target_box is not None:  # a predetermined target: the pull must take that box out
@@ -346,6 +418,8 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
         "risk_ties": ties,
         "valid": bool(valid and (target_box is None or x_box == target_box)),
     } | {k: _plain(v) for k, v in out.items()}
+    if cond.executor == "arm":  # kinematic records keep their old fields
+        record["executor"] = "arm"
     return EpisodeResult(record, log)
 
 
@@ -414,6 +488,7 @@ def ch4_jobs(
     camera: CameraConfig,
     max_attempts: int,
     record_images: bool,
+    arm: ArmConfig | None = None,
 ) -> list[dict[str, Any]]:
     model_path = Path(f"models/{cond.model}/best.pt") if cond.model is not None else None
     return [
@@ -429,6 +504,7 @@ def ch4_jobs(
             "model_path": model_path,
             "max_attempts": max_attempts,
             "record_images": record_images,
+            "arm": arm or ArmConfig(),
         }
         for i in range(cond.episodes)
     ]

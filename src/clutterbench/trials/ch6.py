@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from clutterbench.errors import ClutterbenchError
+from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.planning.extraction import (
     CollapseGraphPlanner,
@@ -238,6 +239,19 @@ PLANNERS: dict[str, Callable[[dict[str, Any], SceneSpec], Any]] = {}
 """ch. 6 planner name -> factory(job, spec): the registry the conditions' `planner` names."""
 
 
+def chosen_support(thresholds: Path, rule: str) -> SupportParams:
+    """The support rule's thresholds chosen on validation scenes by the support stage."""
+    from clutterbench.io import read_json
+
+    chosen = read_json(thresholds)
+    try:
+        return SupportParams(**chosen["chosen"][rule])
+    except (KeyError, TypeError) as exc:
+        raise ClutterbenchError(
+            f"{thresholds}: no usable thresholds for rule '{rule}' ({exc}); rerun the support stage"
+        ) from None
+
+
 def register_planner(name: str):
     """Register a ch. 6 planner factory under `name` (usable as a condition's planner)."""
 
@@ -335,36 +349,76 @@ def execute_decision(
     gone: frozenset[int],
     log: EpisodeLog,
     t0: float = 0.0,
-) -> dict[str, Any]:
+    arm: tuple[SceneSpec, SceneState, ArmConfig] | None = None,
+) -> tuple[dict[str, Any], SceneState, float]:
     """Execute one decision from the step's canonical start (`world`, fresh) and judge it:
     pull in increments, checking the planner's collapse score before each (the first check
     reads the observation the planner decided on, so a box its own rule rejects is never
-    picked and then aborted before motion), release, settle, judge."""
+    picked and then aborted before motion), release, settle, judge. `arm`: (spec, state,
+    Pandas) to execute it arm-level instead (trials/arm.py; `world` then only pictures).
+    -> the step's record, the state it left, its duration (s)."""
     box, hold = decision.pull, decision.hold
     dt = world.cfg.timestep_s
     monitor = getattr(planner, "collapse_score", None)
     max_cp = 0.0
 
-    def go_on(done: int) -> bool:
+    def score(done: int, now: Observation | None, t: float) -> bool:
         nonlocal max_cp
         if monitor is None:
             return True
-        now = obs if done == 0 else observe(world, camera)
-        cp = float(monitor(now, box, hold))
+        cp = float(monitor(obs if done == 0 else now, box, hold))
         max_cp = max(max_cp, cp)
-        log.json(t0 + world.steps_taken * dt, DECISION_TOPIC, {"box": box, "cp": round(cp, 4)})
+        log.json(t, DECISION_TOPIC, {"box": box, "cp": round(cp, 4)})
         return cp <= cp_max
 
-    result = execute_pull(
-        world, box, hold, params.pull_increment_m, params.grasp_lift_m, go_on=go_on
-    )
-    step = judge_pull(result, box, hold, gone, params.moved_threshold_m)
-    return {
+    arm_fields: dict[str, Any] = {}
+    if arm is None:
+        result = execute_pull(
+            world,
+            box,
+            hold,
+            params.pull_increment_m,
+            params.grasp_lift_m,
+            go_on=lambda done: score(
+                done,
+                observe(world, camera) if done and monitor else None,
+                t0 + world.steps_taken * dt,
+            ),
+        )
+        state, elapsed = SceneState.of(world), world.steps_taken * dt
+    else:
+        from clutterbench.trials.arm import arm_pull
+
+        spec, start, arm_cfg = arm
+        done_by_arm = arm_pull(
+            spec,
+            start,
+            box,
+            hold,
+            params.pull_increment_m,
+            params.grasp_lift_m,
+            world.cfg,
+            arm_cfg,
+            log,
+            t0,
+            go_on=lambda done, now: score(done, now, t0),
+            camera=camera,
+        )
+        result, arm_fields = done_by_arm.result, done_by_arm.fields
+        state, elapsed = done_by_arm.state, done_by_arm.elapsed_s
+    if arm is None:
+        step = judge_pull(result, box, hold, gone, params.moved_threshold_m)
+    else:
+        from clutterbench.trials.arm import judge_arm_step
+
+        step = judge_arm_step(result, box, hold, gone, params.moved_threshold_m)
+    record = {
         "box": box,
         "hold": hold,
         "increments": result.increments,
         "max_cp": round(max_cp, 4),
     } | step
+    return record | arm_fields, state, elapsed
 
 
 def run_ch6_episode(job: dict[str, Any]) -> EpisodeResult:
@@ -393,7 +447,6 @@ def run_extraction(
     state = SceneState.start(spec)
     world = world_at(spec, state, physics, render=True)
     log = EpisodeLog(record_images=job["record_images"])
-    dt = physics.timestep_s
     obs = observe(world, camera)
     log.scene(0.0, spec.sizes_m, spec.shelf.boards(), obs.camera, obs.depth_m.shape)
     if target is None:
@@ -415,12 +468,21 @@ def run_extraction(
             end = "gave_up"
             break
         log.json(t, DECISION_TOPIC, {"pull": decision.pull, "hold": decision.hold} | decision.state)
-        step = execute_decision(
-            world, obs, decision, planner, camera, params, job["cp_max"], state.removed, log, t
+        step, state, elapsed = execute_decision(
+            world,
+            obs,
+            decision,
+            planner,
+            camera,
+            params,
+            job["cp_max"],
+            state.removed,
+            log,
+            t,
+            arm=(spec, state, job["arm"]) if job.get("executor", "kinematic") == "arm" else None,
         )
         steps.append(step)
-        t += world.steps_taken * dt
-        state = SceneState.of(world)
+        t += elapsed
         if step["aborted_before_motion"] or step["aborted_after_motion"]:
             blocked.add(decision.pull)
         else:
@@ -458,6 +520,8 @@ def run_extraction(
         "n_disturbed": overall.n_disturbed,
         "disturbance_m": overall.disturbance_m,
     } | judge_episode(steps, end, target)
+    if job.get("executor", "kinematic") == "arm":  # kinematic records keep their old fields
+        record["executor"] = "arm"
     if isinstance(planner, SearchOracle):
         record |= {
             "search_nodes": planner.nodes,
@@ -502,6 +566,8 @@ def ch6_jobs(
             "ch4_model_path": Path(f"models/{trials.ch6.ch4_model}/best.pt"),
             "max_attempts": trials.max_attempts,
             "record_images": trials.mcap_images,
+            "executor": cond.executor,
+            "arm": trials.arm,
         }
         for i in range(cond.episodes)
     ]

@@ -11,6 +11,7 @@ from typing import Literal
 
 from clutterbench.config import bounded
 from clutterbench.data.config import DatasetConfig
+from clutterbench.maniskill.config import ArmConfig
 
 PLANNERS = (
     "pull_target",
@@ -106,6 +107,9 @@ class ConditionConfig:
     pseudo-direct contact (`_gap`, ours)."""
     perception: Literal["instance"] = "instance"
     """Where object masks come from (the simulator's instance image)."""
+    executor: Literal["kinematic", "arm"] = "kinematic"
+    """Who executes a pull: the box moved kinematically (BoxWorld), or Pandas in a ManiSkill
+    scene (trials.arm); the same judge and records either way."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -169,6 +173,8 @@ class Ch4ConditionConfig:
     """The ch. 4 network of the risk planner (a key of train.models); null for the others."""
     perception: Literal["instance", "depth"] = "instance"
     """Object masks from the simulator's instance image, or from the depth image alone."""
+    executor: Literal["kinematic", "arm"] = "kinematic"
+    """Who executes the pull and holds the support: kinematic, or Pandas (trials.arm)."""
 
     def __post_init__(self) -> None:
         if (self.planner == "risk") != (self.model is not None):
@@ -246,6 +252,17 @@ class Ch5TrialParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class ArmConditionConfig:
+    """One arm-level condition (stage trials_arm): a kinematic condition's planner on the same
+    scenes and targets, its pulls executed by Pandas (ManiSkill) instead of kinematically."""
+
+    of: str
+    """The condition it repeats: a key of trials.conditions (ch. 6) or trials.ch4_conditions."""
+    episodes: int = bounded(50, ge=1)
+    """Its first this many episodes (at most that condition's: they are compared one by one)."""
+
+
+@dataclasses.dataclass(frozen=True)
 class TrialsConfig:
     workers: int = bounded(2, ge=1)
     """Worker processes per condition, each with its own renderer and one torch thread."""
@@ -271,6 +288,11 @@ class TrialsConfig:
     plus its entries here and in trials.conditions (docs/extending.md)."""
     mcap_images: bool = True
     """Write depth and instance images of every observation to the condition's MCAP."""
+    arm: ArmConfig = ArmConfig()
+    """The Pandas of arm-level execution (executor: arm)."""
+    arm_conditions: Mapping[str, ArmConditionConfig] = dataclasses.field(default_factory=dict)
+    """Condition name -> a kinematic condition repeated arm-level; stage trials_arm runs them
+    all and compares each with its kinematic row, episode by episode."""
 
     def __post_init__(self) -> None:
         for group in ("conditions", "ch4_conditions", "ch5_conditions"):
@@ -280,3 +302,20 @@ class TrialsConfig:
                         f"{group}.{name}.stream: unknown stream '{cond.stream}' "
                         f"(known: {', '.join(self.streams)})"
                     )
+        for name, arm in self.arm_conditions.items():
+            of = self.conditions.get(arm.of) or self.ch4_conditions.get(arm.of)
+            if of is None:
+                known = [*self.conditions, *self.ch4_conditions]
+                raise ValueError(
+                    f"arm_conditions.{name}.of: unknown condition '{arm.of}' "
+                    f"(known: {', '.join(known)})"
+                )
+            if arm.episodes > of.episodes:
+                raise ValueError(
+                    f"arm_conditions.{name}.episodes: {arm.episodes} is more than the "
+                    f"{of.episodes} episodes of '{arm.of}' it is compared with"
+                )
+            if arm.of in self.conditions and arm.of in self.ch4_conditions:
+                raise ValueError(
+                    f"arm_conditions.{name}.of: '{arm.of}' names a ch. 6 and a ch. 4 condition"
+                )

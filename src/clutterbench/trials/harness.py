@@ -103,6 +103,8 @@ class EpisodeResult:
     record: dict[str, Any]
     """The episode's JSON record (plain JSON types only)."""
     log: EpisodeLog
+    wall_s: float | None = None
+    """Wall-clock seconds the episode took (the machine's, never written to an output)."""
 
 
 EpisodeFn = Callable[[dict[str, Any]], EpisodeResult]
