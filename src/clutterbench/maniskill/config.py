@@ -13,7 +13,12 @@ class ArmConfig:
     control_freq_hz: int = bounded(20, ge=1)
     """Joint-position commands per second (each control step runs 1 / (timestep_s *
     control_freq_hz) physics steps: sim.physics.timestep_s must divide it)."""
-    base_m: tuple[float, float, float] = (-0.62, -0.3, 0.25)
+    rod_length_m: float = bounded(0.3, gt=0.0, le=1.0)
+    """The tool: a rod this long (8 mm radius) in front of the hand, its tip the TCP (ManiSkill's
+    `panda_stick` has 0.1 m). Long enough that the wrist stays out of the shelf for a face
+    deep in it (the shelf is 0.28 m deep; a 0.1 m rod put the wrist into its floor or walls
+    for most faces beyond 0.1 m)."""
+    base_m: tuple[float, float, float] = (-0.82, -0.3, 0.25)
     """Where the first Panda's base stands (shelf frame: x into the shelf, y to the camera's
     left, z up; the shelf opening is x = 0, its floor z = 0), facing the shelf (+x); a
     second Panda stands mirrored (y negated). With two, the one on the pulled box's side

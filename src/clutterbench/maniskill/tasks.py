@@ -21,6 +21,9 @@ BoxWorld of the process uses (a ManiSkill env sets them process-wide).
 
 from __future__ import annotations
 
+import os
+import tempfile
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -54,9 +57,68 @@ MIRROR_OFFSETS = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -np.pi / 2])
 """A Panda's joint state mirrored in its base's x-z plane: q -> q * signs + offsets (the
 hand is mounted at -45 degrees about the last joint; the mirror image of the tool is the
 tool turned half a turn about its rod, which the rod does not feel: tool_quat)."""
-ROBOT = "panda_stick"
-"""ManiSkill's Panda with a 10 cm rod (8 mm radius) instead of fingers: its tip (the TCP) is
-the suction tool that pulls, and the thesis' support rod that holds."""
+ROD_START_M = 0.05
+"""ManiSkill's `panda_stick` rod starts this far in front of the hand's origin (8 mm radius)."""
+
+
+def rod_robot(rod_length_m: float) -> str:
+    """The uid of ManiSkill's `panda_stick` with a rod `rod_length_m` long (its tip the TCP),
+    registered on first use: the same Panda, URDF and SRDF with the rod and the TCP moved,
+    written to this machine's temporary directory (beside a link to ManiSkill's meshes). A
+    rod long enough keeps the wrist out of the shelf when the face is deep in it."""
+    from mani_skill.agents.registration import REGISTERED_AGENTS, register_agent
+    from mani_skill.agents.robots.panda.panda_stick import PandaStick
+
+    mm = int(round(rod_length_m * 1000))
+    uid = f"panda_rod_{mm}mm"
+    if uid in REGISTERED_AGENTS:
+        return uid
+    src = Path(PandaStick.urdf_path)
+    rod = rod_length_m
+    urdf = src.read_text()
+    swaps = [
+        (
+            '<origin xyz="0 0 0.1" rpy="0 0 0"/>',
+            f'<origin xyz="0 0 {ROD_START_M + rod / 2:.4f}" rpy="0 0 0"/>',
+            2,
+        ),
+        (
+            '<cylinder radius="0.008" length="0.1"/>',
+            f'<cylinder radius="0.008" length="{rod:.4f}"/>',
+            2,
+        ),
+        (
+            '<origin rpy="0 0 0" xyz="0 0 0.15"/>',
+            f'<origin rpy="0 0 0" xyz="0 0 {ROD_START_M + rod:.4f}"/>',
+            1,
+        ),
+    ]
+    for old, new, count in swaps:
+        if urdf.count(old) != count:
+            raise ClutterbenchError(
+                f"{src}: not the panda_stick URDF this code knows ({old!r} found "
+                f"{urdf.count(old)} times, expected {count}); check the mani-skill pin"
+            )
+        urdf = urdf.replace(old, new)
+    out = Path(tempfile.gettempdir()) / "clutterbench_robots"
+    out.mkdir(parents=True, exist_ok=True)
+    meshes = out / "franka_description"  # mesh paths stay relative (mplib wants them so)
+    if not meshes.exists():
+        tmp = out / f".franka_description.{os.getpid()}.tmp"
+        tmp.symlink_to(src.parent / "franka_description", target_is_directory=True)
+        os.replace(tmp, meshes)
+    path = out / f"{uid}.urdf"
+    for target, text in (
+        (path, urdf),
+        (path.with_suffix(".srdf"), src.with_suffix(".srdf").read_text()),
+    ):
+        if not target.exists() or target.read_text() != text:
+            tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+            tmp.write_text(text)
+            os.replace(tmp, target)
+    cls = type(f"PandaRod{mm}mm", (PandaStick,), {"uid": uid, "urdf_path": str(path)})
+    register_agent()(cls)
+    return uid
 
 
 def _sapien_physx_defaults() -> SceneConfig:
@@ -87,7 +149,6 @@ class ClutterShelfEnv(BaseEnv):
     `moved_threshold_m`. `reset(options=...)` takes the same keys (with `reconfigure=True`
     when the boxes change) to start another scene or step in the same env."""
 
-    SUPPORTED_ROBOTS = ["panda_stick", ("panda_stick", "panda_stick")]
     SUPPORTED_OBS_MODES = ("none", "state", "state_dict", "sensor_data", "depth+segmentation")
     N_ARMS = 1
 
@@ -118,7 +179,9 @@ class ClutterShelfEnv(BaseEnv):
             )
         self.attached: dict[int, tuple[int, sapien.Pose]] = {}
         """arm index -> (box, box pose in the tool frame): boxes a tool holds."""
-        uids = ROBOT if self.N_ARMS == 1 else (ROBOT,) * self.N_ARMS
+        robot = rod_robot(arm.rod_length_m)
+        uids = robot if self.N_ARMS == 1 else (robot,) * self.N_ARMS
+        self.SUPPORTED_ROBOTS = [uids]
         kwargs.setdefault("sim_backend", "physx_cpu")
         kwargs.setdefault("render_backend", "none")
         kwargs.setdefault("control_mode", "pd_joint_pos")
