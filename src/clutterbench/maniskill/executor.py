@@ -23,6 +23,7 @@ ones it holds.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from collections.abc import Callable
 from typing import Any
 
@@ -32,6 +33,7 @@ from clutterbench.maniskill.config import ArmConfig
 from clutterbench.maniskill.motion import (
     NEAR_LINKS,
     SIDE_BY_SIDE_ROLLS_DEG,
+    SIDE_BY_SIDE_YAWS_DEG,
     TOOL_ROLLS_DEG,
     face_pose,
     link_points,
@@ -90,6 +92,16 @@ class ArmStep:
             "arm_retract_failed": self.retract_failed,
             "arm_s": round(self.control_steps * dt_s, 3),
         }
+
+
+def _matrix(pose7) -> np.ndarray:
+    """A 4x4 transform from [x, y, z, qw, qx, qy, qz]."""
+    from transforms3d.quaternions import quat2mat
+
+    pose7 = np.asarray(pose7, dtype=np.float64)
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = quat2mat(pose7[3:]), pose7[:3]
+    return m
 
 
 class ArmExecutor:
@@ -195,20 +207,27 @@ class ArmExecutor:
         for _ in range(3):  # let the PD controller close the last gap
             self._step(step)
 
-    def _see_other_arm(self, arm: int) -> None:
-        """Arm `arm`'s planner sees the shelf and, with two arms, the other arm where it is
-        now (points on its links' surfaces): no path is planned through the other arm."""
+    def _see_other_arm(self, arm: int, other_q: np.ndarray | None = None) -> None:
+        """Arm `arm`'s planner sees the shelf and, with two arms, the other arm (points on its
+        links' surfaces) where it is now, or at the joint state `other_q` it is planned to
+        take: no path is planned through the other arm."""
         if not self.bimanual:
             return
         clouds = [self._shelf_cloud]
-        for other, links in enumerate(self._arm_points):
-            if other == arm:
-                continue
+        other = 1 - arm
+        links = self._arm_points[other]
+        if other_q is None:
             for link in self.u.agents[other].robot.get_links():  # rebuilt with each scene
-                if link.get_name() not in links:
-                    continue
-                pts = links[link.get_name()]
-                m = link._objs[0].entity_pose.to_transformation_matrix()
+                if link.get_name() in links:
+                    m = link._objs[0].entity_pose.to_transformation_matrix()
+                    clouds.append(links[link.get_name()] @ m[:3, :3].T + m[:3, 3])
+        else:
+            planner = self.planners[other]
+            model = planner.pinocchio_model
+            model.compute_forward_kinematics(np.asarray(other_q, dtype=np.float64))
+            base = _matrix(self.u.arm_bases()[other])
+            for name, pts in links.items():
+                m = base @ _matrix(model.get_link_pose(planner.link_name_2_idx[name]))
                 clouds.append(pts @ m[:3, :3].T + m[:3, 3])
         self.planners[arm].update_point_cloud(
             np.concatenate(clouds), radius=self.cfg.collision_clearance_m
@@ -264,36 +283,54 @@ class ArmExecutor:
             face[1] += side * max(half - FACE_MARGIN_M, 0.0)
         return face
 
-    def _reach(self, arm: int, box: int, step: ArmStep, aside: bool = False) -> str:
-        """Approach `box`'s front face and take hold of it -> an ARM_OUTCOMES name. The tool
-        turns about its rod as TOOL_ROLLS_DEG lists until both straight paths (to the entry
-        point, then to the face) are planned; the first turn's failure is the outcome when
-        none is. `aside` (another arm works beside this one): the face's edge on the arm's
-        side (_face_point), and the turns of SIDE_BY_SIDE_ROLLS_DEG."""
+    def _plan_reach(
+        self, arm: int, box: int, aside: bool, other_q: np.ndarray | None = None
+    ) -> tuple[str, list[tuple[float, list[np.ndarray]]]]:
+        """Plan arm `arm`'s approach to `box`'s front face, the other arm where it is now or
+        at `other_q`: the tool turns about its rod as TOOL_ROLLS_DEG lists (with `aside`,
+        another arm working beside it: the face's edge on the arm's side, _face_point, and
+        SIDE_BY_SIDE_ROLLS_DEG), each turn whose two straight paths (to the entry point, then
+        to the face) plan is kept -> ("ok", [(roll, [to_entry, to_face]), ...]), or the first
+        turn's failure and []."""
         face = self._face_point(arm, box, aside)
-        entry = face.copy()
-        entry[0] = min(face[0], 0.0) - self.cfg.entry_clearance_m
-        self._see_other_arm(arm)
-        planner, first = self.planners[arm], None
-        for roll in SIDE_BY_SIDE_ROLLS_DEG if aside else TOOL_ROLLS_DEG:
+        self._see_other_arm(arm, other_q)
+        planner, first, plans = self.planners[arm], None, []
+        side = -1.0 if arm == 0 else 1.0  # outward: arm 0 stands right (y < 0)
+        yaws = SIDE_BY_SIDE_YAWS_DEG if aside else (0.0,)
+        for yaw, roll in itertools.product(
+            yaws, SIDE_BY_SIDE_ROLLS_DEG if aside else TOOL_ROLLS_DEG
+        ):
+            yaw_deg = -side * yaw  # the tip toward the middle, the hand outward
+            # the entry point: on the rod's line, entry_clearance_m in front of the opening
+            back = (face[0] - min(face[0], 0.0) + self.cfg.entry_clearance_m) / np.cos(
+                np.deg2rad(yaw)
+            )
             status, to_entry = plan_line(
-                planner, face_pose(entry, 0.0, arm, roll), self._qpos(arm), self.dt_s, True
+                planner,
+                face_pose(face, back, arm, roll, yaw_deg),
+                self._qpos(arm),
+                self.dt_s,
+                True,
             )
             if status == "ok":
                 status, to_face = plan_line(
                     planner,
-                    face_pose(face, self.cfg.contact_gap_m, arm, roll),
+                    face_pose(face, self.cfg.contact_gap_m, arm, roll, yaw_deg),
                     to_entry[-1],
                     self.dt_s,
                     True,
                 )
             if status == "ok":
-                break
+                plans.append((roll, [to_entry, to_face]))
+                if other_q is not None or not aside:
+                    break  # one is enough: nothing else depends on which
             first = first or status
-        else:
-            return first
-        self._follow(arm, to_entry, step)
-        self._follow(arm, to_face, step)
+        return ("ok", plans) if plans else (first, [])
+
+    def _take(self, arm: int, box: int, paths: list[np.ndarray], aside: bool, step: ArmStep) -> str:
+        """Follow the approach `paths` and take hold of `box` -> "ok" or "no_contact"."""
+        for path in paths:
+            self._follow(arm, path, step)
         tip = np.asarray(self.u.tcp_pose(arm).p, dtype=np.float64)
         face = self._face_point(arm, box, aside)  # the box may have been pushed on the way
         if (
@@ -303,6 +340,29 @@ class ArmExecutor:
             return "no_contact"
         self.u.attach(arm, box)
         return "ok"
+
+    def _reach_both(
+        self, hold_arm: int, hold: int, pull_arm: int, box: int, step: ArmStep
+    ) -> tuple[str, str | None]:
+        """Two arms side by side: each of the holding arm's planned approaches is tried with
+        the pulling arm planned around where it would stand, the first pair that plans is
+        executed (holding arm first) -> (ARM_OUTCOMES name, the arm that failed or None)."""
+        status, holds = self._plan_reach(hold_arm, hold, aside=True)
+        if status != "ok":
+            return status, "hold"
+        first = None
+        for _, hold_paths in holds:
+            status, pulls = self._plan_reach(pull_arm, box, True, other_q=hold_paths[-1][-1])
+            if status == "ok":
+                break
+            first = first or status
+        else:
+            return first, "pull"
+        outcome = self._take(hold_arm, hold, hold_paths, True, step)
+        if outcome != "ok":
+            return outcome, "hold"
+        outcome = self._take(pull_arm, box, pulls[0][1], True, step)
+        return outcome, None if outcome == "ok" else "pull"
 
     def _travel_m(self, box: int) -> float:
         pose = self.u.box_poses()[box]
@@ -340,13 +400,15 @@ class ArmExecutor:
         ):
             pull_arm, hold_arm = HOLD_ARM, PULL_ARM  # the arm on each box's side takes it
         step.pull_arm = pull_arm
-        order = ([(hold_arm, hold)] if hold is not None else []) + [(pull_arm, box)]
         increments, aborted = 0, False
-        for arm, k in order:
-            outcome = self._reach(arm, k, step, aside=hold is not None)
-            if outcome != "ok":
-                step.outcome, step.failed_arm = outcome, "hold" if arm == hold_arm else "pull"
-                break
+        if hold is not None:
+            step.outcome, step.failed_arm = self._reach_both(hold_arm, hold, pull_arm, box, step)
+        else:
+            status, plans = self._plan_reach(pull_arm, box, aside=False)
+            if status == "ok":
+                status = self._take(pull_arm, box, plans[0][1], False, step)
+            if status != "ok":
+                step.outcome, step.failed_arm = status, "pull"
         if step.outcome == "ok":
             start = np.asarray(self.u.tcp_pose(pull_arm).p, dtype=np.float64)
             q_tool = np.asarray(self.u.tcp_pose(pull_arm).q, dtype=np.float64)

@@ -130,12 +130,26 @@ def link_points(link_component, spacing_m: float = ARM_POINT_SPACING_M) -> np.nd
 
 
 def face_pose(
-    front_face_m: np.ndarray, offset_m: float, arm: int = 0, roll_deg: float = TOOL_ROLLS_DEG[0]
+    front_face_m: np.ndarray,
+    offset_m: float,
+    arm: int = 0,
+    roll_deg: float = TOOL_ROLLS_DEG[0],
+    yaw_deg: float = 0.0,
 ) -> np.ndarray:
-    """Arm `arm`'s tool pose `offset_m` in front of a box's front-face point, pointing into it
-    (turned `roll_deg` about the rod)."""
-    p = np.asarray(front_face_m, dtype=np.float64) - np.array([offset_m, 0.0, 0.0])
-    return np.hstack([p, tool_quat(arm, roll_deg)])
+    """Arm `arm`'s tool pose `offset_m` back along the rod from a box's front-face point,
+    pointing into it: turned `roll_deg` about the rod, the rod turned `yaw_deg` about the
+    vertical from straight into the shelf (positive: its tip toward +y)."""
+    yaw = np.deg2rad(yaw_deg)
+    along = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+    p = np.asarray(front_face_m, dtype=np.float64) - offset_m * along
+    q = qmult(axangle2quat([0.0, 0.0, 1.0], yaw), tool_quat(arm, roll_deg))
+    return np.hstack([p, q])
+
+
+SIDE_BY_SIDE_YAWS_DEG = (0.0, 20.0, 35.0)
+"""With two arms side by side, the rods are also tried turned outward by these angles about
+the vertical (each hand farther toward its own arm's side): wide hands that do not fit side
+by side in front of two neighbouring faces fit when their rods converge."""
 
 
 IK_STARTS = 12
