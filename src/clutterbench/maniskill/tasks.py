@@ -21,6 +21,7 @@ BoxWorld of the process uses (a ManiSkill env sets them process-wide).
 
 from __future__ import annotations
 
+import hashlib
 import os
 import tempfile
 from pathlib import Path
@@ -100,7 +101,9 @@ def rod_robot(rod_length_m: float) -> str:
                 f"{urdf.count(old)} times, expected {count}); check the mani-skill pin"
             )
         urdf = urdf.replace(old, new)
-    out = Path(tempfile.gettempdir()) / "clutterbench_robots"
+    # one directory per ManiSkill installation (its meshes are linked, not copied)
+    where = hashlib.sha1(str(src.parent.resolve()).encode()).hexdigest()[:12]
+    out = Path(tempfile.gettempdir()) / "clutterbench_robots" / where
     out.mkdir(parents=True, exist_ok=True)
     meshes = out / "franka_description"  # mesh paths stay relative (mplib wants them so)
     if not meshes.exists():
