@@ -10,10 +10,9 @@ import pytest
 
 gym = pytest.importorskip("gymnasium")
 
-from clutterbench.maniskill.config import ArmConfig  # noqa: E402
 from clutterbench.maniskill.executor import ArmExecutor  # noqa: E402
 from clutterbench.sim.spec import SceneSpec  # noqa: E402
-from clutterbench.trials.config import TrialsConfig  # noqa: E402
+from clutterbench.trials.config import ArmConfig, TrialsConfig  # noqa: E402
 from clutterbench.trials.protocol import SceneState, execute_pull, judge_pull, world_at  # noqa: E402
 
 STACK3 = Path(__file__).resolve().parents[1] / "data" / "stack3.json"

@@ -29,7 +29,6 @@ from typing import Any
 
 import numpy as np
 
-from clutterbench.maniskill.config import ArmConfig
 from clutterbench.maniskill.motion import (
     NEAR_LINKS,
     SIDE_BY_SIDE_ROLLS_DEG,
@@ -46,6 +45,7 @@ from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.geometry import box_aabb_half_extents
 from clutterbench.sim.physics import CONTACT_SEPARATION_M, PULL_CLEARANCE_M
 from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.config import ArmConfig
 from clutterbench.trials.protocol import PullResult, SceneState
 
 ARM_OUTCOMES = ("ok", "unreachable", "planning_failed", "no_contact")

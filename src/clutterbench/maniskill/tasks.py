@@ -37,12 +37,12 @@ from mani_skill.utils.structs.types import DefaultMaterialsConfig, SceneConfig, 
 from sapien import physx
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.maniskill.config import ArmConfig
 from clutterbench.maniskill.motion import base_quat, make_planner, solve_ik, tool_quat
 from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.geometry import box_aabb_half_extents
 from clutterbench.sim.physics import ROOM_FLOOR_BELOW_SHELF_M
 from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.config import ArmConfig
 from clutterbench.trials.protocol import moved_others
 
 PARK_POSE = sapien.Pose([0.0, 0.0, -50.0])

@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.config import ArmConfig
 from clutterbench.trials.harness import EpisodeLog
 from clutterbench.trials.protocol import PullResult, SceneState, judge_pull, moved_others, world_at
 

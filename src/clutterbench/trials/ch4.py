@@ -24,7 +24,6 @@ from typing import Any
 import numpy as np
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.perception.depth_segmentation import shelf_roi
 from clutterbench.perception.masks import Segmentation, match_segments, segment
@@ -43,7 +42,12 @@ from clutterbench.sim.labelling import act_on_spec
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.config import Ch4ConditionConfig, Ch4TrialParams, SceneStreamConfig
+from clutterbench.trials.config import (
+    ArmConfig,
+    Ch4ConditionConfig,
+    Ch4TrialParams,
+    SceneStreamConfig,
+)
 from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
 from clutterbench.trials.protocol import SceneState
 from clutterbench.trials.scenes import draw_target, draw_trial_spec, policy_rng

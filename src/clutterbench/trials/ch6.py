@@ -17,7 +17,6 @@ from typing import Any
 import numpy as np
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.planning.extraction import (
     CollapseGraphPlanner,
@@ -31,7 +30,7 @@ from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.config import Ch6TrialParams, SceneStreamConfig
+from clutterbench.trials.config import ArmConfig, Ch6TrialParams, SceneStreamConfig
 from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
 from clutterbench.trials.judge import disturbance
 from clutterbench.trials.protocol import (
