@@ -52,6 +52,8 @@ ARM_OUTCOMES = ("ok", "unreachable", "planning_failed", "no_contact")
 """How an arm's part of a step ended: done; no joint state puts the tool at the box's face;
 no straight path there inside the joint limits and clear of the shelf; the tool stopped
 short of the face (other boxes in the way)."""
+POSE_LOG_EVERY = 4
+"""Box poses are logged every this many control steps (and after every motion)."""
 FACE_MARGIN_M = 0.02
 """With two arms at work, each takes its box this far in from the face's edge on its side."""
 PULL_ARM, HOLD_ARM = 0, 1
@@ -79,7 +81,7 @@ class ArmStep:
     joint_log: list[tuple[float, list[list[float]]]] = dataclasses.field(default_factory=list)
     """(time s from the step's start, each arm's 7 joint positions), at every control step."""
     pose_log: list[tuple[float, np.ndarray]] = dataclasses.field(default_factory=list)
-    """(time s, (N, 7) box poses), after each motion."""
+    """(time s, (N, 7) box poses), every POSE_LOG_EVERY control steps and after each motion."""
     on_shelf_held: np.ndarray | None = None
     """(N,) each box's centre inside the shelf, settled with the holding arm still holding."""
 
@@ -183,6 +185,8 @@ class ArmExecutor:
             actions[0] if not self.bimanual else dict(zip(self.uids, actions, strict=True))
         )
         step.control_steps += 1
+        if step.control_steps % POSE_LOG_EVERY == 0:  # the boxes beside the joints, 5 Hz
+            step.pose_log.append((step.control_steps * self.dt_s, self.u.box_poses()))
         step.joint_log.append(
             (
                 step.control_steps * self.dt_s,
