@@ -11,14 +11,11 @@ from pathlib import Path
 
 from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.errors import ClutterbenchError
-from clutterbench.io import write_json
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
-from clutterbench.trials.ch6 import ch6_jobs, chosen_support, load_planners, run_ch6_episode
+from clutterbench.trials.ch6 import condition_jobs, load_planners, run_ch6_episode
 from clutterbench.trials.config import TrialsConfig
-from clutterbench.trials.harness import run_episodes, write_mcap
-from clutterbench.trials.records import write_records
-from clutterbench.trials.stats import aggregate
+from clutterbench.trials.harness import run_episodes, write_condition
 
 THRESHOLDS = Path("reports/support/thresholds.json")
 OUT = Path("reports/trials")
@@ -39,25 +36,12 @@ def trials(params: dict, base: BaseConfig) -> None:
         raise ClutterbenchError("trials.conditions: no conditions to run")
     load_planners(cfg.planner_modules, [c.planner for c in conditions.values()])
     sim = load_section(SimConfig, "sim", params)
-    for model in {cfg.ch6.model, cfg.ch6.ch4_model}:
-        if not Path(f"models/{model}/best.pt").exists():
-            raise ClutterbenchError(f"models/{model}/best.pt missing; run train@{model}")
     jobs, about = [], {}
     for name, cond in conditions.items():
-        support = chosen_support(THRESHOLDS, cond.rule)
-        cp_max = cfg.ch6.cp_max if cfg.ch6.cp_max is not None else support.score_threshold
-        jobs += ch6_jobs(
-            name,
-            cond,
-            cfg,
-            cfg.streams[cond.stream],
-            base.seed,
-            sim.physics,
-            sim.camera,
-            support,
-            cp_max,
-            Path(f"models/{cfg.ch6.model}/best.pt"),
+        mine, support, cp_max = condition_jobs(
+            name, cond, cfg, base.seed, sim.physics, sim.camera, THRESHOLDS
         )
+        jobs += mine
         about[name] = {
             "condition": name,
             "planner": cond.planner,
@@ -69,14 +53,7 @@ def trials(params: dict, base: BaseConfig) -> None:
         }
     results = run_episodes("trials", run_ch6_episode, jobs, cfg.workers)
     for name in conditions:
-        mine = [r for r in results if r.record["condition"] == name]
-        records = [r.record for r in mine]
-        write_records(OUT / name / "records.jsonl", records)
-        meta = {k: str(v) for k, v in about[name].items() if k != "support"}
-        write_mcap(DATA / name / "episodes.mcap", mine, meta)
-        row = aggregate(records).iloc[0].to_dict()
-        summary = about[name] | {k: (v.item() if hasattr(v, "item") else v) for k, v in row.items()}
-        write_json(OUT / name / "summary.json", summary)
+        summary = write_condition(name, results, about[name], OUT, DATA)
         print(
             f"{name}: episodes {summary['success_k']}/{summary['success_n']} succeeded, "
             f"steps {summary.get('step_success_k')}/{summary.get('step_success_n')}, "

@@ -14,16 +14,13 @@ import numpy as np
 
 from clutterbench.config import BaseConfig, load_section
 from clutterbench.errors import ClutterbenchError
-from clutterbench.io import write_json
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
 from clutterbench.trials.arm import run_arm_episode
 from clutterbench.trials.ch4 import ch4_jobs
-from clutterbench.trials.ch6 import ch6_jobs, chosen_support, load_planners
+from clutterbench.trials.ch6 import condition_jobs, load_planners
 from clutterbench.trials.config import TrialsConfig
-from clutterbench.trials.harness import run_episodes, write_mcap
-from clutterbench.trials.records import write_records
-from clutterbench.trials.stats import aggregate
+from clutterbench.trials.harness import run_episodes, write_condition
 
 THRESHOLDS = Path("reports/support/thresholds.json")
 OUT = Path("reports/trials_arm")
@@ -42,22 +39,8 @@ def trials_arm(params: dict, base: BaseConfig) -> None:
                 cfg.conditions[arm.of], executor="arm", episodes=arm.episodes
             )
             load_planners(cfg.planner_modules, [cond.planner])
-            support = chosen_support(THRESHOLDS, cond.rule)
-            cp_max = cfg.ch6.cp_max if cfg.ch6.cp_max is not None else support.score_threshold
-            for model in {cfg.ch6.model, cfg.ch6.ch4_model}:
-                if not Path(f"models/{model}/best.pt").exists():
-                    raise ClutterbenchError(f"models/{model}/best.pt missing; run train@{model}")
-            mine = ch6_jobs(
-                name,
-                cond,
-                cfg,
-                cfg.streams[cond.stream],
-                base.seed,
-                sim.physics,
-                sim.camera,
-                support,
-                cp_max,
-                Path(f"models/{cfg.ch6.model}/best.pt"),
+            mine, _, _ = condition_jobs(
+                name, cond, cfg, base.seed, sim.physics, sim.camera, THRESHOLDS
             )
             chapter = 6
         else:
@@ -96,13 +79,7 @@ def trials_arm(params: dict, base: BaseConfig) -> None:
     wall = time.perf_counter() - start
     per_episode = [r.wall_s for r in results if r.wall_s is not None]
     for name in cfg.arm_conditions:
-        mine = [r for r in results if r.record["condition"] == name]
-        records = [r.record for r in mine]
-        write_records(OUT / name / "records.jsonl", records)
-        write_mcap(DATA / name / "episodes.mcap", mine, {k: str(v) for k, v in about[name].items()})
-        row = aggregate(records).iloc[0].to_dict()
-        summary = about[name] | {k: (v.item() if hasattr(v, "item") else v) for k, v in row.items()}
-        write_json(OUT / name / "summary.json", summary)
+        summary = write_condition(name, results, about[name], OUT, DATA)
         print(
             f"{name} (arm-level {about[name]['of']}): "
             f"{summary['success_k']}/{summary['success_n']} succeeded"

@@ -535,6 +535,38 @@ def _rounded(d: dict[str, Any]) -> dict[str, Any]:
     return {k: round(v, 6) if isinstance(v, float) else v for k, v in d.items()}
 
 
+def condition_jobs(
+    name: str,
+    cond: Any,
+    trials: Any,
+    seed: int,
+    physics: PhysicsConfig,
+    camera: CameraConfig,
+    thresholds: Path,
+) -> tuple[list[dict[str, Any]], SupportParams, float]:
+    """Condition `cond`'s episode jobs, with its support rule's thresholds (chosen on
+    validation scenes by the support stage, `thresholds`) and its abort threshold cp_max;
+    one-line errors when a network is missing."""
+    for model in {trials.ch6.model, trials.ch6.ch4_model}:
+        if not Path(f"models/{model}/best.pt").exists():
+            raise ClutterbenchError(f"models/{model}/best.pt missing; run train@{model}")
+    support = chosen_support(thresholds, cond.rule)
+    cp_max = trials.ch6.cp_max if trials.ch6.cp_max is not None else support.score_threshold
+    jobs = ch6_jobs(
+        name,
+        cond,
+        trials,
+        trials.streams[cond.stream],
+        seed,
+        physics,
+        camera,
+        support,
+        cp_max,
+        Path(f"models/{trials.ch6.model}/best.pt"),
+    )
+    return jobs, support, cp_max
+
+
 def ch6_jobs(
     condition: str,
     cond: Any,

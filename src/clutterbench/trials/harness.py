@@ -117,6 +117,34 @@ def run_episodes(
     return map_in_workers(label, fn, jobs, workers)
 
 
+def write_condition(
+    name: str,
+    results: Sequence[EpisodeResult],
+    about: dict[str, Any],
+    reports: Path,
+    data: Path,
+) -> dict[str, Any]:
+    """Condition `name`'s episodes among `results` -> reports/<name>/records.jsonl and
+    summary.json (`about` and the aggregate row), data/<name>/episodes.mcap (`about` but its
+    `support` as metadata); returns the summary."""
+    from clutterbench.io import write_json
+    from clutterbench.trials.records import write_records
+    from clutterbench.trials.stats import aggregate
+
+    mine = [r for r in results if r.record["condition"] == name]
+    records = [r.record for r in mine]
+    write_records(reports / name / "records.jsonl", records)
+    write_mcap(
+        data / name / "episodes.mcap",
+        mine,
+        {k: str(v) for k, v in about.items() if k != "support"},
+    )
+    row = aggregate(records).iloc[0].to_dict()
+    summary = about | {k: (v.item() if hasattr(v, "item") else v) for k, v in row.items()}
+    write_json(reports / name / "summary.json", summary)
+    return summary
+
+
 def write_mcap(path: Path, results: Sequence[EpisodeResult], metadata: dict[str, str]) -> None:
     """Every episode on one timeline: episode k starts after episode k-1 ended plus a gap.
     /trial/episode marks each start (its record's header), /trial/outcome each end. An
