@@ -1,7 +1,7 @@
 """ManiSkill 3 tasks built from any SceneSpec: the shelf, its boxes at their settled poses and
 the project's depth camera, with one Panda (`ClutterShelfExtract-v1`) or two
-(`ClutterShelfBimanual-v1`), each with a rod tool (ManiSkill's `panda_stick`), standing in
-front of the shelf, on the CPU backend.
+(`ClutterShelfBimanual-v1`), each with a rod tool (ManiSkill's `panda_stick`, its rod
+lengthened: rod_robot), standing in front of the shelf, on the CPU backend.
 
     import gymnasium as gym
     import clutterbench.maniskill  # registers the tasks
