@@ -42,7 +42,7 @@ from clutterbench.maniskill.motion import (
     shelf_points,
 )
 from clutterbench.sim.config import PhysicsConfig
-from clutterbench.sim.geometry import box_aabb_half_extents
+from clutterbench.sim.geometry import box_aabb_half_extents, quat_to_matrix
 from clutterbench.sim.physics import CONTACT_SEPARATION_M, PULL_CLEARANCE_M
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.config import ArmConfig
@@ -98,11 +98,9 @@ class ArmStep:
 
 def _matrix(pose7) -> np.ndarray:
     """A 4x4 transform from [x, y, z, qw, qx, qy, qz]."""
-    from transforms3d.quaternions import quat2mat
-
     pose7 = np.asarray(pose7, dtype=np.float64)
     m = np.eye(4)
-    m[:3, :3], m[:3, 3] = quat2mat(pose7[3:]), pose7[:3]
+    m[:3, :3], m[:3, 3] = quat_to_matrix(pose7[3:]), pose7[:3]
     return m
 
 
@@ -115,6 +113,7 @@ class ArmExecutor:
         self.env = None
         self.planners: list = []
         self._shelf = None
+        self._arm_points: list[dict[str, np.ndarray]] = []
 
     # -- set-up -----------------------------------------------------------------------------
     def _start(self, spec: SceneSpec, state: SceneState, box: int, hold: int | None) -> None:
@@ -149,13 +148,8 @@ class ArmExecutor:
                 for agent, base in zip(self.u.agents, self.u.arm_bases(), strict=True)
             ]
             self.uids = list(self.u.agent.agents_dict) if self.bimanual else None
-        self.env.reset(options={"reconfigure": True} | options)
-        if self._shelf != spec.shelf:
-            self._shelf_cloud = shelf_points(spec.shelf)
-            for planner in self.planners:
-                planner.update_point_cloud(self._shelf_cloud, radius=self.cfg.collision_clearance_m)
-            self._shelf = spec.shelf
-        if self.bimanual and not hasattr(self, "_arm_points"):
+            # points on each arm's near links, in the link frames (what the other arm's
+            # planner sees of it; the links keep their shapes when the scene is rebuilt)
             self._arm_points = [
                 {
                     link.get_name(): link_points(link._objs[0])
@@ -164,6 +158,12 @@ class ArmExecutor:
                 }
                 for agent in self.u.agents
             ]
+        self.env.reset(options={"reconfigure": True} | options)
+        if self._shelf != spec.shelf:
+            self._shelf_cloud = shelf_points(spec.shelf)
+            for planner in self.planners:
+                planner.update_point_cloud(self._shelf_cloud, radius=self.cfg.collision_clearance_m)
+            self._shelf = spec.shelf
         self.targets = [np.asarray(q, dtype=np.float64) for q in self.u.ready_qpos()]
         self.dt_s = 1.0 / self.cfg.control_freq_hz
         scene = self.u.scene.sub_scenes[0]
