@@ -109,3 +109,58 @@ def test_episode_record_and_mcap(tmp_path):
     topics = read_episode(tmp_path / "e.mcap")["topics"]
     for topic in ("/perception/detections", "/planner/decision", "/camera/depth", "/trial/result"):
         assert topics.get(topic, 0) >= 1, topic
+
+
+FLAT = [1.0, 0.0, 0.0, 0.0]
+
+
+def planned(spec: SceneSpec, new_box: np.ndarray, camera: CameraConfig = CAM, min_points: int = 3):
+    physics = PhysicsConfig()
+    state = SceneState.start(spec)
+    obs = observe(world_at(spec, state, physics, render=True), camera)
+    dets = ch5.true_clusters(spec, state, physics, obs)
+    rp = ReplenishParams(finger_m=0.012, min_points=min_points)
+    planner = ReplenishPlanner(rp, ch5.space_of(spec))
+    return planner.plan(obs, dets, new_box), dets
+
+
+def test_a_stack_covered_by_a_deeper_box_offers_its_top_occupied():
+    """Thesis Fig. 5.9 (c): a box lying across a stack's top, deeper than the stack (it hides
+    the stack's top surface from the camera): B^top is still a candidate, occupied by it, and
+    the planner lifts it aside (bimanual), never gives up."""
+    sizes = np.array([[0.12, 0.1, 0.03], [0.12, 0.1, 0.03], [0.2, 0.13, 0.035]])
+    poses = np.array(
+        [
+            [0.15, 0.0, 0.0155, *FLAT],
+            [0.15, 0.0, 0.0465, *FLAT],
+            [0.11, 0.0, 0.0795, *FLAT],
+        ]
+    )
+    spec = SceneSpec(sizes_m=sizes, poses=poses, camera=CAM, meta={"groups": [[0, 1], [2]]})
+    # the default scale's image and occupancy count (trials.ch5.min_points)
+    plan, dets = planned(spec, np.array([0.12, 0.1, 0.03]), CameraConfig(image_size=128), 25)
+    assert sorted(d.cls for d in dets) == ["C^h", "C^v"]
+    tops = [c for c in plan.info["candidates"] if c["side"] == "top"]
+    assert tops and all(c["occupants"] for c in tops), plan.info["candidates"]
+    assert plan.branch == "bimanual" and plan.candidate.side == "top"
+
+
+def test_a_box_in_front_of_a_candidate_occupies_it():
+    """The new box goes in from the front: a box standing nearer the camera than a row, in
+    front of the place beside it, blocks that place although it is not inside it."""
+    ys = [0.12, 0.08]
+    poses = [[0.2, y, 0.06, *STANDING] for y in ys] + [[0.06, 0.035, 0.06, *STANDING]]
+    spec = SceneSpec(
+        sizes_m=np.tile(SIZE, (3, 1)),
+        poses=np.array(poses),
+        camera=CAM,
+        meta={"groups": [[0, 1], [2]]},
+    )
+    plan, _ = planned(spec, NEW_BOX)
+    # the row stands at shelf y 0.065-0.135 (image-aligned x about -0.1), the front box at 0.035
+    row = [k for k, c in enumerate(plan.info["clusters"]) if c["rect_m"][0] < -0.07]
+    assert len(row) == 1, plan.info["clusters"]
+    right_of_row = [
+        c for c in plan.info["candidates"] if c["side"] == "right" and c["cluster"] == row[0]
+    ]
+    assert right_of_row and right_of_row[0]["occupants"], plan.info["candidates"]

@@ -45,7 +45,18 @@ def test_move_goal_clears_the_candidate_side():
     assert move_goal(s, "right", 0.03, 0.08, G)[0] == pytest.approx(0.1 + 0.015 + 0.02 + 0.01)
     assert move_goal(s, "left", 0.03, 0.08, G)[0] == pytest.approx(0.1 - 0.015 - 0.02 - 0.01)
     up = move_goal(s, "top", 0.12, 0.03, G)
-    assert up[0] == pytest.approx(0.1) and up[1] == pytest.approx(-0.05 - 0.03 - 0.01)
+    assert up[0] == pytest.approx(0.1) and up[1] == pytest.approx(-0.05 - 0.03 - 2 * G)
+
+
+def test_a_lifted_blocker_clears_the_top_candidate():
+    """B_s lying on a stack is lifted clear of B^top (which starts g above the stack, eq.
+    5.2) with g to spare: the new box is never let go into the held blocker."""
+    stack = np.array([0.0, -0.05, 0.12, 0.1])  # top edge at y = -0.1
+    s = np.array([0.0, -0.12, 0.13, 0.04])  # lying on it: bottom edge at y = -0.1
+    top = candidate_rect(stack, "top", 0.12, 0.03, G)
+    up = move_goal(s, "top", 0.12, 0.03, G)
+    blocker_bottom = up[1] + s[3] / 2
+    assert blocker_bottom <= top[1] - top[3] / 2 - G + 1e-9
 
 
 def test_rearrange_goal_is_beside_the_blocker_on_its_side():

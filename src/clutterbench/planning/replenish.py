@@ -87,8 +87,6 @@ class Cluster:
     """(4,) (x, y, w, h) metres in the image-aligned frame (x = -y_shelf, y = -z_shelf)."""
     front_x_m: float
     """Shelf x of its front face (median of its visible points)."""
-    top_x_m: float
-    """Shelf x of the middle of its top surface (the points within TOP_BAND_M of its top)."""
     top_span_m: np.ndarray
     """(2,) image-aligned x extent of its top surface: where B^top can rest (eq. 5.2)."""
     mask: np.ndarray
@@ -166,14 +164,15 @@ def candidate_rect(b: np.ndarray, side: Side, w_new: float, h_new: float, g: flo
 
 def move_goal(s: np.ndarray, side: Side, w_new: float, h_new: float, g: float) -> np.ndarray:
     """p^goal of blocker B_s on candidate `side`, thesis eq. (5.6): aside by the new box's
-    width on left / right. On top the thesis lifts by h'/2 + h_s/2 + g; we lift by h' + g so
-    that the new box fits under whatever B_s's height."""
+    width on left / right. On top the thesis lifts by h'/2 + h_s/2 + g; we lift by h' + 2g so
+    that the new box fits under whatever B_s's height: B^top starts g above the stack (eq.
+    5.2) and ends h' higher, and B_s keeps g above that."""
     x, y, w, _ = (float(v) for v in s)
     if side == "right":
         return np.array([x + w_new / 2 + w / 2 + g, y])
     if side == "left":
         return np.array([x - w_new / 2 - w / 2 - g, y])
-    return np.array([x, y - h_new - g])
+    return np.array([x, y - h_new - 2 * g])
 
 
 def rearrange_goal(
@@ -254,30 +253,80 @@ def place_clusters(
         rect = np.array([(x0 + x1) / 2, (y0 + y1) / 2, x1 - x0, y1 - y0])
         front = float(np.median(p[:, 0]))
         band = p[:, 2] >= p[:, 2].max() - TOP_BAND_M
-        top_x = float((p[band, 0].min() + p[band, 0].max()) / 2)
         span = np.array([x_img[band].min(), x_img[band].max()])
         box = np.asarray(det.box, float)
-        out.append(Cluster(len(out), det.cls, box, rect, front, top_x, span, inside))
+        out.append(Cluster(len(out), det.cls, box, rect, front, span, inside))
     return out
 
 
 def new_box_pose(
-    rect_m: np.ndarray, side: Side, size_m: np.ndarray, cluster: Cluster, space: WorkingSpace
+    rect_m: np.ndarray,
+    side: Side,
+    size_m: np.ndarray,
+    cluster: Cluster,
+    space: WorkingSpace,
+    g_m: float,
 ) -> np.ndarray:
-    """(7,) the new box let go at the candidate: centred across it, DROP_M above its bottom
-    (what it will rest on); flat and centred in depth on a stack's top surface, or standing
-    (width up, thickness across) with its front face flush with a row's."""
+    """(7,) the new box let go at the candidate: centred across it, DROP_M above what it will
+    rest on (a row's floor: the candidate's bottom; a stack's top surface: g under B^top's
+    bottom, eq. 5.2's margin); flat on a stack or standing (width up, thickness across) beside
+    a row, its front face flush with the cluster's (as goods face the aisle; a box lying on a
+    stack may hide the stack's top surface from the camera, its front face is what is seen)."""
     d = float(size_m[0])
     _, h_new = new_box_extent_m(size_m, side)
-    x = cluster.top_x_m if side == "top" else cluster.front_x_m + d / 2
+    x = cluster.front_x_m + d / 2
     x = float(np.clip(x, d / 2 + 0.003, space.depth_m - d / 2 - 0.003))
     y = -float(rect_m[0])
     z = -(float(rect_m[1]) + float(rect_m[3]) / 2) + h_new / 2 + DROP_M
     if side == "top":
+        z -= g_m
         q = np.array([1.0, 0.0, 0.0, 0.0])
     else:  # standing: local y up, local z across (sim/families/shelved.py STANDING)
         q = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])
     return np.array([x, y, max(z, h_new / 2 + DROP_M), *q])
+
+
+def owner_map(obs: Observation, clusters: Sequence[Cluster]) -> np.ndarray:
+    """(H, W) the cluster each pixel belongs to (-1: none; the first cluster where masks
+    overlap)."""
+    owner = np.full(obs.depth_m.shape, -1, dtype=np.int64)
+    for c in clusters:
+        owner[c.mask & (owner < 0)] = c.index
+    return owner
+
+
+def path_blockers(
+    obs: Observation,
+    clusters: Sequence[Cluster],
+    cluster: Cluster,
+    goal_m: np.ndarray,
+    params: ReplenishParams,
+    space: WorkingSpace,
+) -> tuple[int, ...]:
+    """What stands in the way of carrying `cluster` to `goal_m`: the clusters (-1: points of
+    no cluster) with at least min_points depth points in the region its image-aligned
+    rectangle sweeps beyond where it stands, no deeper in the shelf than its own deepest
+    point, most points first; () when the way is clear. Eq. (5.6) sets the goal beside the
+    candidate, not where it is free, and the thesis keeps a moved object off the others
+    (5.3.3: objects must not touch while moving)."""
+    pts, on_box = box_points(obs, space)
+    owner = owner_map(obs, clusters)
+    x, y, w, h = (float(v) for v in cluster.rect_m)
+    gx, gy = (float(v) for v in goal_m)
+    shrink = 0.002
+    xi, yi = -pts[..., 1], -pts[..., 2]
+    swept = (
+        (xi >= min(x, gx) - w / 2 + shrink)
+        & (xi <= max(x, gx) + w / 2 - shrink)
+        & (yi >= min(y, gy) - h / 2 + shrink)
+        & (yi <= max(y, gy) + h / 2 - shrink)
+    )
+    where_it_is = (np.abs(xi - x) <= w / 2) & (np.abs(yi - y) <= h / 2)
+    deepest = float(pts[cluster.mask, 0].max()) + 0.01
+    hit = on_box & swept & ~where_it_is & (pts[..., 0] <= deepest) & (owner != cluster.index)
+    counts = np.bincount(owner[hit] + 1, minlength=len(clusters) + 1)
+    found = np.nonzero(counts >= params.min_points)[0]
+    return tuple(int(k) - 1 for k in found[np.argsort(-counts[found], kind="stable")])
 
 
 def candidates(
@@ -288,18 +337,19 @@ def candidates(
     space: WorkingSpace,
 ) -> list[Candidate]:
     """Every placement candidate inside the working space (thesis 5.2.3), with the clusters
-    whose box points fall inside it (the 3D region: the candidate's rectangle, from the
-    cluster's front face to the new box's depth behind it).
+    whose box points fall inside it or in front of it (the 3D region: the candidate's
+    rectangle from the shelf's front to the new box's depth behind the cluster's front face:
+    the box goes in from the front, and a box seen in front of the place hides what is
+    behind it and blocks the way).
 
     B^top spans the cluster's top surface, not its whole width: eq. (5.2) puts the box flush
     with the cluster's left edge, off the stack where its top box is narrower than the boxes
-    under it. A candidate must also rest on something once its occupants are moved: the
-    floor, or box points other than its occupants' just under the middle of its bottom
-    (else a free candidate in mid-air beside a box on a stack would be "simple")."""
+    under it, and rests on that surface. A candidate beside a cluster must rest on something
+    once its occupants are moved: the floor, or box points other than its occupants' just
+    under the middle of its bottom (else a free candidate in mid-air beside a box on a stack
+    would be "simple")."""
     pts, on_box = box_points(obs, space)
-    owner = np.full(obs.depth_m.shape, -1, dtype=np.int64)
-    for c in clusters:
-        owner[c.mask & (owner < 0)] = c.index
+    owner = owner_map(obs, clusters)
     out: list[Candidate] = []
     g, d_new = params.finger_m, float(size_m[0])
     for c in clusters:
@@ -314,11 +364,10 @@ def candidates(
             x, y, w, h = rect
             shrink = 0.001
             across = np.abs(-pts[..., 1] - x)
-            inside = (
+            inside = (  # the candidate's volume and the insertion path in front of it
                 on_box
                 & (across <= w / 2 - shrink)
                 & (np.abs(-pts[..., 2] - y) <= h / 2 - shrink)
-                & (pts[..., 0] >= c.front_x_m - 0.01)
                 & (pts[..., 0] <= c.front_x_m + d_new + 0.01)
             )
             counts = np.bincount(owner[inside] + 1, minlength=len(clusters) + 1)
@@ -326,7 +375,7 @@ def candidates(
             found = found[np.argsort(-counts[found], kind="stable")]
             occupants = tuple(int(k) - 1 for k in found)
             bottom = y + h / 2
-            if -bottom > SUPPORT_BAND_M:  # not on the floor: box points under its middle
+            if side != "top" and -bottom > SUPPORT_BAND_M:  # off the floor: box points under it
                 under = (
                     on_box
                     & (across <= w / 2 - g)
@@ -336,7 +385,7 @@ def candidates(
                 )
                 if under.sum() < params.min_points:
                     continue
-            pose = new_box_pose(rect, side, size_m, c, space)
+            pose = new_box_pose(rect, side, size_m, c, space, g)
             out.append(Candidate(c.index, side, rect, occupants, pose))
     return out
 
@@ -372,6 +421,32 @@ class ReplenishPlanner:
             for c in clusters
             if c.index not in skip
         )
+
+    def _rearrange(
+        self,
+        obs: Observation,
+        clusters: Sequence[Cluster],
+        k: Cluster,
+        s: Cluster,
+        s_goal: np.ndarray,
+        regions: dict[int, np.ndarray | None],
+        skip: set[int] = frozenset(),  # type: ignore[assignment]
+    ) -> Plan | None:
+        """Bimanual rearrangement (eqs. 5.7-5.9): carry B_k beside B_s's goal and let it go,
+        if that is safe (its own collapse region overlaps no cluster but those in `skip`), it
+        stays in the working space and its way is clear; else None."""
+        if k.index not in regions:
+            regions[k.index] = self._region(obs, k)
+        if not self._safe(regions[k.index], clusters, set(skip) | {s.index, k.index}):
+            return None
+        goal_k = rearrange_goal(k.rect_m, s.rect_m, self.params.finger_m, s_goal)
+        moved_k = np.array([goal_k[0], goal_k[1], k.rect_m[2], k.rect_m[3]])
+        if not in_working_space(moved_k, self.space):
+            return None
+        if path_blockers(obs, clusters, k, goal_k, self.params, self.space):
+            return None
+        move_k = Move(k.index, k.box_px, k.rect_m[:2].copy(), goal_k, k.cls in ("C^r", "C^l"))
+        return Plan("rearrange", None, move_k, {"obstacle": k.index})
 
     def plan(self, obs: Observation, detections: Sequence[Detection], size_m: np.ndarray) -> Plan:
         clusters = place_clusters(obs, detections, self.space)
@@ -410,31 +485,27 @@ class ReplenishPlanner:
             if s.index not in regions:
                 regions[s.index] = self._region(obs, s)
             region = regions[s.index]
+            skip = {s.index, cand.cluster}
+            in_way = path_blockers(obs, clusters, s, goal, self.params, self.space)
+            if in_way:  # carrying B_s there would push another box: make way first
+                if rearrange is None and in_way[0] >= 0 and in_way[0] not in skip:
+                    k = clusters[in_way[0]]
+                    rearrange = self._rearrange(obs, clusters, k, s, goal, regions)
+                    if rearrange is not None:
+                        rearrange.info.update(info | {"candidate": n, "blocker": s.index})
+                continue
             move = Move(s.index, s.box_px, s.rect_m[:2].copy(), goal, s.cls in ("C^r", "C^l"))
-            if self._safe(region, clusters, {s.index, cand.cluster}):
+            if self._safe(region, clusters, skip):
                 return Plan("bimanual", cand, move, info | {"candidate": n, "blocker": s.index})
             if rearrange is None and region is not None:  # eqs. (5.7)-(5.9)
-                others = [c for c in clusters if c.index not in (s.index, cand.cluster)]
+                others = [c for c in clusters if c.index not in skip]
                 if not others:
                     continue
+                # B_k: the cluster overlapping B_s's collapse region most
                 k = max(others, key=lambda c: (rect_iou_mask(c.box_px, region), -c.index))
-                if k.index not in regions:
-                    regions[k.index] = self._region(obs, k)
-                if not self._safe(regions[k.index], clusters, {s.index, cand.cluster, k.index}):
-                    continue
-                goal_k = rearrange_goal(k.rect_m, s.rect_m, g, goal)
-                moved_k = np.array([goal_k[0], goal_k[1], k.rect_m[2], k.rect_m[3]])
-                if not in_working_space(moved_k, self.space):
-                    continue
-                move_k = Move(
-                    k.index, k.box_px, k.rect_m[:2].copy(), goal_k, k.cls in ("C^r", "C^l")
-                )
-                rearrange = Plan(
-                    "rearrange",
-                    None,
-                    move_k,
-                    info | {"candidate": n, "blocker": s.index, "obstacle": k.index},
-                )
+                rearrange = self._rearrange(obs, clusters, k, s, goal, regions, skip)
+                if rearrange is not None:
+                    rearrange.info.update(info | {"candidate": n, "blocker": s.index})
         if rearrange is not None:
             return rearrange
         return Plan("none", None, None, info)

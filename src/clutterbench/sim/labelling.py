@@ -67,12 +67,15 @@ def draw_scene_setup(
     n_objects: Sequence[int],
 ) -> tuple[str, int]:
     """(family, number of boxes) of scene `index`, drawn once from its own stream: a rejected
-    attempt redraws only the placement, so hard families are not under-represented."""
+    attempt redraws only the placement, so hard families are not under-represented. The
+    number is capped at the family's `max_objects`."""
     rng = np.random.default_rng([seed, zlib.crc32(f"{dataset}/setup".encode()), index])
     names = sorted(family_weights)
     weights = np.array([family_weights[k] for k in names], dtype=np.float64)
     family = names[int(rng.choice(len(names), p=weights / weights.sum()))]
-    return family, int(rng.integers(n_objects[0], n_objects[1] + 1))
+    n = int(rng.integers(n_objects[0], n_objects[1] + 1))
+    cap = get_family(family).max_objects
+    return family, n if cap is None else min(n, cap)
 
 
 def build_world(spec: SceneSpec, physics: PhysicsConfig, render: bool) -> BoxWorld:

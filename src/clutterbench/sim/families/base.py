@@ -31,6 +31,9 @@ class SceneFamily:
     """
 
     name: ClassVar[str]
+    max_objects: ClassVar[int | None] = None
+    """The most boxes the family can arrange (None: any): a scene drawn with more gets this
+    many, so that a dataset mixing families can share one n_objects range."""
 
     def place(self, world: BoxWorld, sizes_m: np.ndarray, rng: np.random.Generator) -> Placement:
         raise NotImplementedError
