@@ -61,3 +61,16 @@ def test_setup_is_a_function_of_the_scene_index():
     assert a == labelling.draw_scene_setup(0, "ch6", 17, WEIGHTS, N_RANGE)
     others = {labelling.draw_scene_setup(0, "ch6", i, WEIGHTS, N_RANGE) for i in range(30)}
     assert len(others) > 5
+
+
+def test_a_family_gets_no_more_boxes_than_it_can_arrange():
+    """replenish_stacked arranges 7 boxes at most: a 9-10 box draw is capped, other families
+    keep the drawn count."""
+    cap = labelling.get_family("replenish_stacked").max_objects
+    drawn = [
+        labelling.draw_scene_setup(0, "mix", i, {"replenish_stacked": 1.0}, (9, 10))
+        for i in range(8)
+    ]
+    assert {n for _, n in drawn} == {cap}
+    free = [labelling.draw_scene_setup(0, "mix", i, {"shelved": 1.0}, (9, 10)) for i in range(8)]
+    assert {n for _, n in free} <= {9, 10} and max(n for _, n in free) > cap

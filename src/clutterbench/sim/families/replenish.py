@@ -78,6 +78,9 @@ def row_from_wall(
 
 class ReplenishStacked(SceneFamily):
     name = "replenish_stacked"
+    max_objects = 7
+    """Left-over books stand in one row from the wall beside the stack: with 8 boxes the row
+    meets the stack in most draws (measured: 6 of 6 scenes needed redraws, 2 at most)."""
     dependent_prob = 0.5
     overhang_m = (0.012, 0.025)
     """How far the obstacle sticks out over the stack's side toward the dependent book."""
@@ -170,6 +173,7 @@ class ReplenishRandom(SceneFamily):
     """Either layout with one more box dropped in a random pose (it joins what it touches)."""
 
     name = "replenish_random"
+    max_objects = ReplenishStacked.max_objects + 1
 
     def place(self, world: BoxWorld, sizes_m: np.ndarray, rng: np.random.Generator) -> Placement:
         layout = ReplenishStacked() if rng.random() < 0.5 else ReplenishShelved()
