@@ -30,6 +30,7 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.observation import Observation
 from clutterbench.perception.boxes import Detection, detections_from_clusters
 from clutterbench.planning.replenish import (
+    DROP_M,
     Candidate,
     Move,
     Plan,
@@ -47,6 +48,7 @@ from clutterbench.planning.replenish import (
 from clutterbench.sim.catalog import box_extents_m
 from clutterbench.sim.clusters import box_tilt, scene_clusters
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.geometry import aabb_overlap_xy
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
@@ -159,6 +161,25 @@ def floor_lift_m(world: BoxWorld, boxes: list[int], move: np.ndarray, turn: floa
     return float(max(0.0, 0.002 - (lo[boxes, 2].min() + move[2])) + 0.01)
 
 
+def set_down(world: BoxWorld, boxes: list[int]) -> None:
+    """Lower held boxes straight down until DROP_M above what lies under them (the floor or
+    a box), as a gripper sets its load down before it opens: a blocker lifted clear of B^top
+    comes to rest on the new box instead of being dropped onto it (thesis Fig. 5.9 c)."""
+    lo, hi = world.aabbs()
+    glo, ghi = lo[boxes].min(axis=0), hi[boxes].max(axis=0)
+    tops = [
+        hi[i, 2]
+        for i in range(world.n)
+        if i not in boxes
+        and i not in world.removed
+        and hi[i, 2] <= glo[2] + 0.002
+        and aabb_overlap_xy(glo, ghi, lo[i], hi[i])
+    ]
+    drop = glo[2] - max(tops, default=0.0) - DROP_M
+    if drop > 0.001:
+        world.carry_group(boxes, np.array([0.0, 0.0, -drop]))
+
+
 @dataclasses.dataclass
 class StepOutcome:
     record: dict[str, Any]
@@ -174,8 +195,8 @@ def execute(
     gone: frozenset[int],
 ) -> StepOutcome:
     """Execute a plan from the step's canonical start (`world`, fresh): carry the moved
-    cluster (held for a placement, let go for a rearrangement), insert the new box at the
-    candidate, release every held box, settle, judge."""
+    cluster (held for a placement, set down and let go for a rearrangement), insert the new
+    box at the candidate, set every held box down, release it, settle, judge."""
     assert world.steps_taken == 0, "a step starts from a freshly built world"
     start = world.positions().copy()
     n_before = world.n
@@ -190,11 +211,14 @@ def execute(
             shift = shift + np.array([0.0, 0.0, floor_lift_m(world, moved, shift, turn)])
             world.carry_group(moved, shift, turn)
             if plan.branch == "rearrange":
+                set_down(world, moved)
                 world.release(moved)
                 world.settle_action()
     placed = None
     if plan.candidate is not None:
         placed, _ = world.insert(size_m, plan.candidate.pose)
+    if world.held():
+        set_down(world, world.held())
     world.release(world.held())
     world.settle_action()
     return StepOutcome(
