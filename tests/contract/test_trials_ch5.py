@@ -124,10 +124,8 @@ def planned(spec: SceneSpec, new_box: np.ndarray, camera: CameraConfig = CAM, mi
     return planner.plan(obs, dets, new_box), dets
 
 
-def test_a_stack_covered_by_a_deeper_box_offers_its_top_occupied():
-    """Thesis Fig. 5.9 (c): a box lying across a stack's top, deeper than the stack (it hides
-    the stack's top surface from the camera): B^top is still a candidate, occupied by it, and
-    the planner lifts it aside (bimanual), never gives up."""
+def covered_stack() -> SceneSpec:
+    """A stack of two boxes with a deeper box lying across its top (thesis Fig. 5.9 c)."""
     sizes = np.array([[0.12, 0.1, 0.03], [0.12, 0.1, 0.03], [0.2, 0.13, 0.035]])
     poses = np.array(
         [
@@ -136,7 +134,14 @@ def test_a_stack_covered_by_a_deeper_box_offers_its_top_occupied():
             [0.11, 0.0, 0.0795, *FLAT],
         ]
     )
-    spec = SceneSpec(sizes_m=sizes, poses=poses, camera=CAM, meta={"groups": [[0, 1], [2]]})
+    return SceneSpec(sizes_m=sizes, poses=poses, camera=CAM, meta={"groups": [[0, 1], [2]]})
+
+
+def test_a_stack_covered_by_a_deeper_box_offers_its_top_occupied():
+    """Thesis Fig. 5.9 (c): a box lying across a stack's top, deeper than the stack (it hides
+    the stack's top surface from the camera): B^top is still a candidate, occupied by it, and
+    the planner lifts it aside (bimanual), never gives up."""
+    spec = covered_stack()
     # the default scale's image and occupancy count (trials.ch5.min_points)
     plan, dets = planned(spec, np.array([0.12, 0.1, 0.03]), CameraConfig(image_size=128), 25)
     assert sorted(d.cls for d in dets) == ["C^h", "C^v"]
@@ -164,3 +169,33 @@ def test_a_box_in_front_of_a_candidate_occupies_it():
         c for c in plan.info["candidates"] if c["side"] == "right" and c["cluster"] == row[0]
     ]
     assert right_of_row and right_of_row[0]["occupants"], plan.info["candidates"]
+
+
+def test_a_lifted_blocker_is_set_down_before_it_is_let_go(monkeypatch):
+    """Bimanual on B^top: the blocker held above the new box is lowered onto it before the
+    gripper opens (not dropped from its lift height), and the step succeeds."""
+    spec = covered_stack()
+    physics = PhysicsConfig()
+    state = SceneState.start(spec)
+    obs = observe(world_at(spec, state, physics, render=True), CAM)
+    dets = ch5.true_clusters(spec, state, physics, obs)
+    planner = ReplenishPlanner(ReplenishParams(finger_m=0.012), ch5.space_of(spec))
+    new_box = np.array([0.12, 0.1, 0.03])
+    plan = planner.plan(obs, dets, new_box)
+    assert plan.branch == "bimanual" and plan.candidate.side == "top"
+    gaps = []
+    world = world_at(spec, state, physics)
+    release = type(world).release
+
+    def spy(self, boxes):
+        boxes = list(boxes)
+        if boxes:
+            lo, hi = self.aabbs()
+            others = [i for i in range(self.n) if i not in boxes]
+            gaps.append(float(lo[boxes, 2].min() - hi[others, 2].max()))
+        return release(self, boxes)
+
+    monkeypatch.setattr(type(world), "release", spy)
+    out = ch5.execute(world, obs, plan, new_box, TrialsConfig().ch5, state.removed)
+    assert gaps and max(gaps) < 0.005, gaps
+    assert out.record["success"], out.record
