@@ -471,16 +471,20 @@ class ReplenishPlanner:
         regions: dict[int, np.ndarray | None] = {}
         rearrange: Plan | None = None
         g = self.params.finger_m
+        why_not = info["why_not"] = ["" for _ in cands]  # why no bimanual plan, per candidate
         for n, cand in enumerate(cands):  # bimanual replenishment: one blocker
             if cand.occupants[0] < 0:
-                continue  # what fills it is no detected cluster: nothing to grasp
+                why_not[n] = "filled by no detected cluster"  # nothing to grasp
+                continue
             s = clusters[cand.occupants[0]]  # B_s: the cluster filling it most
             if s.index == cand.cluster:
-                continue  # its own cluster fills it: nothing to move aside
+                why_not[n] = "filled by its own cluster"  # nothing to move aside
+                continue
             w_new, h_new = new_box_extent_m(np.asarray(size_m, float), cand.side)
             goal = move_goal(s.rect_m, cand.side, w_new, h_new, g)
             moved = np.array([goal[0], goal[1], s.rect_m[2], s.rect_m[3]])
             if not in_working_space(moved, self.space):
+                why_not[n] = "blocker's goal outside the shelf"
                 continue
             if s.index not in regions:
                 regions[s.index] = self._region(obs, s)
@@ -488,6 +492,7 @@ class ReplenishPlanner:
             skip = {s.index, cand.cluster}
             in_way = path_blockers(obs, clusters, s, goal, self.params, self.space)
             if in_way:  # carrying B_s there would push another box: make way first
+                why_not[n] = f"blocker's way blocked by {in_way[0]}"
                 if rearrange is None and in_way[0] >= 0 and in_way[0] not in skip:
                     k = clusters[in_way[0]]
                     rearrange = self._rearrange(obs, clusters, k, s, goal, regions)
@@ -497,6 +502,7 @@ class ReplenishPlanner:
             move = Move(s.index, s.box_px, s.rect_m[:2].copy(), goal, s.cls in ("C^r", "C^l"))
             if self._safe(region, clusters, skip):
                 return Plan("bimanual", cand, move, info | {"candidate": n, "blocker": s.index})
+            why_not[n] = "blocker's collapse region overlaps another cluster"
             if rearrange is None and region is not None:  # eqs. (5.7)-(5.9)
                 others = [c for c in clusters if c.index not in skip]
                 if not others:

@@ -9,6 +9,7 @@ succeeding where the oracle failed on the same scene is counted (it should not h
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -150,7 +151,12 @@ def table_5_2(
         [
             "branch: the plan that placed the box (or the last one executed); "
             "ends: placed (success), collapse (another box moved), misplaced (the new box did "
-            "not rest at its place), gave_up (no plan)."
+            "not rest at its place), gave_up (no plan).",
+            "why no plan: for the episodes that gave up, what ruled out each occupied "
+            "candidate (an episode counts once per reason): filled by no detected cluster "
+            "(nothing to grasp), filled by its own cluster, the blocker's goal outside the "
+            "shelf, its way blocked (and the box in the way could not be rearranged), its "
+            "collapse region overlapping another cluster (and no safe rearrangement).",
         ],
     )
     return frame
@@ -176,5 +182,9 @@ def branch_breakdown(
                 }
                 for end in ("placed", "collapse", "misplaced", "gave_up", "max_steps"):
                     row[end] = sum(r["end"] == end for r in g)
+                why = Counter(w for r in g for w in r.get("gave_up_why", []))
+                row["why no plan (episodes)"] = (
+                    "; ".join(f"{w} {k}" for w, k in sorted(why.items())) if why else ""
+                )
                 rows.append(row)
     return pd.DataFrame.from_records(rows)

@@ -20,6 +20,7 @@ the instance image, never by the planner.
 from __future__ import annotations
 
 import dataclasses
+import re
 import zlib
 from pathlib import Path
 from typing import Any
@@ -358,6 +359,7 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
     end, t, dt = "max_steps", 0.0, physics.timestep_s
     queued: list[Plan] = []
     simulated = 0
+    gave_up_why: list[str] = []
     while len(steps) < params.max_steps:
         log.observation(t, obs.depth_m, obs.instance)
         log.poses(t, state.poses)
@@ -386,6 +388,8 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
         log.json(t, DECISION_TOPIC, plan_json(plan))
         if plan.branch == "none":
             end = "gave_up"
+            why = {re.sub(r" by -?\d+$", "", w) for w in plan.info.get("why_not", []) if w}
+            gave_up_why = sorted(why)
             break
         out = execute(world, obs, plan, size_m, params, state.removed)
         steps.append(out.record)
@@ -424,6 +428,8 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
         "disturbance_m": round(float(sum(s["disturbance_m"] for s in steps)), 6),
         "rejected_starts": dict(spec.meta.get("rejected", {})),
     }
+    if end == "gave_up":  # why no candidate had a plan (planning/replenish.py why_not)
+        record["gave_up_why"] = gave_up_why
     if cond.planner == "oracle":
         record["simulated"] = simulated
     return EpisodeResult(_rounded(record), log)
