@@ -148,6 +148,9 @@ def test_a_stack_covered_by_a_deeper_box_offers_its_top_occupied():
     tops = [c for c in plan.info["candidates"] if c["side"] == "top"]
     assert tops and all(c["occupants"] for c in tops), plan.info["candidates"]
     assert plan.branch == "bimanual" and plan.candidate.side == "top"
+    # let go on the stack's top (z 0.0615, hidden by the blocker), not inside the stack
+    bottom = plan.candidate.pose[2] - 0.03 / 2
+    assert 0.0615 <= bottom <= 0.0615 + 0.012, bottom
 
 
 def test_a_box_in_front_of_a_candidate_occupies_it():

@@ -266,12 +266,14 @@ def new_box_pose(
     cluster: Cluster,
     space: WorkingSpace,
     g_m: float,
+    rest_z_m: float | None = None,
 ) -> np.ndarray:
     """(7,) the new box let go at the candidate: centred across it, DROP_M above what it will
     rest on (a row's floor: the candidate's bottom; a stack's top surface: g under B^top's
-    bottom, eq. 5.2's margin); flat on a stack or standing (width up, thickness across) beside
-    a row, its front face flush with the cluster's (as goods face the aisle; a box lying on a
-    stack may hide the stack's top surface from the camera, its front face is what is seen)."""
+    bottom, eq. 5.2's margin, or `rest_z_m` when given, the surface seen higher); flat on a
+    stack or standing (width up, thickness across) beside a row, its front face flush with the
+    cluster's (as goods face the aisle; a box lying on a stack may hide the stack's top
+    surface from the camera, its front face is what is seen)."""
     d = float(size_m[0])
     _, h_new = new_box_extent_m(size_m, side)
     x = cluster.front_x_m + d / 2
@@ -280,6 +282,8 @@ def new_box_pose(
     z = -(float(rect_m[1]) + float(rect_m[3]) / 2) + h_new / 2 + DROP_M
     if side == "top":
         z -= g_m
+        if rest_z_m is not None:
+            z = max(z, rest_z_m + h_new / 2 + DROP_M)
         q = np.array([1.0, 0.0, 0.0, 0.0])
     else:  # standing: local y up, local z across (sim/families/shelved.py STANDING)
         q = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])
@@ -385,7 +389,15 @@ def candidates(
                 )
                 if under.sum() < params.min_points:
                     continue
-            pose = new_box_pose(rect, side, size_m, c, space, g)
+            rest_z = None
+            if side == "top" and occupants and occupants[0] >= 0:
+                # the blocker lies on the stack: its lowest points across B^top show where
+                # the stack's top is when the blocker hides it (the stack's own visible top
+                # is then too low, and a box let go there would be pushed into the stack)
+                on_occ = clusters[occupants[0]].mask & on_box & (across <= w / 2)
+                if on_occ.sum() >= params.min_points:
+                    rest_z = float(np.percentile(pts[on_occ][:, 2], 5))
+            pose = new_box_pose(rect, side, size_m, c, space, g, rest_z)
             out.append(Candidate(c.index, side, rect, occupants, pose))
     return out
 
