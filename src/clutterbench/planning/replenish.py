@@ -20,7 +20,7 @@ boxes a detection holds is the executor's business (trials/ch5.py grasps what is
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Sequence, Set
 from typing import Any, Literal
 
 import numpy as np
@@ -234,14 +234,17 @@ def box_points(obs: Observation, space: WorkingSpace) -> tuple[np.ndarray, np.nd
 
 
 def place_clusters(
-    obs: Observation, detections: Sequence[Detection], space: WorkingSpace
+    obs: Observation,
+    detections: Sequence[Detection],
+    space: WorkingSpace,
+    points: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> list[Cluster]:
     """Every detection in the image-aligned metric frame: the extent of the box-surface points
     seen inside its image box (the depth image back-projected), its front face at their
     median depth. Boxes of one cluster stand at different depths, so corners back-projected
     at one depth would put the nearer boxes' bottoms below the floor. A detection with no
     such point is dropped."""
-    pts, on_box = box_points(obs, space)
+    pts, on_box = points if points is not None else box_points(obs, space)
     out: list[Cluster] = []
     for det in detections:
         inside = rect_mask(det.box, obs.depth_m.shape) & on_box
@@ -299,22 +302,30 @@ def owner_map(obs: Observation, clusters: Sequence[Cluster]) -> np.ndarray:
     return owner
 
 
+def owners_by_count(owner: np.ndarray, n_clusters: int, min_points: int) -> tuple[int, ...]:
+    """The clusters (-1: none) with at least `min_points` of the selected pixels' `owner`
+    values, most first."""
+    counts = np.bincount(owner + 1, minlength=n_clusters + 1)
+    found = np.nonzero(counts >= min_points)[0]
+    return tuple(int(k) - 1 for k in found[np.argsort(-counts[found], kind="stable")])
+
+
 def path_blockers(
-    obs: Observation,
+    points: tuple[np.ndarray, np.ndarray],
+    owner: np.ndarray,
     clusters: Sequence[Cluster],
     cluster: Cluster,
     goal_m: np.ndarray,
-    params: ReplenishParams,
-    space: WorkingSpace,
+    min_points: int,
 ) -> tuple[int, ...]:
     """What stands in the way of carrying `cluster` to `goal_m`: the clusters (-1: points of
     no cluster) with at least min_points depth points in the region its image-aligned
     rectangle sweeps beyond where it stands, no deeper in the shelf than its own deepest
     point, most points first; () when the way is clear. Eq. (5.6) sets the goal beside the
     candidate, not where it is free, and the thesis keeps a moved object off the others
-    (5.3.3: objects must not touch while moving)."""
-    pts, on_box = box_points(obs, space)
-    owner = owner_map(obs, clusters)
+    (5.3.3: objects must not touch while moving). `points`: box_points of the observation,
+    `owner`: its owner_map."""
+    pts, on_box = points
     x, y, w, h = (float(v) for v in cluster.rect_m)
     gx, gy = (float(v) for v in goal_m)
     shrink = 0.002
@@ -328,9 +339,7 @@ def path_blockers(
     where_it_is = (np.abs(xi - x) <= w / 2) & (np.abs(yi - y) <= h / 2)
     deepest = float(pts[cluster.mask, 0].max()) + 0.01
     hit = on_box & swept & ~where_it_is & (pts[..., 0] <= deepest) & (owner != cluster.index)
-    counts = np.bincount(owner[hit] + 1, minlength=len(clusters) + 1)
-    found = np.nonzero(counts >= params.min_points)[0]
-    return tuple(int(k) - 1 for k in found[np.argsort(-counts[found], kind="stable")])
+    return owners_by_count(owner[hit], len(clusters), min_points)
 
 
 def candidates(
@@ -339,6 +348,7 @@ def candidates(
     size_m: np.ndarray,
     params: ReplenishParams,
     space: WorkingSpace,
+    points: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> list[Candidate]:
     """Every placement candidate inside the working space (thesis 5.2.3), with the clusters
     whose box points fall inside it or in front of it (the 3D region: the candidate's
@@ -351,8 +361,8 @@ def candidates(
     under it, and rests on that surface. A candidate beside a cluster must rest on something
     once its occupants are moved: the floor, or box points other than its occupants' just
     under the middle of its bottom (else a free candidate in mid-air beside a box on a stack
-    would be "simple")."""
-    pts, on_box = box_points(obs, space)
+    would be "simple"). `points`: box_points of the observation, if already computed."""
+    pts, on_box = points if points is not None else box_points(obs, space)
     owner = owner_map(obs, clusters)
     out: list[Candidate] = []
     g, d_new = params.finger_m, float(size_m[0])
@@ -374,10 +384,7 @@ def candidates(
                 & (np.abs(-pts[..., 2] - y) <= h / 2 - shrink)
                 & (pts[..., 0] <= c.front_x_m + d_new + 0.01)
             )
-            counts = np.bincount(owner[inside] + 1, minlength=len(clusters) + 1)
-            found = np.nonzero(counts >= params.min_points)[0]
-            found = found[np.argsort(-counts[found], kind="stable")]
-            occupants = tuple(int(k) - 1 for k in found)
+            occupants = owners_by_count(owner[inside], len(clusters), params.min_points)
             bottom = y + h / 2
             if side != "top" and -bottom > SUPPORT_BAND_M:  # off the floor: box points under it
                 under = (
@@ -437,16 +444,18 @@ class ReplenishPlanner:
     def _rearrange(
         self,
         obs: Observation,
+        seen: tuple[tuple[np.ndarray, np.ndarray], np.ndarray],
         clusters: Sequence[Cluster],
         k: Cluster,
         s: Cluster,
         s_goal: np.ndarray,
         regions: dict[int, np.ndarray | None],
-        skip: set[int] = frozenset(),  # type: ignore[assignment]
+        skip: Set[int] = frozenset(),
     ) -> Plan | None:
         """Bimanual rearrangement (eqs. 5.7-5.9): carry B_k beside B_s's goal and let it go,
         if that is safe (its own collapse region overlaps no cluster but those in `skip`), it
-        stays in the working space and its way is clear; else None."""
+        stays in the working space and its way is clear; else None. `seen`: (box_points,
+        owner_map) of the observation."""
         if k.index not in regions:
             regions[k.index] = self._region(obs, k)
         if not self._safe(regions[k.index], clusters, set(skip) | {s.index, k.index}):
@@ -455,14 +464,17 @@ class ReplenishPlanner:
         moved_k = np.array([goal_k[0], goal_k[1], k.rect_m[2], k.rect_m[3]])
         if not in_working_space(moved_k, self.space):
             return None
-        if path_blockers(obs, clusters, k, goal_k, self.params, self.space):
+        if path_blockers(*seen, clusters, k, goal_k, self.params.min_points):
             return None
         move_k = Move(k.index, k.box_px, k.rect_m[:2].copy(), goal_k, k.cls in ("C^r", "C^l"))
         return Plan("rearrange", None, move_k, {"obstacle": k.index})
 
     def plan(self, obs: Observation, detections: Sequence[Detection], size_m: np.ndarray) -> Plan:
-        clusters = place_clusters(obs, detections, self.space)
-        cands = candidates(obs, clusters, np.asarray(size_m, float), self.params, self.space)
+        points = box_points(obs, self.space)  # back-projected once per plan
+        clusters = place_clusters(obs, detections, self.space, points)
+        cands = candidates(
+            obs, clusters, np.asarray(size_m, float), self.params, self.space, points
+        )
         info: dict[str, Any] = {
             "clusters": [
                 {"cls": c.cls, "box_px": _r(c.box_px), "rect_m": _r(c.rect_m)} for c in clusters
@@ -484,6 +496,7 @@ class ReplenishPlanner:
         rearrange: Plan | None = None
         g = self.params.finger_m
         why_not = info["why_not"] = ["" for _ in cands]  # why no bimanual plan, per candidate
+        seen = (points, owner_map(obs, clusters))
         for n, cand in enumerate(cands):  # bimanual replenishment: one blocker
             if cand.occupants[0] < 0:
                 why_not[n] = "filled by no detected cluster"  # nothing to grasp
@@ -498,19 +511,19 @@ class ReplenishPlanner:
             if not in_working_space(moved, self.space):
                 why_not[n] = "blocker's goal outside the shelf"
                 continue
-            if s.index not in regions:
-                regions[s.index] = self._region(obs, s)
-            region = regions[s.index]
             skip = {s.index, cand.cluster}
-            in_way = path_blockers(obs, clusters, s, goal, self.params, self.space)
+            in_way = path_blockers(*seen, clusters, s, goal, self.params.min_points)
             if in_way:  # carrying B_s there would push another box: make way first
                 why_not[n] = f"blocker's way blocked by {in_way[0]}"
                 if rearrange is None and in_way[0] >= 0 and in_way[0] not in skip:
                     k = clusters[in_way[0]]
-                    rearrange = self._rearrange(obs, clusters, k, s, goal, regions)
+                    rearrange = self._rearrange(obs, seen, clusters, k, s, goal, regions)
                     if rearrange is not None:
                         rearrange.info.update(info | {"candidate": n, "blocker": s.index})
                 continue
+            if s.index not in regions:  # its collapse map: only once its way is clear
+                regions[s.index] = self._region(obs, s)
+            region = regions[s.index]
             move = Move(s.index, s.box_px, s.rect_m[:2].copy(), goal, s.cls in ("C^r", "C^l"))
             if self._safe(region, clusters, skip):
                 return Plan("bimanual", cand, move, info | {"candidate": n, "blocker": s.index})
@@ -521,7 +534,7 @@ class ReplenishPlanner:
                     continue
                 # B_k: the cluster overlapping B_s's collapse region most
                 k = max(others, key=lambda c: (rect_iou_mask(c.box_px, region), -c.index))
-                rearrange = self._rearrange(obs, clusters, k, s, goal, regions, skip)
+                rearrange = self._rearrange(obs, seen, clusters, k, s, goal, regions, skip)
                 if rearrange is not None:
                     rearrange.info.update(info | {"candidate": n, "blocker": s.index})
         if rearrange is not None:
