@@ -915,10 +915,6 @@ def replenish(
         typer.echo(json.dumps(out))
 
 
-if __name__ == "__main__":
-    main()
-
-
 @app.command("yamakuzushi")
 def yamakuzushi(
     seed: Annotated[int, typer.Option("--seed", metavar="N", help="The pile's seed.")] = 0,
@@ -973,3 +969,76 @@ def yamakuzushi(
         typer.echo(json.dumps(head))
         if mcap is not None:
             write_mcap(mcap, [result], {"condition": variant, "seed": str(seed)})
+
+
+@app.command("yamakuzushi-validate")
+def yamakuzushi_validate(
+    min_probability: Annotated[
+        list[float],
+        typer.Option(
+            "--min-probability",
+            help="A value of yamakuzushi.select.min_probability to play (repeat the option).",
+        ),
+    ],
+    games: Annotated[int, typer.Option("--games", min=1, help="Games per value.")] = 40,
+    model: Annotated[
+        Path | None,
+        typer.Option("--model", help="Slide ConvNet [default: models/slide_convnet/best.pt]."),
+    ] = None,
+) -> None:
+    """Choose `yamakuzushi.select.min_probability` on validation piles (seed stream ch3_val,
+    never the games' piles): play --games games with the ConvNet for each value and print
+    pieces per game and per-slide success per value, then the value with the most pieces per
+    game among those with >= 90% per-slide success (the rule the params' value comes from)."""
+    with _user_errors():
+        import dataclasses
+
+        from clutterbench.config import BaseConfig, load_section
+        from clutterbench.data.slides import pile_seed
+        from clutterbench.trials.ch3 import ch3_jobs, run_ch3_game
+        from clutterbench.trials.ch3_config import Ch3Config
+        from clutterbench.trials.harness import run_episodes
+        from clutterbench.trials.stats import aggregate_games
+
+        for p in min_probability:
+            if not 0.0 <= p <= 1.0:
+                raise ClutterbenchError(f"--min-probability {p}: not within [0, 1]")
+        params = _project_params()
+        cfg = load_section(Ch3Config, "yamakuzushi", params) if params else Ch3Config()
+        seed = load_section(BaseConfig, "base", params).seed if params else BaseConfig().seed
+        path = _require_file(
+            _default_path(model, "models/slide_convnet/best.pt"), "--model", "dvc repro train_slide"
+        )
+        games_cfg = dataclasses.replace(
+            cfg.games, n_games=games, variants=("convnet",), mcap_images=False
+        )
+        jobs = []
+        for p in min_probability:
+            select = dataclasses.replace(cfg.select, min_probability=p)
+            run = dataclasses.replace(cfg, games=games_cfg, select=select)
+            for job in ch3_jobs(run, lambda g: pile_seed(seed, "ch3_val", g), str(path)):
+                jobs.append(job | {"min_probability": p})
+        results = run_episodes("validation games", run_ch3_game, jobs, cfg.games.workers)
+        records = [
+            r.record | {"condition": f"{job['min_probability']:g}"}
+            for r, job in zip(results, jobs, strict=True)
+        ]
+        summary = aggregate_games(records)
+        best = None
+        for row in summary.itertuples():
+            rate = row.step_success_k / row.step_success_n if row.step_success_n else 0.0
+            typer.echo(
+                f"min_probability {row.condition}: {row.mean_pieces:.2f} pieces per game, "
+                f"per slide {row.step_success_k}/{row.step_success_n} = {rate:.1%}, "
+                f"ends: {row.ends}"
+            )
+            if rate >= 0.9 and (best is None or row.mean_pieces > best[1]):
+                best = (row.condition, row.mean_pieces)
+        if best is None:
+            typer.echo("no value reaches 90% per slide on these games")
+        else:
+            typer.echo(f"choice: min_probability {best[0]} (most pieces at >= 90% per slide)")
+
+
+if __name__ == "__main__":
+    main()

@@ -401,3 +401,32 @@ def test_yamakuzushi_unknown_variant_is_a_one_line_error() -> None:
     result = runner.invoke(app, ["yamakuzushi", "--variant", "best"])
     assert result.exit_code == 2
     assert "--variant 'best'" in result.output and len(result.output.strip().splitlines()) == 1
+
+
+def test_yamakuzushi_validate_plays_each_threshold_on_validation_piles(tmp_path: Path) -> None:
+    import torch
+
+    from clutterbench.models.slide_convnet import (
+        SlideConvNet,
+        SlideConvNetConfig,
+        save_slide_convnet,
+    )
+    from clutterbench.trials.ch3_config import Ch3Config
+
+    size = Ch3Config().scan.crop_px
+    model = tmp_path / "slide.pt"
+    torch.manual_seed(0)
+    save_slide_convnet(model, SlideConvNet(SlideConvNetConfig(input_size=size)).eval(), {})
+    args = ["yamakuzushi-validate", "--games", "1", "--model", str(model)]
+    result = runner.invoke(app, [*args, "--min-probability", "1", "--min-probability", "0"])
+    assert result.exit_code == 0, result.output
+    rows = {line.split(":")[0]: line for line in result.output.splitlines() if ": " in line}
+    assert "per slide 0/0" in rows["min_probability 1"]  # nothing is that likely: no slide
+    assert "per slide 0/0" not in rows["min_probability 0"]  # every piece is worth a slide
+
+
+def test_yamakuzushi_validate_rejects_a_probability_outside_0_1() -> None:
+    result = runner.invoke(app, ["yamakuzushi-validate", "--min-probability", "1.5"])
+    assert result.exit_code == 2
+    assert "--min-probability 1.5" in result.output
+    assert len(result.output.strip().splitlines()) == 1

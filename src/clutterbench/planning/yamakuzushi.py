@@ -90,7 +90,7 @@ class PomdpConfig:
     min_mass: float = bounded(0.005, ge=0.0)
     """Below this belief mass (eq. 3.8) no state fits the piece: e.g. one resting on another
     at a tilt none of the 32 states holds (eq. 3.5 omitted them all) ..."""
-    when_no_state_fits: Literal["refuse", "slide"] = "refuse"
+    when_no_state_fits: Literal["refuse", "slide"] = "slide"
     """... and the POMDP then refuses the piece (the thesis' rule read literally: no belief on
     the flat states) or leaves the choice to the target selection (slide: the POMDP has no
     evidence either way). Chosen on validation piles (README)."""
