@@ -202,3 +202,18 @@ def test_a_lifted_blocker_is_set_down_before_it_is_let_go(monkeypatch):
     out = ch5.execute(world, obs, plan, new_box, TrialsConfig().ch5, state.removed)
     assert gaps and max(gaps) < 0.005, gaps
     assert out.record["success"], out.record
+
+
+@pytest.mark.parametrize("lean_deg", [20.0, -20.0])
+def test_a_leaning_box_is_carried_upright(lean_deg):
+    """The turn the executor gives a leaning cluster (thesis 5.2.3: C^r / C^l set upright)
+    leaves it standing straight, whichever way it leaned (a sign slip doubles the lean)."""
+    from clutterbench.sim.clusters import box_tilt
+    from clutterbench.sim.geometry import quat_from_axis_angle, quat_mul
+
+    quat = quat_mul(quat_from_axis_angle([1, 0, 0], np.deg2rad(-lean_deg)), STANDING)
+    spec = SceneSpec(sizes_m=SIZE[None], poses=np.array([[0.1, 0.0, 0.08, *quat]]), camera=CAM)
+    world = world_at(spec, SceneState.start(spec), PhysicsConfig())
+    assert box_tilt(SIZE, world.poses()[0, 3:])[1] == pytest.approx(lean_deg, abs=0.5)
+    world.carry_group([0], np.zeros(3), ch5.upright_angle_rad(world, [0]))
+    assert abs(box_tilt(SIZE, world.poses()[0, 3:])[1]) < 0.5

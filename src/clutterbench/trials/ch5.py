@@ -146,12 +146,14 @@ def members(obs: Observation, det_box_px: np.ndarray) -> list[int]:
 
 
 def upright_angle_rad(world: BoxWorld, boxes: list[int]) -> float:
-    """The turn about x that sets a leaning cluster upright: minus the mean lean of its
-    standing boxes (a gripper closing on the cluster aligns it)."""
+    """The turn about x (`BoxWorld.carry_group`'s, right-handed: a positive turn tips a top
+    toward -y) that sets a leaning cluster upright: the mean lean of its standing boxes
+    (`box_tilt`'s, positive with the top toward +y), a gripper closing on the cluster aligns
+    it."""
     poses = world.poses()
     leans = [box_tilt(np.asarray(world.sizes_m[i]), poses[i, 3:]) for i in boxes]
     standing = [a for flat, a in leans if not flat]
-    return float(-np.deg2rad(np.mean(standing))) if standing else 0.0
+    return float(np.deg2rad(np.mean(standing))) if standing else 0.0
 
 
 def floor_lift_m(world: BoxWorld, boxes: list[int], move: np.ndarray, turn: float) -> float:
