@@ -217,3 +217,26 @@ def test_a_leaning_box_is_carried_upright(lean_deg):
     assert box_tilt(SIZE, world.poses()[0, 3:])[1] == pytest.approx(lean_deg, abs=0.5)
     world.carry_group([0], np.zeros(3), ch5.upright_angle_rad(world, [0]))
     assert abs(box_tilt(SIZE, world.poses()[0, 3:])[1]) < 0.5
+
+
+@pytest.mark.parametrize("tilt_deg", [0.0, 20.0])
+def test_a_tilted_box_on_a_stack_offers_no_place_on_top(tilt_deg):
+    """A box lying tilted on a stack shows only a strip of top surface: a box let go there
+    slides off, so no free B^top is offered (the level stack, tilt 0, offers it)."""
+    from clutterbench.sim.geometry import quat_from_axis_angle
+
+    t = np.deg2rad(tilt_deg)
+    z_top = 0.0615 + 0.05 * np.sin(t) + 0.015 * np.cos(t) + 0.0005
+    sizes = np.array([[0.12, 0.1, 0.03]] * 3)
+    poses = np.array(
+        [
+            [0.15, 0.0, 0.0155, *FLAT],
+            [0.15, 0.0, 0.0465, *FLAT],
+            [0.15, 0.0, z_top, *quat_from_axis_angle([1, 0, 0], t)],
+        ]
+    )
+    spec = SceneSpec(sizes_m=sizes, poses=poses, camera=CAM, meta={"groups": [[0, 1, 2]]})
+    plan, dets = planned(spec, np.array([0.12, 0.1, 0.03]), CameraConfig(image_size=128), 25)
+    assert [d.cls for d in dets] == ["C^h"]
+    tops = [c for c in plan.info["candidates"] if c["side"] == "top"]
+    assert bool(tops) == (tilt_deg == 0.0), plan.info["candidates"]

@@ -358,7 +358,9 @@ def candidates(
 
     B^top spans the cluster's top surface, not its whole width: eq. (5.2) puts the box flush
     with the cluster's left edge, off the stack where its top box is narrower than the boxes
-    under it, and rests on that surface. A candidate beside a cluster must rest on something
+    under it, and rests on that surface; a free B^top whose surface is narrower than half the
+    new box (a tilted box on top shows only a strip within TOP_BAND_M of its highest point)
+    is no place: the box's middle would overhang it. A candidate beside a cluster must rest on something
     once its occupants are moved: the floor, or box points other than its occupants' just
     under the middle of its bottom (else a free candidate in mid-air beside a box on a stack
     would be "simple"). `points`: box_points of the observation, if already computed."""
@@ -385,6 +387,8 @@ def candidates(
                 & (pts[..., 0] <= c.front_x_m + d_new + 0.01)
             )
             occupants = owners_by_count(owner[inside], len(clusters), params.min_points)
+            if side == "top" and not occupants and np.ptp(c.top_span_m) < w_new / 2:
+                continue  # the new box's middle would overhang the top surface: it tips off
             bottom = y + h / 2
             if side != "top" and -bottom > SUPPORT_BAND_M:  # off the floor: box points under it
                 under = (
