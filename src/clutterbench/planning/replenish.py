@@ -360,10 +360,11 @@ def candidates(
     with the cluster's left edge, off the stack where its top box is narrower than the boxes
     under it, and rests on that surface; a free B^top whose surface is narrower than half the
     new box (a tilted box on top shows only a strip within TOP_BAND_M of its highest point)
-    is no place: the box's middle would overhang it. A candidate beside a cluster must rest on something
-    once its occupants are moved: the floor, or box points other than its occupants' just
-    under the middle of its bottom (else a free candidate in mid-air beside a box on a stack
-    would be "simple"). `points`: box_points of the observation, if already computed."""
+    is no place: the box's middle would overhang it. A candidate beside a cluster must rest
+    on something once its occupants are moved: the floor, or box points other than its
+    occupants' just under the middle of its bottom (else a free candidate in mid-air beside a
+    box on a stack would be "simple"). `points`: box_points of the observation, if already
+    computed."""
     pts, on_box = points if points is not None else box_points(obs, space)
     owner = owner_map(obs, clusters)
     out: list[Candidate] = []
