@@ -9,10 +9,15 @@ from pathlib import Path
 
 from clutterbench.config import BaseConfig, load_section
 from clutterbench.errors import ClutterbenchError
-from clutterbench.io import read_json, write_json, write_text
+from clutterbench.io import write_json, write_text
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
-from clutterbench.trials.ch5 import ch5_jobs, check_models, run_ch5_episode
+from clutterbench.trials.ch5 import (
+    ch5_jobs,
+    check_models,
+    collapse_threshold,
+    run_ch5_episode,
+)
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.harness import run_episodes, write_mcap
 from clutterbench.trials.records import write_records
@@ -22,25 +27,13 @@ OUT = Path("reports/trials_ch5")
 DATA = Path("data/trials_ch5")
 
 
-def val_threshold(model: str) -> float:
-    path = Path(f"reports/evaluate/{model}_ch5/metrics.json")
-    try:
-        return float(read_json(path)["val_chosen_threshold"])
-    except (KeyError, TypeError, ValueError):
-        raise ClutterbenchError(
-            f"{path}: no val_chosen_threshold; rerun evaluate@{model}_ch5"
-        ) from None
-
-
 def trials_ch5(params: dict, base: BaseConfig) -> None:
     cfg = load_section(TrialsConfig, "trials", params)
     if not cfg.ch5_conditions:
         raise ClutterbenchError("trials.ch5_conditions: no conditions to run")
     sim = load_section(SimConfig, "sim", params)
     check_models(dict(cfg.ch5_conditions), cfg.ch5)
-    prob = cfg.ch5.prob_threshold
-    if prob is None:
-        prob = val_threshold(cfg.ch5.model)
+    prob = collapse_threshold(cfg.ch5)
     with_detector = any(c.perception == "detector" for c in cfg.ch5_conditions.values())
     jobs = []
     for name, cond in cfg.ch5_conditions.items():

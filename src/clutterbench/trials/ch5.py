@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from clutterbench.errors import ClutterbenchError
+from clutterbench.io import read_json
 from clutterbench.observation import Observation
 from clutterbench.perception.boxes import Detection, detections_from_clusters
 from clutterbench.planning.replenish import (
@@ -565,6 +566,20 @@ def ch5_jobs(
         }
         for i in range(cond.episodes)
     ]
+
+
+def collapse_threshold(params: Ch5TrialParams) -> float:
+    """The collapse region's probability threshold: params' own, else the one evaluate@
+    <model>_ch5 chose on the ch. 5 validation split (never a test-scene choice)."""
+    if params.prob_threshold is not None:
+        return params.prob_threshold
+    path = Path(f"reports/evaluate/{params.model}_ch5/metrics.json")
+    try:
+        return float(read_json(path)["val_chosen_threshold"])
+    except (KeyError, TypeError, ValueError):
+        raise ClutterbenchError(
+            f"{path}: no val_chosen_threshold; rerun evaluate@{params.model}_ch5"
+        ) from None
 
 
 def check_models(conds: dict[str, Ch5ConditionConfig], params: Ch5TrialParams) -> None:

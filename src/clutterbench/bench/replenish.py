@@ -1,0 +1,124 @@
+"""`make bench`, chapter 5 part: the costs of a replenishment trial -> reports/bench/ch5.{json,md}.
+
+Measured in one process (one core, the worker setting) on the first N_SCENES scenes of each
+trial stream drawn from the bench's own seed (never the table's scenes): a scene's draw
+(drops, settling, redraws), a world built and observed, the detector's clusters, one collapse
+map (the ch. 5 network on one cluster), one plan (candidates, the blockers' ways and
+collapse maps), and whole episodes of the planner with collapse prediction and of the oracle
+(every candidate action simulated). Needs the detector, the ch. 5 collapse network and its
+validation threshold (the part is skipped, with a message, without them).
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from pathlib import Path
+
+from clutterbench.bench import header, measure_table, write_result
+from clutterbench.config import load_params, load_section
+from clutterbench.platform_info import cpu_description
+
+N_SCENES = 8
+SEED = 99
+TYPES = ("stacked", "shelved", "random")
+
+
+def _timed(fn, *args, **kwargs) -> tuple[object, float]:
+    t0 = time.perf_counter()
+    out = fn(*args, **kwargs)
+    return out, time.perf_counter() - t0
+
+
+def bench_ch5(out_dir: Path = Path("reports/bench")) -> dict:
+    import torch
+
+    from clutterbench.errors import ClutterbenchError
+    from clutterbench.parallel import worker_init
+    from clutterbench.planning.replenish import ReplenishPlanner, place_clusters
+    from clutterbench.sim.config import SimConfig
+    from clutterbench.sim.render import ensure_renderer, observe
+    from clutterbench.trials import ch5
+    from clutterbench.trials.config import TrialsConfig
+    from clutterbench.trials.protocol import SceneState, world_at
+    from clutterbench.trials.scenes import draw_trial_spec
+
+    params = load_params("params.yaml")
+    params = {**params, "base": {**params["base"], "scale": "default"}}
+    trials = load_section(TrialsConfig, "trials", params)
+    sim = load_section(SimConfig, "sim", params)
+    try:
+        ch5.check_models(dict(trials.ch5_conditions), trials.ch5)
+        prob = ch5.collapse_threshold(trials.ch5)
+    except ClutterbenchError as e:
+        print(f"ch5 bench skipped: {e}")
+        return {}
+    worker_init(1)
+    torch.set_num_threads(1)
+    ensure_renderer()
+    parts: dict[str, list[float]] = {
+        k: [] for k in ("draw", "observe", "detect", "collapse_map", "plan")
+    }
+    episodes: dict[str, list[float]] = {}
+    for scene_type in TYPES:
+        for planner in ("replenish", "oracle"):
+            name = f"{planner}_{scene_type}"
+            cond = trials.ch5_conditions[name]
+            jobs = ch5.ch5_jobs(
+                name,
+                cond,
+                trials.ch5,
+                trials.streams[cond.stream],
+                SEED,
+                sim.physics,
+                sim.camera,
+                trials.max_attempts,
+                False,
+                prob,
+                scene_type,
+                True,
+            )[:N_SCENES]
+            ch5.run_ch5_episode(jobs[0])  # warm-up: models loaded, shaders compiled
+            episodes[name] = [_timed(ch5.run_ch5_episode, job)[1] for job in jobs]
+            if planner != "replenish":
+                continue
+            for job in jobs:
+                spec, t = _timed(
+                    draw_trial_spec,
+                    cond.stream,
+                    job["stream_cfg"],
+                    job["seed"],
+                    job["index"],
+                    sim.physics,
+                    sim.camera,
+                    job["max_attempts"],
+                    keep_groups=True,
+                )
+                parts["draw"].append(t)
+                state = SceneState.start(spec)
+                obs, t = _timed(
+                    observe, world_at(spec, state, sim.physics, render=True), sim.camera
+                )
+                parts["observe"].append(t)
+                dets, t = _timed(ch5.perceive, job, spec, state, obs)
+                parts["detect"].append(t)
+                space = ch5.space_of(spec)
+                cmap = ch5.collapse_map_fn(job)
+                clusters = place_clusters(obs, dets, space)
+                if clusters:
+                    parts["collapse_map"].append(_timed(cmap, obs, clusters[0].mask)[1])
+                size = ch5.new_box_size(
+                    job["seed"], cond.stream, job["index"], trials.ch5.new_boxes
+                )
+                plan = ReplenishPlanner(ch5.planner_params(job), space, cmap).plan
+                parts["plan"].append(_timed(plan, obs, dets, size)[1])
+    result: dict = {**cpu_description(), "scenes_per_type": N_SCENES}
+    for k, v in parts.items():
+        result[f"{k}_median_s"] = statistics.median(v)
+    for k, v in episodes.items():
+        result[f"episode_{k}_median_s"] = statistics.median(v)
+    md = header("Chapter 5 (shelf replenishment) costs, one core", result)
+    write_result(out_dir, "ch5", result, md + measure_table(result, tuple(cpu_description())))
+    for k, v in result.items():
+        print(f"{k}: {v}")
+    return result
