@@ -153,17 +153,23 @@ def test_a_stack_covered_by_a_deeper_box_offers_its_top_occupied():
     assert 0.0615 <= bottom <= 0.0615 + 0.012, bottom
 
 
-def test_a_box_in_front_of_a_candidate_occupies_it():
-    """The new box goes in from the front: a box standing nearer the camera than a row, in
-    front of the place beside it, blocks that place although it is not inside it."""
+def row_with_a_box_in_front() -> SceneSpec:
+    """A row of two standing boxes deep in the shelf and one more standing near the front,
+    in front of the place right of the row (not inside it)."""
     ys = [0.12, 0.08]
     poses = [[0.2, y, 0.06, *STANDING] for y in ys] + [[0.06, 0.035, 0.06, *STANDING]]
-    spec = SceneSpec(
+    return SceneSpec(
         sizes_m=np.tile(SIZE, (3, 1)),
         poses=np.array(poses),
         camera=CAM,
         meta={"groups": [[0, 1], [2]]},
     )
+
+
+def test_a_box_in_front_of_a_candidate_occupies_it():
+    """The new box goes in from the front: a box standing nearer the camera than a row, in
+    front of the place beside it, blocks that place although it is not inside it."""
+    spec = row_with_a_box_in_front()
     plan, _ = planned(spec, NEW_BOX)
     # the row stands at shelf y 0.065-0.135 (image-aligned x about -0.1), the front box at 0.035
     row = [k for k, c in enumerate(plan.info["clusters"]) if c["rect_m"][0] < -0.07]
@@ -240,3 +246,28 @@ def test_a_tilted_box_on_a_stack_offers_no_place_on_top(tilt_deg):
     assert [d.cls for d in dets] == ["C^h"]
     tops = [c for c in plan.info["candidates"] if c["side"] == "top"]
     assert bool(tops) == (tilt_deg == 0.0), plan.info["candidates"]
+
+
+def test_the_new_box_is_carried_in_from_the_front_and_pushes_what_is_in_its_way():
+    """Placing at the place behind the front box (forced: the planner calls it occupied)
+    carries the new box through the front box, which is pushed and fails the step; a box
+    made to appear at its place would leave the front box alone."""
+    from clutterbench.planning.replenish import Plan, candidates, place_clusters
+
+    spec = row_with_a_box_in_front()
+    physics = PhysicsConfig()
+    state = SceneState.start(spec)
+    obs = observe(world_at(spec, state, physics, render=True), CAM)
+    dets = ch5.true_clusters(spec, state, physics, obs)
+    rp = ReplenishParams(finger_m=0.012, min_points=3)
+    clusters = place_clusters(obs, dets, ch5.space_of(spec))
+    row = [c.index for c in clusters if c.rect_m[0] < -0.07]
+    cands = candidates(obs, clusters, NEW_BOX, rp, ch5.space_of(spec))
+    right = [c for c in cands if c.side == "right" and c.cluster == row[0]]
+    assert right and right[0].occupants
+    world = world_at(spec, state, physics)
+    out = ch5.execute(
+        world, obs, Plan("simple", right[0], None), NEW_BOX, TrialsConfig().ch5, state.removed
+    )
+    assert out.record["placed"] and not out.record["others_still"], out.record
+    assert out.record["n_disturbed"] >= 1

@@ -3,8 +3,9 @@
 An episode: draw a scene from the condition's stream and settle it (the canonical start),
 draw the new box, then repeat: observe -> arrangement clusters (the detector, or the
 generator's ground truth) -> plan (planning/replenish.py) -> execute from a fresh world at the
-present state through the action API (`carry_group` + `hold` a blocker aside, `insert` the
-new box at the candidate, `release` every held box, settle) -> judge from physics. A
+present state through the action API (`carry_group` + `hold` a blocker aside, carry the
+new box in through the shelf's front to the candidate, `release` every held box, settle) ->
+judge from physics. A
 rearrangement (a cluster moved aside and let go) is judged, then the planner looks again; the
 episode ends at its first failed step, when the box is placed, or when the planner has no
 plan (gave up).
@@ -50,7 +51,7 @@ from clutterbench.planning.replenish import (
 from clutterbench.sim.catalog import box_extents_m
 from clutterbench.sim.clusters import box_tilt, scene_clusters
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
-from clutterbench.sim.geometry import aabb_overlap_xy
+from clutterbench.sim.geometry import aabb_overlap_xy, box_aabb_half_extents
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
@@ -63,6 +64,8 @@ ENDS = ("placed", "collapse", "misplaced", "gave_up", "max_steps")
 """Why an episode ended: the box was placed and nothing else moved (success); a step moved
 another box beyond the threshold or off the shelf; the box did not come to rest at its place;
 the planner had no plan; the plan cap."""
+FRONT_CLEARANCE_M = 0.005
+"""The new box starts its way in this far in front of the shelf's open front."""
 MEMBER_FRACTION = 0.5
 """A box belongs to a detection (is grasped with it) when at least this fraction of its
 visible pixels lie inside the detection's image box."""
@@ -184,6 +187,24 @@ def set_down(world: BoxWorld, boxes: list[int]) -> None:
         world.carry_group(boxes, np.array([0.0, 0.0, -drop]))
 
 
+def insert_from_front(world: BoxWorld, size_m: np.ndarray, pose: np.ndarray) -> int:
+    """Carry the new box in through the shelf's open front (x = 0) along +x, at its place's
+    height and attitude, held (kinematic: what stands in its way is pushed, and judged), let
+    it go at its place and settle (the blocker, if any, still held). A box made to appear at
+    its place would push what it overlaps aside by depenetration, through no motion a robot
+    could make. Returns the new box's index."""
+    pose = np.asarray(pose, dtype=np.float64)
+    half_x = float(box_aabb_half_extents(np.asarray(size_m, float), pose[3:])[0])
+    start = pose.copy()
+    start[0] = min(float(pose[0]), -half_x - FRONT_CLEARANCE_M)
+    placed = world.add_box(size_m, start)
+    world.hold([placed])
+    world.carry_group([placed], np.array([float(pose[0] - start[0]), 0.0, 0.0]))
+    world.release([placed])
+    world.settle_action()
+    return placed
+
+
 @dataclasses.dataclass
 class StepOutcome:
     record: dict[str, Any]
@@ -220,7 +241,7 @@ def execute(
                 world.settle_action()
     placed = None
     if plan.candidate is not None:
-        placed, _ = world.insert(size_m, plan.candidate.pose)
+        placed = insert_from_front(world, size_m, plan.candidate.pose)
     if world.held():
         set_down(world, world.held())
     world.release(world.held())
