@@ -645,7 +645,7 @@ def plan(
     model: Annotated[
         Path | None,
         typer.Option(
-            "--model", help="Collapse predictor checkpoint [default: models/cp_focal/best.pt]."
+            "--model", help="Collapse predictor checkpoint (default: models/cp_focal/best.pt)."
         ),
     ] = None,
     thresholds: Annotated[
@@ -653,7 +653,7 @@ def plan(
         typer.Option(
             "--thresholds",
             help="Val-chosen thresholds of the support stage "
-            "[default: reports/support/thresholds.json].",
+            "(default: reports/support/thresholds.json).",
         ),
     ] = None,
     mcap: Annotated[
@@ -817,7 +817,7 @@ def replenish(
     ] = "clusters",
     model: Annotated[
         Path | None,
-        typer.Option("--model", help="Collapse map network [default: models/cmn_bs32/best.pt]."),
+        typer.Option("--model", help="Collapse map network (default: models/cmn_bs32/best.pt)."),
     ] = None,
     mcap: Annotated[
         Path | None, typer.Option("--mcap", help="With --execute: write the episode as MCAP.")
@@ -924,7 +924,7 @@ def yamakuzushi(
     ] = "convnet",
     model: Annotated[
         Path | None,
-        typer.Option("--model", help="Slide ConvNet [default: models/slide_convnet/best.pt]."),
+        typer.Option("--model", help="Slide ConvNet (default: models/slide_convnet/best.pt)."),
     ] = None,
     mcap: Annotated[
         Path | None, typer.Option("--mcap", help="Write the game as MCAP (Foxglove).")
@@ -983,7 +983,7 @@ def yamakuzushi_validate(
     games: Annotated[int, typer.Option("--games", min=1, help="Games per value.")] = 40,
     model: Annotated[
         Path | None,
-        typer.Option("--model", help="Slide ConvNet [default: models/slide_convnet/best.pt]."),
+        typer.Option("--model", help="Slide ConvNet (default: models/slide_convnet/best.pt)."),
     ] = None,
 ) -> None:
     """Choose `yamakuzushi.select.min_probability` on validation piles (seed stream ch3_val,
