@@ -349,6 +349,7 @@ def candidates(
     params: ReplenishParams,
     space: WorkingSpace,
     points: tuple[np.ndarray, np.ndarray] | None = None,
+    owner: np.ndarray | None = None,
 ) -> list[Candidate]:
     """Every placement candidate inside the working space (thesis 5.2.3), with the clusters
     whose box points fall inside it or in front of it (the 3D region: the candidate's
@@ -363,10 +364,10 @@ def candidates(
     is no place: the box's middle would overhang it. A candidate beside a cluster must rest
     on something once its occupants are moved: the floor, or box points other than its
     occupants' just under the middle of its bottom (else a free candidate in mid-air beside a
-    box on a stack would be "simple"). `points`: box_points of the observation, if already
-    computed."""
+    box on a stack would be "simple"). `points`, `owner`: box_points and owner_map of the
+    observation, if already computed."""
     pts, on_box = points if points is not None else box_points(obs, space)
-    owner = owner_map(obs, clusters)
+    owner = owner if owner is not None else owner_map(obs, clusters)
     out: list[Candidate] = []
     g, d_new = params.finger_m, float(size_m[0])
     for c in clusters:
@@ -477,8 +478,9 @@ class ReplenishPlanner:
     def plan(self, obs: Observation, detections: Sequence[Detection], size_m: np.ndarray) -> Plan:
         points = box_points(obs, self.space)  # back-projected once per plan
         clusters = place_clusters(obs, detections, self.space, points)
+        owner = owner_map(obs, clusters)
         cands = candidates(
-            obs, clusters, np.asarray(size_m, float), self.params, self.space, points
+            obs, clusters, np.asarray(size_m, float), self.params, self.space, points, owner
         )
         info: dict[str, Any] = {
             "clusters": [
@@ -501,7 +503,7 @@ class ReplenishPlanner:
         rearrange: Plan | None = None
         g = self.params.finger_m
         why_not = info["why_not"] = ["" for _ in cands]  # why no bimanual plan, per candidate
-        seen = (points, owner_map(obs, clusters))
+        seen = (points, owner)
         for n, cand in enumerate(cands):  # bimanual replenishment: one blocker
             if cand.occupants[0] < 0:
                 why_not[n] = "filled by no detected cluster"  # nothing to grasp
