@@ -113,7 +113,7 @@ def convnet_targets(model, obs: Observation, scan: ScanConfig, sel: SelectConfig
 
     cands = raster_candidates(scan)
     pieces = piece_under(obs, cands.start_xy, scan.edge_margin_px)
-    seen = set(_visible_pieces(obs, sel.min_visible_px))
+    seen = set(obs.visible_boxes(sel.min_visible_px))
     on = np.array([k for k in range(len(cands)) if int(pieces[k]) in seen], dtype=np.int64)
     if not len(on):
         return []
@@ -159,7 +159,7 @@ def random_targets(
     """One uniformly random raster candidate on a visible piece (empty when none)."""
     cands = raster_candidates(scan)
     pieces = piece_under(obs, cands.start_xy, scan.edge_margin_px)
-    seen = set(_visible_pieces(obs, sel.min_visible_px))
+    seen = set(obs.visible_boxes(sel.min_visible_px))
     on = [k for k in range(len(cands)) if int(pieces[k]) in seen]
     if not on:
         return []
