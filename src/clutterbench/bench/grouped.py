@@ -8,13 +8,20 @@ scores) on the same inputs, in one process on this machine, and reports their ra
 - training pairs per second (loading + train step) of the default-scale networks on their
   generated training data;
 - inference pairs per second of the trials' collapse predictor on validation scenes;
-- collapse-prediction seconds per multi-step trial (ch. 6) and per 10-box ch. 4 plan.
+- collapse-prediction seconds per multi-step trial (ch. 6) and per 10-box ch. 4 plan, with
+  the trial's calls split into one-target calls (a pull's abort checks, each on a new depth
+  image: nothing to share) and several-target calls (a decision's support maps).
+Beside each training and inference ratio, its ceiling from the network's arithmetic alone
+(forward FLOPs per pair, per-pair / grouped, at the measured pairs per scene; training
+costs a fixed multiple of the forward in both paths).
 Needs data/generate, data/split and the trained models (dvc repro); skipped without them.
 """
 
 from __future__ import annotations
 
+import contextlib
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +40,7 @@ from clutterbench.platform_info import cpu_description
 
 TRAIN_MODELS = ("cp_focal", "cmn_bs32", "ch4_various")
 """One network per chapter's data: ch. 6, ch. 5, ch. 4 (pairs of masks)."""
-TRAIN_BATCHES = 6
+TRAIN_BATCHES = 20
 """Timed training batches per path (after one warm-up batch)."""
 
 
@@ -47,6 +54,40 @@ def _per_pair_batch(ds: PairDataset, indices: list[int]) -> dict[str, torch.Tens
     depth image, noised apart), stacked."""
     items = [ds[i] for i in indices]
     return {k: torch.stack([item[k] for item in items]) for k in items[0]}
+
+
+def flop_ceiling(model: Any, targets_per_scene: float) -> dict[str, float]:
+    """Forward GFLOPs of a collapse_map network: the depth encoder per scene, the
+    decoder's per-scene part (its convs' VGG-map halves) and per-target part, and the ratio
+    per-pair / grouped FLOPs per pair at `targets_per_scene`: the most encoding a scene once
+    can buy, before any overhead."""
+    from torch.utils.flop_counter import FlopCounterMode
+
+    model = model.eval()
+    size, n_masks, n = int(model.cfg.input_size), int(model.cfg.n_masks), 8
+
+    def gflops(fn: Any) -> float:
+        with torch.no_grad(), FlopCounterMode(display=False) as counter:
+            fn()
+        return counter.get_total_flops() / 1e9
+
+    depth = torch.rand(1, 1, size, size)
+    masks = torch.rand(n, n_masks, size, size)
+    feats = model.encode(depth)
+    encoder = gflops(lambda: model.encode(depth))
+    pair = gflops(lambda: model(depth, masks[:1]))  # the concatenated (per-pair) network
+    one = gflops(lambda: model.decode(feats, masks[:1], torch.zeros(1, dtype=torch.int64)))
+    many = gflops(lambda: model.decode(feats, masks, torch.zeros(n, dtype=torch.int64)))
+    per_target = (many - one) / (n - 1)
+    per_scene = one - per_target
+    grouped = (encoder + per_scene) / targets_per_scene + per_target
+    return {
+        "encoder_gflop": encoder,
+        "decoder_scene_gflop": per_scene,
+        "decoder_target_gflop": per_target,
+        "pair_gflop": pair,
+        "ceiling": pair / grouped,
+    }
 
 
 def bench_training(params: dict[str, Any], name: str, batches: int) -> dict[str, float]:
@@ -87,6 +128,12 @@ def bench_training(params: dict[str, Any], name: str, batches: int) -> dict[str,
         out[f"train_{name}_{path}_pairs_per_s"] = pairs / seconds
         if path == "grouped":
             out[f"train_{name}_pairs_per_scene"] = pairs / max(scenes, 1)
+    per_scene = len(ds.pairs) / len(np.unique(ds.pairs[:, 0]))
+    net = build_model(mcfg.arch, mcfg.net)
+    ceiling = flop_ceiling(net, out[f"train_{name}_pairs_per_scene"])
+    out |= {f"train_{name}_{k}": v for k, v in ceiling.items()}
+    out[f"train_{name}_targets_per_scene"] = per_scene
+    out[f"train_{name}_ceiling_whole_scenes"] = flop_ceiling(net, per_scene)["ceiling"]
     out[f"train_{name}_ratio"] = (
         out[f"train_{name}_grouped_pairs_per_s"] / out[f"train_{name}_per_pair_pairs_per_s"]
     )
@@ -123,6 +170,8 @@ def bench_inference(params: dict[str, Any], scenes: int) -> dict[str, float]:
             predict_collapse(predictor, depth, masks)
         out[f"infer_{path}_pairs_per_s"] = sum(len(m) for _, m in inputs) / predictor.seconds
     out["infer_pairs_per_scene"] = float(np.mean([len(m) for _, m in inputs]))
+    model = CollapsePredictor.from_checkpoint(ckpt, fold_bn=False).model
+    out["infer_ceiling"] = flop_ceiling(model, out["infer_pairs_per_scene"])["ceiling"]
     out["infer_ratio"] = out["infer_grouped_pairs_per_s"] / out["infer_per_pair_pairs_per_s"]
     return out
 
@@ -162,15 +211,43 @@ def bench_trial_cp(params: dict[str, Any], episodes: int) -> dict[str, float]:
         )
         run_ch6_episode(jobs[0])  # warm-up
         predictor.seconds, wall = 0.0, time.perf_counter()
-        for job in jobs:
-            run_ch6_episode(job)
+        with _calls_recorded() as calls:
+            for job in jobs:
+                run_ch6_episode(job)
         out[f"trial_multi_step_cp_{path}_s"] = predictor.seconds / len(jobs)
+        for kind, mine in (
+            ("one", [c for c in calls if c[0] == 1]),
+            ("several", [c for c in calls if c[0] > 1]),
+        ):
+            out[f"trial_multi_step_{kind}_target_calls_{path}"] = len(mine) / len(jobs)
+            out[f"trial_multi_step_{kind}_target_cp_{path}_s"] = sum(t for _, t in mine) / len(jobs)
         out[f"trial_multi_step_{path}_s"] = (time.perf_counter() - wall) / len(jobs)
     out["trial_multi_step_cp_ratio"] = (
         out["trial_multi_step_cp_per_pair_s"] / out["trial_multi_step_cp_grouped_s"]
     )
     out |= _ch4_plan(params, sim, trials, episodes)
     return out
+
+
+@contextlib.contextmanager
+def _calls_recorded() -> Iterator[list[tuple[int, float]]]:
+    """(candidates, seconds) of every collapse-prediction call made inside the block."""
+    from clutterbench.collapse import predict
+
+    calls: list[tuple[int, float]] = []
+    inner = predict.scene_logits
+
+    def recorded(predictor: CollapsePredictor, depth_m: Any, masks: Any) -> torch.Tensor:
+        t0 = time.perf_counter()
+        logits = inner(predictor, depth_m, masks)
+        calls.append((len(masks), time.perf_counter() - t0))
+        return logits
+
+    predict.scene_logits = recorded
+    try:
+        yield calls
+    finally:
+        predict.scene_logits = inner
 
 
 def _use_predictor(model: Path, image_size: int, new: bool) -> CollapsePredictor:
@@ -217,6 +294,17 @@ def _ch4_plan(params: dict[str, Any], sim: Any, trials: Any, piles: int) -> dict
     return out
 
 
+def _paper_flops(targets_per_scene: float) -> dict[str, float]:
+    """cp_focal's FLOP split at paper scale (full VGG-16, 256 px): arithmetic only."""
+    params = load_params("params.yaml")
+    params = {**params, "base": {**params["base"], "scale": "paper"}}
+    mcfg = load_section(TrainConfig, "train", params).models["cp_focal"]
+    net = build_model(mcfg.arch, mcfg.net)
+    out = {f"paper_cp_focal_{k}": v for k, v in flop_ceiling(net, targets_per_scene).items()}
+    out["paper_cp_focal_targets_per_scene"] = targets_per_scene
+    return out
+
+
 def bench_grouped(
     out_dir: Path = Path("reports/bench"),
     batches: int = TRAIN_BATCHES,
@@ -234,6 +322,7 @@ def bench_grouped(
     result: dict[str, Any] = {}
     for name in TRAIN_MODELS:
         result |= bench_training(params, name, batches)
+    result |= _paper_flops(result["train_cp_focal_targets_per_scene"])
     result |= bench_inference(params, scenes)
     torch.set_num_threads(1)  # as a trials worker
     result |= bench_trial_cp(params, episodes)
@@ -249,37 +338,69 @@ def _markdown(r: dict[str, Any]) -> list[str]:
     lines += [
         "Same inputs, same process; per-pair = every (scene, target) pair loaded and encoded",
         "on its own (the path before grouping). Training and inference at 2 threads, trials",
-        "at 1 (as a trials worker).",
+        "at 1 (as a trials worker). FLOP ceiling: per-pair / grouped forward FLOPs per pair at",
+        "the same pairs per scene, the most encoding once can buy before any overhead.",
         "",
-        "| measure | per pair | grouped | ratio |",
-        "|---|---|---|---|",
+        "| measure | per pair | grouped | ratio | FLOP ceiling |",
+        "|---|---|---|---|---|",
     ]
     for name in TRAIN_MODELS:
         lines.append(
             f"| train {name}, pairs/s ({r[f'train_{name}_pairs_per_scene']:.1f} pairs per "
             f"scene in a batch) | {r[f'train_{name}_per_pair_pairs_per_s']:.1f} | "
-            f"{r[f'train_{name}_grouped_pairs_per_s']:.1f} | {r[f'train_{name}_ratio']:.2f}x |"
+            f"{r[f'train_{name}_grouped_pairs_per_s']:.1f} | {r[f'train_{name}_ratio']:.2f}x "
+            f"| {r[f'train_{name}_ceiling']:.2f}x |"
         )
     lines.append(
         f"| inference, pairs/s ({r['infer_pairs_per_scene']:.1f} targets per scene) | "
         f"{r['infer_per_pair_pairs_per_s']:.1f} | {r['infer_grouped_pairs_per_s']:.1f} | "
-        f"{r['infer_ratio']:.2f}x |"
+        f"{r['infer_ratio']:.2f}x | {r['infer_ceiling']:.2f}x |"
     )
     lines.append(
         f"| collapse prediction per multi-step trial, s | "
         f"{r['trial_multi_step_cp_per_pair_s']:.3f} | {r['trial_multi_step_cp_grouped_s']:.3f} "
-        f"| {r['trial_multi_step_cp_ratio']:.2f}x less |"
+        f"| {r['trial_multi_step_cp_ratio']:.2f}x less | |"
     )
+    for kind, what in (
+        ("one", "one-target calls (abort checks)"),
+        ("several", "several-target calls (support maps)"),
+    ):
+        lines.append(
+            f"| - of which {what}: calls per trial / s | "
+            f"{r[f'trial_multi_step_{kind}_target_calls_per_pair']:.1f} / "
+            f"{r[f'trial_multi_step_{kind}_target_cp_per_pair_s']:.3f} | "
+            f"{r[f'trial_multi_step_{kind}_target_calls_grouped']:.1f} / "
+            f"{r[f'trial_multi_step_{kind}_target_cp_grouped_s']:.3f} | | |"
+        )
     lines.append(
         f"| multi-step trial, wall s | {r['trial_multi_step_per_pair_s']:.3f} | "
-        f"{r['trial_multi_step_grouped_s']:.3f} | |"
+        f"{r['trial_multi_step_grouped_s']:.3f} | | |"
     )
     lines.append(
         f"| collapse prediction per ch. 4 plan (10 boxes, all ordered pairs), s | "
         f"{r['ch4_plan_10_objects_cp_per_pair_s']:.3f} | "
         f"{r['ch4_plan_10_objects_cp_grouped_s']:.3f} | "
-        f"{r['ch4_plan_10_objects_cp_ratio']:.2f}x less |"
+        f"{r['ch4_plan_10_objects_cp_ratio']:.2f}x less | |"
     )
+    lines += [
+        "",
+        "Forward GFLOPs per pair (FlopCounterMode): depth encoder per scene, decoder part per",
+        "scene (its convs' VGG-map halves), decoder part per target (mask encoder included);",
+        "the ceiling if every batch held all of a scene's targets (the dataset's mean):",
+        "",
+        "| network | encoder / scene | decoder / scene | decoder / target | per-pair network "
+        "| targets per scene | ceiling, whole scenes |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    rows = [(name, f"train_{name}") for name in TRAIN_MODELS]
+    for name, key in [*rows, ("cp_focal, paper scale", "paper_cp_focal")]:
+        whole = "ceiling" if key.startswith("paper") else "ceiling_whole_scenes"
+        lines.append(
+            f"| {name} | {r[f'{key}_encoder_gflop']:.3f} | "
+            f"{r[f'{key}_decoder_scene_gflop']:.3f} | "
+            f"{r[f'{key}_decoder_target_gflop']:.3f} | {r[f'{key}_pair_gflop']:.3f} "
+            f"| {r[f'{key}_targets_per_scene']:.1f} | {r[f'{key}_{whole}']:.2f}x |"
+        )
     return lines
 
 
