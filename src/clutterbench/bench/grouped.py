@@ -56,11 +56,10 @@ def _per_pair_batch(ds: PairDataset, indices: list[int]) -> dict[str, torch.Tens
     return {k: torch.stack([item[k] for item in items]) for k in items[0]}
 
 
-def flop_ceiling(model: Any, targets_per_scene: float) -> dict[str, float]:
-    """Forward GFLOPs of a collapse_map network: the depth encoder per scene, the
-    decoder's per-scene part (its convs' VGG-map halves) and per-target part, and the ratio
-    per-pair / grouped FLOPs per pair at `targets_per_scene`: the most encoding a scene once
-    can buy, before any overhead."""
+def flop_split(model: Any) -> dict[str, float]:
+    """Forward GFLOPs of a collapse_map network: the depth encoder per scene, the decoder's
+    per-scene part (its convs' VGG-map halves), its per-target part, and the per-pair
+    (concatenated) network."""
     from torch.utils.flop_counter import FlopCounterMode
 
     model = model.eval()
@@ -79,15 +78,25 @@ def flop_ceiling(model: Any, targets_per_scene: float) -> dict[str, float]:
     one = gflops(lambda: model.decode(feats, masks[:1], torch.zeros(1, dtype=torch.int64)))
     many = gflops(lambda: model.decode(feats, masks, torch.zeros(n, dtype=torch.int64)))
     per_target = (many - one) / (n - 1)
-    per_scene = one - per_target
-    grouped = (encoder + per_scene) / targets_per_scene + per_target
     return {
         "encoder_gflop": encoder,
-        "decoder_scene_gflop": per_scene,
+        "decoder_scene_gflop": one - per_target,
         "decoder_target_gflop": per_target,
         "pair_gflop": pair,
-        "ceiling": pair / grouped,
     }
+
+
+def ceiling(split: dict[str, float], targets_per_scene: float) -> float:
+    """Per-pair / grouped FLOPs per pair at `targets_per_scene`: the most encoding a scene
+    once can buy, before any overhead."""
+    per_scene = split["encoder_gflop"] + split["decoder_scene_gflop"]
+    return split["pair_gflop"] / (per_scene / targets_per_scene + split["decoder_target_gflop"])
+
+
+def flop_ceiling(model: Any, targets_per_scene: float) -> dict[str, float]:
+    """flop_split of `model` and its ceiling at `targets_per_scene`."""
+    split = flop_split(model)
+    return split | {"ceiling": ceiling(split, targets_per_scene)}
 
 
 def bench_training(params: dict[str, Any], name: str, batches: int) -> dict[str, float]:
@@ -129,11 +138,10 @@ def bench_training(params: dict[str, Any], name: str, batches: int) -> dict[str,
         if path == "grouped":
             out[f"train_{name}_pairs_per_scene"] = pairs / max(scenes, 1)
     per_scene = len(ds.pairs) / len(np.unique(ds.pairs[:, 0]))
-    net = build_model(mcfg.arch, mcfg.net)
-    ceiling = flop_ceiling(net, out[f"train_{name}_pairs_per_scene"])
-    out |= {f"train_{name}_{k}": v for k, v in ceiling.items()}
+    split = flop_ceiling(build_model(mcfg.arch, mcfg.net), out[f"train_{name}_pairs_per_scene"])
+    out |= {f"train_{name}_{k}": v for k, v in split.items()}
     out[f"train_{name}_targets_per_scene"] = per_scene
-    out[f"train_{name}_ceiling_whole_scenes"] = flop_ceiling(net, per_scene)["ceiling"]
+    out[f"train_{name}_ceiling_whole_scenes"] = ceiling(split, per_scene)
     out[f"train_{name}_ratio"] = (
         out[f"train_{name}_grouped_pairs_per_s"] / out[f"train_{name}_per_pair_pairs_per_s"]
     )
