@@ -10,6 +10,7 @@ from clutterbench.config import BaseConfig, load_section
 from clutterbench.data.config import GenerateConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json
+from clutterbench.precision import inference_from_params
 from clutterbench.stage import run_stage
 
 
@@ -19,6 +20,7 @@ def evaluate(params: dict, base: BaseConfig) -> None:
     if name not in cfg.runs:
         raise ClutterbenchError(f"evaluate.runs.{name}: no such run (known: {', '.join(cfg.runs)})")
     run, cfg = cfg.runs[name], cfg.for_run(name)
+    precision = inference_from_params(params)
     gen = load_section(GenerateConfig, "generate", params)
     for key, dataset in (("dataset", run.dataset), ("val_dataset", run.val_dataset)):
         if dataset not in gen.datasets:
@@ -39,6 +41,7 @@ def evaluate(params: dict, base: BaseConfig) -> None:
     metrics = result.metrics
     out = Path(f"reports/evaluate/{name}")
     about = {"model": run.model, "dataset": run.dataset, "split": run.split}
+    about |= {"precision": precision}
     write_json(out / "metrics.json", about | {"val_dataset": run.val_dataset, **metrics})
     write_sweep_csv(out / "sweep.csv", result.sweep)
     write_sweep_csv(out / "val_sweep.csv", result.val_sweep)

@@ -12,6 +12,7 @@ from clutterbench.data.generate import generate_dataset
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json, write_text
 from clutterbench.planning.support import oracle_heatmaps
+from clutterbench.precision import inference_from_params
 from clutterbench.progress import progress_bar
 from clutterbench.report.support_figure import SupportPanel, support_figure
 from clutterbench.sim.config import SimConfig
@@ -41,6 +42,7 @@ def support(params: dict, base: BaseConfig) -> None:
     if cfg.val_dataset not in gen.datasets:
         raise ClutterbenchError(f"support.val_dataset: unknown dataset '{cfg.val_dataset}'")
     model = Path(f"models/{cfg.model}/best.pt")
+    precision = inference_from_params(params)
     predictor = CollapsePredictor.from_checkpoint(model, image_size=sim.camera.image_size)
 
     # 1. thresholds on validation scenes
@@ -101,7 +103,8 @@ def support(params: dict, base: BaseConfig) -> None:
     thresholds = {m: as_dict(p) for m, p in chosen.items()} | {"random": {"p_edge": p_edge}}
     val_at = {m: val_metrics_at(sweep, m, p) for m, p in chosen.items()}
     write_json(
-        OUT / "thresholds.json", {"chosen": thresholds, "val": val_at, "val_scenes": len(val)}
+        OUT / "thresholds.json",
+        {"chosen": thresholds, "val": val_at, "val_scenes": len(val), "precision": precision},
     )
     support_figure(panels, OUT / "figure.png", "Inferred (white, dashed) and true (pink) support")
     mean = scenes.groupby("method", sort=False)[["precision", "recall"]].mean()

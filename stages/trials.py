@@ -11,6 +11,7 @@ from pathlib import Path
 
 from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.errors import ClutterbenchError
+from clutterbench.precision import inference_from_params
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
 from clutterbench.trials.ch6 import condition_jobs, load_planners, run_ch6_episode
@@ -36,6 +37,7 @@ def trials(params: dict, base: BaseConfig) -> None:
         raise ClutterbenchError("trials.conditions: no conditions to run")
     load_planners(cfg.planner_modules, [c.planner for c in conditions.values()])
     sim = load_section(SimConfig, "sim", params)
+    precision = inference_from_params(params)
     jobs, about = [], {}
     for name, cond in conditions.items():
         mine, support, cp_max = condition_jobs(
@@ -48,6 +50,7 @@ def trials(params: dict, base: BaseConfig) -> None:
             "stream": cond.stream,
             "rule": cond.rule,
             "scale": base.scale,
+            "precision": precision,
             "cp_max": cp_max,
             "support": as_dict(support),
         }

@@ -14,6 +14,7 @@ import numpy as np
 
 from clutterbench.config import BaseConfig, load_section
 from clutterbench.errors import ClutterbenchError
+from clutterbench.precision import inference_from_params
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
 from clutterbench.trials.arm import run_arm_episode
@@ -32,6 +33,7 @@ def trials_arm(params: dict, base: BaseConfig) -> None:
     if not cfg.arm_conditions:
         raise ClutterbenchError("trials.arm_conditions: no conditions to run")
     sim = load_section(SimConfig, "sim", params)
+    precision = inference_from_params(params)
     jobs, about = [], {}
     for name, arm in cfg.arm_conditions.items():
         if arm.of in cfg.conditions:
@@ -73,6 +75,7 @@ def trials_arm(params: dict, base: BaseConfig) -> None:
             "stream": cond.stream,
             "executor": "arm",
             "scale": base.scale,
+            "precision": precision,
         }
     start = time.perf_counter()
     results = run_episodes("trials_arm", run_arm_episode, jobs, cfg.workers)

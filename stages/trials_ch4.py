@@ -11,6 +11,7 @@ from pathlib import Path
 from clutterbench.config import BaseConfig, load_section
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json, write_text
+from clutterbench.precision import inference_from_params
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
 from clutterbench.trials.ch4 import ch4_jobs, draw_figure, run_ch4_episode
@@ -28,6 +29,7 @@ def trials_ch4(params: dict, base: BaseConfig) -> None:
     if not cfg.ch4_conditions:
         raise ClutterbenchError("trials.ch4_conditions: no conditions to run")
     sim = load_section(SimConfig, "sim", params)
+    precision = inference_from_params(params)
     jobs = []
     for name, cond in cfg.ch4_conditions.items():
         if cond.model is not None and not Path(f"models/{cond.model}/best.pt").exists():
@@ -55,6 +57,7 @@ def trials_ch4(params: dict, base: BaseConfig) -> None:
             "perception": cond.perception,
             "stream": cond.stream,
             "scale": base.scale,
+            "precision": precision,
         }
         mine = [r for r in results if r.record["condition"] == name]
         write_mcap(DATA / name / "episodes.mcap", mine, about)
@@ -69,7 +72,12 @@ def trials_ch4(params: dict, base: BaseConfig) -> None:
         )
     summary = aggregate(records)
     write_text(OUT / "summary.csv", summary.to_csv(index=False))
-    totals = {"scale": base.scale, "conditions": len(cfg.ch4_conditions), "trials": len(records)}
+    totals = {
+        "scale": base.scale,
+        "precision": precision,
+        "conditions": len(cfg.ch4_conditions),
+        "trials": len(records),
+    }
     totals |= {
         "success_rate": sum(r["success"] for r in records) / len(records),
         "strict_success_rate": sum(r["strict_success"] for r in records) / len(records),

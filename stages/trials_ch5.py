@@ -10,6 +10,7 @@ from pathlib import Path
 from clutterbench.config import BaseConfig, load_section
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json, write_text
+from clutterbench.precision import inference_from_params
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
 from clutterbench.trials.ch5 import (
@@ -32,6 +33,7 @@ def trials_ch5(params: dict, base: BaseConfig) -> None:
     if not cfg.ch5_conditions:
         raise ClutterbenchError("trials.ch5_conditions: no conditions to run")
     sim = load_section(SimConfig, "sim", params)
+    precision = inference_from_params(params)
     check_models(dict(cfg.ch5_conditions), cfg.ch5)
     prob = collapse_threshold(cfg.ch5)
     with_detector = any(c.perception == "detector" for c in cfg.ch5_conditions.values())
@@ -61,6 +63,7 @@ def trials_ch5(params: dict, base: BaseConfig) -> None:
             "perception": cond.perception,
             "stream": cond.stream,
             "scale": base.scale,
+            "precision": precision,
             "prob_threshold": str(prob),
         }
         mine = [r for r in results if r.record["condition"] == name]
@@ -68,7 +71,13 @@ def trials_ch5(params: dict, base: BaseConfig) -> None:
     summary = aggregate(records)
     write_text(OUT / "summary.csv", summary.to_csv(index=False))
     write_json(
-        OUT / "totals.json", {"scale": base.scale, "prob_threshold": prob, "trials": len(records)}
+        OUT / "totals.json",
+        {
+            "scale": base.scale,
+            "precision": precision,
+            "prob_threshold": prob,
+            "trials": len(records),
+        },
     )
     for row in summary.itertuples():
         print(f"{row.condition}: success {row.success_k}/{row.success_n}")

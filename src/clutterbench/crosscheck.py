@@ -43,7 +43,7 @@ import numpy as np
 import yaml
 
 from clutterbench.io import load_npz, read_json, write_json
-from clutterbench.platform_info import environment
+from clutterbench.platform_info import environment, instruction_set
 
 SCENES = 400  # ch6_test scenes (tiny: 3)
 EPISODES = 300  # episodes of multi_step and of oracle (tiny: 2)
@@ -316,7 +316,10 @@ def byte_identity(expected: dict, got: dict) -> dict[str, Any]:
     same = [p for p in DIGESTED if expected["digests"].get(p) == got["digests"].get(p)]
     differ = [p for p in DIGESTED if p not in same]
     e_env, g_env = expected["run"]["environment"], got["run"]["environment"]
-    same_machine = all(e_env[k] == g_env[k] for k in ("cpu_model", "torch_threads"))
+    # Bits match only on the same CPU model, instruction set (torch's kernel level and the
+    # flags that pick the precision) and thread count; an older record without the
+    # instruction set counts as another machine.
+    same_machine = all(e_env.get(k) == g_env.get(k) for k in SAME_MACHINE_KEYS)
     return {
         "byte_identical": not differ,
         "differing_outputs": differ,
@@ -337,9 +340,13 @@ def table(rows: list[Row], alpha: float = ALPHA) -> str:
     return "\n".join(lines)
 
 
+SAME_MACHINE_KEYS = ("cpu_model", "torch_cpu_capability", "cpu_flags", "torch_threads")
+
+
 def _machine(env: dict) -> str:
+    isa = f" ({instruction_set(env)})" if "torch_cpu_capability" in env else ""
     return (
-        f"{env['cpu_model']}, {env['logical_cpus']} logical CPUs, torch threads "
+        f"{env['cpu_model']}{isa}, {env['logical_cpus']} logical CPUs, torch threads "
         f"{env['torch_threads']}, torch {env['torch']}, sapien {env['sapien']}"
     )
 
@@ -387,11 +394,17 @@ def main(argv: list[str] | None = None) -> int:
             f"{len(DIGESTED)} outputs differ: {', '.join(ident['differing_outputs'])})"
         )
     if ident["same_cpu_model_and_threads"]:
-        print("same CPU model and torch threads as the expectations: byte-identity expected")
+        print(
+            "same CPU model, instruction set and torch threads as the expectations: "
+            "byte-identity expected"
+        )
         if not ident["byte_identical"]:
             print("  (it was not: other code or package versions, or a determinism bug)")
     else:
-        print("other CPU model or thread count: only statistical agreement is expected")
+        print(
+            "other CPU model, instruction set or thread count: only statistical agreement "
+            "is expected"
+        )
     print(f"crosscheck: {'PASS' if ok else 'FAIL'} ({got['run']['repro_seconds']} s)")
     write_json(
         root / RESULT,

@@ -1,8 +1,12 @@
-"""The machine a result came from: CPU model, logical CPUs, torch threads, versions.
+"""The machine a result came from: CPU model, instruction set, logical CPUs, torch threads,
+versions.
 
-Results are byte-identical only on the same CPU model with the same thread count (README:
-Determinism), so every benchmark result, the report stage's metrics and the cross-check
-record these. Nothing here imports SAPIEN (versions are read from package metadata).
+Results are byte-identical only on the same CPU model and instruction set with the same
+thread count and network precision (README: Determinism). A model name such as "AMD EPYC"
+names neither the instruction set nor whether bf16 runs natively, so every benchmark result,
+the report stage's metrics and the cross-check record torch's CPU capability (the kernel
+level it dispatches to) and the relevant CPU flags beside it. Nothing here imports SAPIEN
+(versions are read from package metadata).
 """
 
 from __future__ import annotations
@@ -28,6 +32,32 @@ def cpu_model(cpuinfo: Path = CPUINFO) -> str:
     return platform.processor() or platform.machine() or "unknown"
 
 
+FLAGS = ("avx2", "avx512f", "avx512_bf16", "amx_bf16")
+"""The CPU flags that decide which network kernels run, and whether bf16 is native."""
+
+
+def cpu_flags(cpuinfo: Path = CPUINFO) -> dict[str, bool]:
+    """Each of FLAGS: present in /proc/cpuinfo's first "flags" line (all False elsewhere)."""
+    present: set[str] = set()
+    try:
+        for line in cpuinfo.read_text(errors="replace").splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "flags":
+                present = set(value.split())
+                break
+    except OSError:
+        pass
+    return {flag: flag in present for flag in FLAGS}
+
+
+def torch_cpu_capability() -> str:
+    """The kernel level torch dispatches to: "AVX2", "AVX512", ... (ATEN_CPU_CAPABILITY can
+    hold it lower than the CPU allows; imports torch)."""
+    import torch
+
+    return str(torch.backends.cpu.get_cpu_capability())
+
+
 def logical_cpus() -> int:
     return os.cpu_count() or 1
 
@@ -40,13 +70,24 @@ def torch_threads() -> int:
 
 
 def cpu_description() -> dict[str, Any]:
-    """CPU model, logical CPUs, torch threads and architecture: what byte-identity needs."""
+    """CPU model, instruction set (torch's capability and the CPU flags), logical CPUs,
+    torch threads and architecture: what byte-identity needs."""
     return {
         "cpu_model": cpu_model(),
+        "torch_cpu_capability": torch_cpu_capability(),
+        "cpu_flags": cpu_flags(),
         "logical_cpus": logical_cpus(),
         "torch_threads": torch_threads(),
         "machine": platform.machine(),
     }
+
+
+def instruction_set(description: dict[str, Any]) -> str:
+    """One phrase for a cpu_description(): torch's capability and the flags present, e.g.
+    "torch AVX2; avx2" or "torch AVX512; avx2 avx512f avx512_bf16"."""
+    flags = description.get("cpu_flags") or {}
+    present = " ".join(f for f in FLAGS if flags.get(f)) or "none of " + "/".join(FLAGS)
+    return f"torch {description.get('torch_cpu_capability', '?')}; {present}"
 
 
 def package_version(name: str) -> str | None:

@@ -105,7 +105,7 @@ def test_predict_collapse_batches_over_targets(arch):
     torch.manual_seed(0)
     model = build_model(arch, tiny_config(arch))
     depth, target, _ = scene_batch()
-    predictor = CollapsePredictor(model, batch_size=3, bf16=False)
+    predictor = CollapsePredictor(model, batch_size=3, precision="fp32")
     masks = target[:, 0].numpy()
     heat = predict_collapse(predictor, depth[0, 0].numpy(), masks)
     assert heat.shape == (4, SIZE, SIZE) and heat.dtype == np.float32
@@ -235,7 +235,7 @@ def test_cross_entropy_training_step_drives_loss_down(arch):
     mcfg = TrainModelConfig(
         arch=arch, dataset="x", batch_size=4, lr=1e-2, epochs=1, net=net, loss="ce"
     )
-    cfg = TrainConfig(models={"m": mcfg}, bf16=False, channels_last=False)
+    cfg = TrainConfig(models={"m": mcfg}, precision="fp32", channels_last=False)
     model = build_model(arch, net).train()
     opt = torch.optim.Adam(model.parameters(), lr=mcfg.lr)
     depth, masks, classes = pull_batch()
@@ -258,7 +258,7 @@ def test_predict_collapse_takes_mask_pairs(arch):
     torch.manual_seed(0)
     model = build_model(arch, tiny_config(arch, **CH4)).eval()
     depth, masks, _ = pull_batch()
-    predictor = CollapsePredictor(model, batch_size=3, bf16=False, channels_last=False)
+    predictor = CollapsePredictor(model, batch_size=3, precision="fp32", channels_last=False)
     heat = predict_collapse(predictor, depth[0, 0].numpy(), masks.numpy())
     with torch.no_grad():
         probs = torch.softmax(model(depth[:1].expand(4, -1, -1, -1), masks), dim=1)
@@ -298,7 +298,7 @@ def test_predict_collapse_encodes_the_scene_once_with_the_same_maps(arch, monkey
     torch.manual_seed(0)
     model = build_model(arch, tiny_config(arch)).eval()
     depth, target, _ = scene_batch(5)
-    predictor = CollapsePredictor(model, batch_size=2, bf16=False, channels_last=False)
+    predictor = CollapsePredictor(model, batch_size=2, precision="fp32", channels_last=False)
     calls = []
     if getattr(model, "encodes_scene_once", False):
         real = predictor.model.encode

@@ -63,7 +63,7 @@ def toy():
 
 def _params(arch: str, **net) -> dict:
     model = {"arch": arch, "dataset": "d", "batch_size": 2, "lr": 1e-2, "epochs": 1, "net": net}
-    return {"models": {"m": model}, "bf16": False, "channels_last": False}
+    return {"models": {"m": model}, "precision": "fp32", "channels_last": False}
 
 
 def test_builtin_archs_keep_their_names_and_order():
@@ -109,7 +109,7 @@ def test_a_registered_network_trains_saves_and_loads(toy, tmp_path):
     model.eval()
     with torch.no_grad():
         assert torch.equal(ckpt.model()(depth, target), model(depth, target))
-    predictor = CollapsePredictor.from_checkpoint(path, image_size=SIZE, bf16=False)
+    predictor = CollapsePredictor.from_checkpoint(path, image_size=SIZE, precision="fp32")
     heat = predictor(depth[0, 0].numpy(), target[:, 0].numpy())
     assert heat.shape == (2, SIZE, SIZE) and 0.0 <= heat.min() <= heat.max() <= 1.0
 

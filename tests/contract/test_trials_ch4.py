@@ -129,7 +129,7 @@ def test_risk_planner_pulls_the_pair_of_least_predicted_collapse(stack3, physics
     ensure_renderer()
     obs = observe(BoxWorld.from_spec(stack3, physics, render=True), CAM)
     seg = masks_from_instance(obs, 5)
-    predictor = CollapsePredictor(ExtractCollapses(), bf16=False, channels_last=False)
+    predictor = CollapsePredictor(ExtractCollapses(), precision="fp32", channels_last=False)
     choice, pairs, risks, _ = plan_risk(predictor, obs, seg, None, 0.4)
     area = seg.masks.sum(axis=(1, 2))
     assert choice.extract == int(np.argmin(area))
@@ -155,7 +155,7 @@ def test_equal_risks_go_to_the_least_expected_collapse(stack3, physics):
     seg = masks_from_instance(obs, 5)
     area = seg.masks.sum(axis=(1, 2))
     assert int(np.argmin(area)) != 0  # else the first candidate would win anyway
-    predictor = CollapsePredictor(FaintExtractCollapse(), bf16=False, channels_last=False)
+    predictor = CollapsePredictor(FaintExtractCollapse(), precision="fp32", channels_last=False)
     choice, _, risks, _ = plan_risk(predictor, obs, seg, None, 0.4)
     assert (risks == 0).all()
     assert choice.extract == int(np.argmin(area))

@@ -52,7 +52,7 @@ PARAMS = {
                 "epochs": 1,
             }
         },
-        "bf16": False,
+        "precision": "fp32",
         "channels_last": False,
     },
 }

@@ -15,12 +15,19 @@ from pathlib import Path
 from typing import Any
 
 from clutterbench.io import write_json, write_text
+from clutterbench.platform_info import instruction_set
+from clutterbench.precision import native_bf16
 
 
 def machine_line(result: Mapping[str, Any]) -> str:
-    """The markdown line under a title naming the machine (keys of cpu_description())."""
+    """The markdown line under a title naming the machine (keys of cpu_description()): the
+    model name, and the instruction set that decides the network kernels and precision."""
+    isa = ""
+    if "torch_cpu_capability" in result:
+        native = native_bf16(result["torch_cpu_capability"], result.get("cpu_flags") or {})
+        isa = f" ({instruction_set(result)}; bf16 {'native' if native else 'emulated'})"
     return (
-        f"Machine: {result['cpu_model']}, {result['logical_cpus']} logical CPUs, "
+        f"Machine: {result['cpu_model']}{isa}, {result['logical_cpus']} logical CPUs, "
         f"{result['torch_threads']} torch threads, {result['machine']}."
     )
 

@@ -11,6 +11,7 @@ from clutterbench.config import bounded
 from clutterbench.data.labels import OUTPUT_CHANNELS
 from clutterbench.errors import ClutterbenchError
 from clutterbench.models import ARCHS, parse_net_config
+from clutterbench.precision import check_precision, resolve_precision
 from clutterbench.sim.noise import DepthNoiseConfig
 
 
@@ -78,12 +79,14 @@ class TrainConfig:
     """Depth noise augmentation."""
     channels_last: bool = True
     """NHWC memory format (measured ~2x faster on this CPU; reports/bench/models.md)."""
-    bf16: bool = True
-    """bfloat16 autocast for convolutions (AVX512-BF16 CPUs; measured in reports/bench)."""
+    precision: str = "auto"
+    """auto (bf16 autocast where the CPU runs it natively, else fp32), fp32 or bf16
+    (clutterbench.precision; both timed in reports/bench/models.md)."""
     val_threshold: float = bounded(0.5, gt=0.0, le=1.0)
     """Probability above which a pixel counts as collapse in validation metrics."""
 
     def __post_init__(self) -> None:
+        check_precision(self.precision, "train.precision")
         for name, m in self.models.items():
             if m.arch not in ARCHS:
                 raise ClutterbenchError(
@@ -93,6 +96,11 @@ class TrainConfig:
                 net = parse_net_config(m.arch, m.net, f"train.models.{name}.net")
                 object.__setattr__(m, "net", net)
             check_labels(m, f"train.models.{name}")
+
+    @property
+    def bf16(self) -> bool:
+        """Whether training runs under bf16 autocast on this CPU (`precision` resolved)."""
+        return resolve_precision(self.precision) == "bf16"
 
 
 @dataclasses.dataclass(frozen=True)

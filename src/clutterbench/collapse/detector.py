@@ -38,6 +38,7 @@ from clutterbench.models.detector import (
     save_detector,
 )
 from clutterbench.perception.boxes import ARRANGEMENT_CLASSES, Detection, nms
+from clutterbench.precision import check_precision, resolve_precision
 from clutterbench.progress import progress_bar
 from clutterbench.sim.noise import DepthNoiseConfig, add_depth_noise
 
@@ -72,8 +73,9 @@ class DetectorParams:
     """Weight of the L1 loss on the centre's sub-cell offset."""
     gaussian_alpha: float = bounded(0.54, gt=0.0, le=1.0)
     """Heatmap Gaussian sigma = alpha * box side / 6 (TTFNet's elliptic Gaussian)."""
-    bf16: bool = True
-    """Train under bfloat16 autocast (CPU; evaluation and inference stay float32)."""
+    precision: str = "auto"
+    """Training under bfloat16 autocast: auto (where the CPU runs it natively, else fp32),
+    fp32 or bf16 (clutterbench.precision; evaluation and inference stay float32)."""
     channels_last: bool = True
     """Channels-last memory layout while training (faster convolutions on the CPU)."""
     shift_px: int = bounded(8, ge=0)
@@ -96,6 +98,9 @@ class DetectorParams:
     """Most heatmap peaks decoded per image."""
     figure_samples: int = bounded(6, ge=1)
     """Test images in figure.png (thesis Fig. 5.3)."""
+
+    def __post_init__(self) -> None:
+        check_precision(self.precision, "detector.precision")
 
 
 class ArrangementDetector:
@@ -315,6 +320,8 @@ def train_detector(
     seed = detector_seed(base_seed, p.dataset)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
+    precision = resolve_precision(p.precision)
+    bf16 = precision == "bf16"
     model = ArrangementNet(p.net)
     if p.channels_last:
         model = model.to(memory_format=torch.channels_last)
@@ -332,6 +339,7 @@ def train_detector(
     meta = {
         "dataset": p.dataset,
         "image_size": size,
+        "precision": precision,
         "classes": list(ARRANGEMENT_CLASSES),
         "seed": seed,
         "score_threshold": p.score_threshold,
@@ -353,7 +361,7 @@ def train_detector(
                 x, targets = training_batch(train, idx, p, rng)
                 if p.channels_last:
                     x = x.contiguous(memory_format=torch.channels_last)
-                with torch.autocast("cpu", dtype=torch.bfloat16, enabled=p.bf16):
+                with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
                     out = model(x)
                 out = {k: v.float() for k, v in out.items()}
                 loss = detector_loss(out, targets, p)
@@ -393,6 +401,7 @@ def train_detector(
         "train_images": len(train),
         "val_images": len(val),
         "parameters": sum(t.numel() for t in model.parameters()),
+        "precision": precision,
     }
     write_json(paths.timing_file, {"stage": "detector", "train_s": train_s, "epoch_s": epoch_s})
     return ArrangementDetector.from_checkpoint(paths.model_dir / "best.pt"), summary

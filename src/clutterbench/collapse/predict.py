@@ -17,6 +17,7 @@ from torch import nn
 
 from clutterbench.models.checkpoint import check_compatible, load_checkpoint
 from clutterbench.models.common import fold_batchnorm
+from clutterbench.precision import inference_precision, resolve_precision
 
 
 def forward_logits(
@@ -28,7 +29,8 @@ def forward_logits(
     scene_of: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """(S, 1, H, W) depth (m) and (P, n_masks, H, W) masks -> (P, K, H, W) logits, in the
-    measured-fastest CPU setup (channels-last memory, bf16 autocast; reports/bench/models.md).
+    measured-fastest CPU setup (channels-last memory; bf16 autocast where the CPU runs it
+    natively: clutterbench.precision, reports/bench/models.md).
 
     Without `scene_of` mask p goes with depth p (S = P). With it, mask p goes with depth
     scene_of[p]: a network that `encodes_scene_once` encodes each depth image once for all
@@ -67,13 +69,16 @@ def collapse_probs(logits: torch.Tensor) -> torch.Tensor:
 
 
 class CollapsePredictor:
-    """A trained collapse network ready for inference (eval mode, no grad)."""
+    """A trained collapse network ready for inference (eval mode, no grad).
+
+    `precision` auto / fp32 / bf16 (clutterbench.precision); None takes the process's
+    inference precision (params' inference.precision as set by the stage, else auto)."""
 
     def __init__(
         self,
         model: nn.Module,
         batch_size: int = 16,
-        bf16: bool = True,
+        precision: str | None = None,
         channels_last: bool = True,
         encode_once: bool = True,
         fold_bn: bool = True,
@@ -81,7 +86,12 @@ class CollapsePredictor:
         self.model = fold_batchnorm(model) if fold_bn else model.eval()
         if channels_last:
             self.model = self.model.to(memory_format=torch.channels_last)
-        self.batch_size, self.bf16, self.channels_last = batch_size, bf16, channels_last
+        self.precision = (
+            inference_precision() if precision is None else resolve_precision(precision)
+        )
+        """The precision used: fp32 or bf16."""
+        self.bf16 = self.precision == "bf16"
+        self.batch_size, self.channels_last = batch_size, channels_last
         self.encode_once = encode_once
         self.seconds = 0.0
         """Wall time spent in `scene_logits` so far (the collapse prediction's share)."""

@@ -39,7 +39,8 @@ from clutterbench.progress import progress_bar
 DEVICE_ENV = "CLUTTERBENCH_TRAIN_DEVICE"
 """Where training runs: cpu (the default), cuda, or auto (cuda when torch sees a GPU). It
 changes where the numbers are computed, not what: no dvc parameter, results agree
-statistically (bf16 autocast is a CPU setting; on a GPU training runs in float32)."""
+statistically (bf16 autocast is a CPU setting, train.precision; on a GPU training runs in
+float32 and records fp32)."""
 
 LOG_COLUMNS = (
     "epoch",
@@ -148,6 +149,7 @@ def train_model(
             f"'{mcfg.dataset}' has {size}x{size} images (sim.camera.image_size)"
         )
     device = train_device()
+    precision = ("bf16" if cfg.bf16 else "fp32") if device.type == "cpu" else "fp32"
     model = build_model(mcfg.arch, mcfg.net).to(device)
     if cfg.channels_last:
         model = model.to(memory_format=torch.channels_last)
@@ -176,6 +178,7 @@ def train_model(
         "image_size": size,
         "train": as_dict(dataclasses.replace(mcfg, net={})),
         "seed": seed,
+        "precision": precision,
     }
     with EpisodeWriter(paths.model_dir / "train.mcap", {"model": name, **meta}) as mcap:
         mcap.write_depth(0.0, sample["depth_m"][0].numpy())
@@ -223,6 +226,7 @@ def train_model(
             "train_pairs": len(train_ds),
             "val_pairs": len(val_ds),
             "parameters": sum(p.numel() for p in model.parameters()),
+            "precision": precision,
         }
         mcap.set_outcome({"best_epoch": best["epoch"], "best_val_loss": best["val_loss"]})
     write_json(paths.report_dir / "summary.json", summary)
