@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import os
 import shutil
 import subprocess
@@ -28,6 +29,7 @@ from clutterbench.logs.mcap_episode import read_episode
 from clutterbench.models.checkpoint import load_checkpoint, save_checkpoint
 from clutterbench.models.collapse_map import CollapseMapConfig, CollapseMapNet
 from clutterbench.models.vgg import VGGConfig
+from clutterbench.precision import resolve_precision
 from clutterbench.report.config import ReportConfig
 from clutterbench.sim.config import SimConfig
 from clutterbench.trials.ch3_config import Ch3Config
@@ -84,8 +86,14 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
         assert len(list((a / "data/generate" / name).glob("shard-*.npz"))) >= 1
         assert (a / "data/split" / f"{name}.json").exists()
     assert "ch6" in (a / "reports/tables/datasets.md").read_text()
+    auto = resolve_precision("auto")  # bf16 only where this CPU runs it natively
     for name in load_section(TrainConfig, "train", params).models:
-        assert load_checkpoint(a / "models" / name / "best.pt").meta["name"] == name
+        meta = load_checkpoint(a / "models" / name / "best.pt").meta
+        assert meta["name"] == name and meta["precision"] == auto
+        assert (
+            json.loads((a / "reports/train" / name / "summary.json").read_text())["precision"]
+            == auto
+        )
         episode = read_episode(a / "models" / name / "train.mcap")
         assert episode["topics"]["/train/epoch"] >= 1 and "outcome" in episode["metadata"]
         # wall times live outside dvc's outputs (reports/timing/), not in the train report
@@ -104,6 +112,7 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
         assert ours["val-chosen threshold"].between(0, 0.99).all()
         assert ours["differs from thesis"].str.contains(r"64 px \(thesis").all()
     for run_dir in (a / "reports/evaluate").iterdir():
+        assert json.loads((run_dir / "metrics.json").read_text())["precision"] == auto
         assert (run_dir / "figure.png").stat().st_size > 1000
         assert len((run_dir / "sweep.csv").read_text().splitlines()) == 101
         assert len((run_dir / "val_sweep.csv").read_text().splitlines()) == 101

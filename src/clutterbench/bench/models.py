@@ -1,11 +1,13 @@
 """`make bench`, networks part: training / inference speed on this CPU -> reports/bench/.
 
-Measures a train step and a forward pass per image for every network of `train.models`
-under the four combinations of channels-last and bf16 autocast and at 1 and 2 threads, then
-the inference API: ms per collapse map at default and paper sizes, and ms for all targets of
-a 10-object scene in one batched call. When a trained checkpoint exists, also how far bf16
-inference moves its probabilities from float32 on real validation images. Last, the peak RSS
-of a training epoch over sharded data of growing size (clutterbench.bench.memory).
+Measures a train step per image for every network of `train.models` in both precisions
+(fp32 and bf16 autocast) with and without channels-last memory, at 1 and 2 threads, and says
+which precision `auto` picks on this CPU (clutterbench.precision: bf16 only where it is
+native; emulated bf16 is ~10x slower than fp32). Then the inference API in both precisions:
+ms per collapse map at default and paper sizes, and ms for all targets of a 10-object scene
+in one batched call. When a trained checkpoint exists, also how far bf16 inference moves its
+probabilities from float32 on real validation images. Last, the peak RSS of a training epoch
+over sharded data of growing size (clutterbench.bench.memory).
 """
 
 from __future__ import annotations
@@ -28,10 +30,13 @@ from clutterbench.config import load_params, load_section
 from clutterbench.data.dataset import CollapseDataset
 from clutterbench.models import build_model
 from clutterbench.platform_info import cpu_description
+from clutterbench.precision import PRECISIONS, native_bf16, resolve_precision
 
 BATCH = 16
 STEPS = 3
 SCENE_OBJECTS = 10
+MEASURED = tuple(p for p in PRECISIONS if p != "auto")
+"""Both precisions are timed on every CPU, whichever `auto` picks."""
 
 
 def _inputs(
@@ -71,6 +76,18 @@ def time_train_step(
     return 1e3 * float(np.median(times[1:])) / batch
 
 
+def bf16_over_fp32(rows: list[dict[str, Any]]) -> dict[str, float]:
+    """Per model: bf16 train ms / fp32 train ms at 2 threads, channels-last (the defaults):
+    below 1 where bf16 is native, ~10 where it is emulated."""
+    ms = {
+        (r["model"], r["precision"]): r["train_ms_per_image"]
+        for r in rows
+        if r["threads"] == 2 and r["channels_last"]
+    }
+    models = dict.fromkeys(m for m, _ in ms)
+    return {m: ms[(m, "bf16")] / ms[(m, "fp32")] for m in models}
+
+
 def time_predict(predictor: CollapsePredictor, n_targets: int, repeats: int = 5) -> float:
     """ms for one predict_collapse call over `n_targets` masks of one depth image."""
     size = predictor.input_size
@@ -87,8 +104,8 @@ def time_predict(predictor: CollapsePredictor, n_targets: int, repeats: int = 5)
 
 def bf16_agreement(ckpt: Path, gen_dir: Path, split_file: Path, threshold_m: float) -> dict:
     """Max |p_bf16 - p_fp32| and the fraction of pixels whose 0.5 decision flips."""
-    fp32 = CollapsePredictor.from_checkpoint(ckpt, bf16=False)
-    bf16 = CollapsePredictor.from_checkpoint(ckpt, bf16=True)
+    fp32 = CollapsePredictor.from_checkpoint(ckpt, precision="fp32")
+    bf16 = CollapsePredictor.from_checkpoint(ckpt, precision="bf16")
     ds = CollapseDataset(gen_dir, split_file, "val", threshold_m)
     worst, flips, pixels = 0.0, 0, 0
     for i in range(0, len(ds), max(1, len(ds) // 64)):
@@ -115,15 +132,15 @@ def bench_models(out_dir: Path = Path("reports/bench")) -> dict:
         if key in seen:
             continue
         seen.add(key)
-        for threads, cl, bf in itertools.product((1, 2), (False, True), (False, True)):
+        for threads, cl, precision in itertools.product((1, 2), (False, True), MEASURED):
             torch.set_num_threads(threads)
-            ms = time_train_step(m.arch, m.net, cl, bf)
+            ms = time_train_step(m.arch, m.net, cl, precision == "bf16")
             rows.append(
                 {
                     "model": name,
                     "threads": threads,
                     "channels_last": cl,
-                    "bf16": bf,
+                    "precision": precision,
                     "train_ms_per_image": ms,
                 }
             )
@@ -134,15 +151,20 @@ def bench_models(out_dir: Path = Path("reports/bench")) -> dict:
     for scale, cfg in by_scale.items():
         m = cfg.models[cp]
         model = build_model(m.arch, m.net)
-        for bf in (False, True):
-            predictor = CollapsePredictor(model, batch_size=SCENE_OBJECTS, bf16=bf)
-            tag = f"{scale}_{m.net.input_size}px_{'bf16' if bf else 'fp32'}"
-            inference[f"ms_per_map_{tag}"] = time_predict(predictor, 1)
+        for precision in MEASURED:
+            predictor = CollapsePredictor(model, batch_size=SCENE_OBJECTS, precision=precision)
+            tag = f"{scale}_{m.net.input_size}px_{precision}"
+            # emulated bf16 at paper size takes minutes per call: fewer repeats
+            slow = scale == "paper" and precision == "bf16" and not native_bf16()
+            inference[f"ms_per_map_{tag}"] = time_predict(predictor, 1, repeats=1 if slow else 5)
             inference[f"ms_scene_{SCENE_OBJECTS}_targets_{tag}"] = time_predict(
-                predictor, SCENE_OBJECTS, repeats=3 if scale == "paper" else 5
+                predictor, SCENE_OBJECTS, repeats=1 if slow else 3 if scale == "paper" else 5
             )
             print(tag, inference[f"ms_per_map_{tag}"], flush=True)
     result: dict[str, Any] = {
+        "bf16_native": native_bf16(),
+        "auto_picks": resolve_precision("auto"),
+        "bf16_over_fp32": bf16_over_fp32(rows),
         "train_step": rows,
         "inference_model": cp,
         "inference": inference,
@@ -169,14 +191,21 @@ def _markdown(result: dict) -> list[str]:
     lines = header("Network benchmark (CPU)", result) + [
         f"Train step: Adam, batch {BATCH}, per image (median of {STEPS}).",
         "",
-        "| model | threads | channels-last | bf16 | train ms / image |",
+        "| model | threads | channels-last | precision | train ms / image |",
         "|---|---|---|---|---|",
     ]
     for r in result["train_step"]:
         lines.append(
-            f"| {r['model']} | {r['threads']} | {r['channels_last']} | {r['bf16']} | "
+            f"| {r['model']} | {r['threads']} | {r['channels_last']} | {r['precision']} | "
             f"{r['train_ms_per_image']:.1f} |"
         )
+    native = "native" if result["bf16_native"] else "emulated"
+    ratios = ", ".join(f"{m} {x:.2f}x" for m, x in result["bf16_over_fp32"].items())
+    lines += [
+        "",
+        f"bf16 is {native} on this CPU; `precision: auto` picks **{result['auto_picks']}**. "
+        f"bf16 / fp32 train time at 2 threads, channels-last: {ratios}.",
+    ]
     lines += [
         "",
         f"Inference ({result['inference_model']}, 2 threads):",
