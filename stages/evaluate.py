@@ -41,7 +41,7 @@ def evaluate(params: dict, base: BaseConfig) -> None:
     metrics = result.metrics
     out = Path(f"reports/evaluate/{name}")
     about = {"model": run.model, "dataset": run.dataset, "split": run.split}
-    about |= {"precision": precision}
+    about |= {"network_precision": precision}
     write_json(out / "metrics.json", about | {"val_dataset": run.val_dataset, **metrics})
     write_sweep_csv(out / "sweep.csv", result.sweep)
     write_sweep_csv(out / "val_sweep.csv", result.val_sweep)

@@ -104,7 +104,12 @@ def support(params: dict, base: BaseConfig) -> None:
     val_at = {m: val_metrics_at(sweep, m, p) for m, p in chosen.items()}
     write_json(
         OUT / "thresholds.json",
-        {"chosen": thresholds, "val": val_at, "val_scenes": len(val), "precision": precision},
+        {
+            "chosen": thresholds,
+            "val": val_at,
+            "val_scenes": len(val),
+            "network_precision": precision,
+        },
     )
     support_figure(panels, OUT / "figure.png", "Inferred (white, dashed) and true (pink) support")
     mean = scenes.groupby("method", sort=False)[["precision", "recall"]].mean()

@@ -50,7 +50,7 @@ def trials(params: dict, base: BaseConfig) -> None:
             "stream": cond.stream,
             "rule": cond.rule,
             "scale": base.scale,
-            "precision": precision,
+            "network_precision": precision,
             "cp_max": cp_max,
             "support": as_dict(support),
         }

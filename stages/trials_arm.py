@@ -75,7 +75,7 @@ def trials_arm(params: dict, base: BaseConfig) -> None:
             "stream": cond.stream,
             "executor": "arm",
             "scale": base.scale,
-            "precision": precision,
+            "network_precision": precision,
         }
     start = time.perf_counter()
     results = run_episodes("trials_arm", run_arm_episode, jobs, cfg.workers)

@@ -57,7 +57,7 @@ def trials_ch4(params: dict, base: BaseConfig) -> None:
             "perception": cond.perception,
             "stream": cond.stream,
             "scale": base.scale,
-            "precision": precision,
+            "network_precision": precision,
         }
         mine = [r for r in results if r.record["condition"] == name]
         write_mcap(DATA / name / "episodes.mcap", mine, about)
@@ -74,7 +74,7 @@ def trials_ch4(params: dict, base: BaseConfig) -> None:
     write_text(OUT / "summary.csv", summary.to_csv(index=False))
     totals = {
         "scale": base.scale,
-        "precision": precision,
+        "network_precision": precision,
         "conditions": len(cfg.ch4_conditions),
         "trials": len(records),
     }

@@ -63,7 +63,7 @@ def trials_ch5(params: dict, base: BaseConfig) -> None:
             "perception": cond.perception,
             "stream": cond.stream,
             "scale": base.scale,
-            "precision": precision,
+            "network_precision": precision,
             "prob_threshold": str(prob),
         }
         mine = [r for r in results if r.record["condition"] == name]
@@ -74,7 +74,7 @@ def trials_ch5(params: dict, base: BaseConfig) -> None:
         OUT / "totals.json",
         {
             "scale": base.scale,
-            "precision": precision,
+            "network_precision": precision,
             "prob_threshold": prob,
             "trials": len(records),
         },

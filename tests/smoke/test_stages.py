@@ -112,7 +112,7 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
         assert ours["val-chosen threshold"].between(0, 0.99).all()
         assert ours["differs from thesis"].str.contains(r"64 px \(thesis").all()
     for run_dir in (a / "reports/evaluate").iterdir():
-        assert json.loads((run_dir / "metrics.json").read_text())["precision"] == auto
+        assert json.loads((run_dir / "metrics.json").read_text())["network_precision"] == auto
         assert (run_dir / "figure.png").stat().st_size > 1000
         assert len((run_dir / "sweep.csv").read_text().splitlines()) == 101
         assert len((run_dir / "val_sweep.csv").read_text().splitlines()) == 101
