@@ -36,9 +36,7 @@ def test_disturbance_counts_only_other_boxes_beyond_the_threshold():
     assert d.disturbance_m == pytest.approx(0.024)
 
 
-def _result(
-    held, released, increments=10, aborted=False, extracted=True, on_shelf=None, end=None
-):
+def _result(held, released, increments=10, aborted=False, extracted=True, on_shelf=None, end=None):
     """Displacements as drops (the box's centre went down by it), unless `end` poses say."""
     n = len(released)
     start = np.tile([0.0, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0], (n, 1))
