@@ -147,7 +147,9 @@ def _clean_sequence_exists(oracle: SearchOracle, state: SceneState, target: int)
         )
         for h in holds:
             step, after, _ = oracle.simulate(state, (x, h))
-            if step["strict_success"] and (x == target or _clean_sequence_exists(oracle, after, target)):
+            if step["strict_success"] and (
+                x == target or _clean_sequence_exists(oracle, after, target)
+            ):
                 return True
     return False
 
