@@ -221,3 +221,11 @@ def test_an_executed_judged_step_is_never_aborted_before_motion():
         s = judge_arm_step(case, 0, None, frozenset(), THR, CF)
         assert not (s["executed"] and s["aborted_before_motion"])
         assert not (s["judged"] and s["aborted_before_motion"])
+
+
+def test_an_invalid_ch4_action_is_never_counted_a_success():
+    from clutterbench.trials.ch4 import OUTCOMES, count_if_valid
+
+    clean = dict.fromkeys(OUTCOMES, True) | {"others_still": True}
+    assert not any(count_if_valid(clean, valid=False)[k] for k in OUTCOMES)
+    assert all(count_if_valid(clean, valid=True)[k] for k in OUTCOMES)

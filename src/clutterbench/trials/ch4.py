@@ -455,19 +455,7 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
     out.pop("displacement_m", None)
     out.pop("displacement_held_m", None)
     valid = bool(valid and (target_box is None or x_box == target_box))
-    if target_box is not None or not valid:  # a predetermined target: that box must come out
-        hit = x_box == target_box or target_box is None
-        hit = hit and valid  # an invalid action is never a success
-        out = out | {
-            k: bool(out[k] and hit)
-            for k in (
-                "target_out",
-                "success",
-                "strict_success",
-                "success_held",
-                "strict_success_held",
-            )
-        }
+    out = count_if_valid(out, valid)
     record = {
         "condition": job["condition"],
         "episode": job["index"],
@@ -544,6 +532,17 @@ def draw_figure(job: dict[str, Any], out_path: Path) -> None:
         if cond.perception == "depth"
         else [str(b) for b in seg.ids],
     )
+
+
+OUTCOMES = ("target_out", "success", "strict_success", "success_held", "strict_success_held")
+"""A ch. 4 trial's outcome flags, all false for an invalid action."""
+
+
+def count_if_valid(out: dict[str, Any], valid: bool) -> dict[str, Any]:
+    """The judged pull `out` with every outcome flag false unless the action was valid (both
+    segments grasp boxes, two different ones, and with a given target the pulled box is it):
+    an invalid action is executed as chosen, but never counted a success."""
+    return out | {k: bool(out[k] and valid) for k in OUTCOMES}
 
 
 def _plain(v: Any) -> Any:
