@@ -301,11 +301,13 @@ def test_every_planner_gives_a_judged_record(planner, tiny_cp, tiny_ch4):
     assert rec["planner"] == planner and rec["steps"]
     assert rec["success"] == (rec["end"] == "target_out")
     for s in rec["steps"]:
-        expected = (s["extracted"] and s["others_still"]) if s["judged"] else None
+        expected = (s["extracted"] and s["collapse_free"]) if s["judged"] else None
         assert s["success"] == expected
+        strict = (s["extracted"] and s["others_still"]) if s["strict_judged"] else None
+        assert s["strict_success"] == strict
         assert not s["aborted_before_motion"], "a planner picked a box its own rule rejects"
-    # the episode stops at its first failed step
-    assert all(s["others_still"] for s in rec["steps"][:-1])
+    # the episode stops at its first (collapse-free) failed step
+    assert all(s["collapse_free"] for s in rec["steps"][:-1])
     assert all(s["success"] is not False for s in rec["steps"][:-1])
     assert rec["end"] in ("target_out", "collapse", "target_fell", "gave_up", "max_steps")
 
