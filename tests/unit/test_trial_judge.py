@@ -229,3 +229,40 @@ def test_an_invalid_ch4_action_is_never_counted_a_success():
     clean = dict.fromkeys(OUTCOMES, True) | {"others_still": True}
     assert not any(count_if_valid(clean, valid=False)[k] for k in OUTCOMES)
     assert all(count_if_valid(clean, valid=True)[k] for k in OUTCOMES)
+
+
+def _entry(box, displacement=0.0, drop=0.0, tilt=0.0, left=False, held=False):
+    return {
+        "box": box,
+        "held": held,
+        "displacement_m": displacement,
+        "drop_m": drop,
+        "tilt_change_deg": tilt,
+        "left_shelf": left,
+    }
+
+
+def test_rejudge_reads_ch4_and_ch5_records_from_the_per_box_fields():
+    from clutterbench.trials.rejudge import rejudge
+
+    ch4 = {
+        "condition": "c4",
+        "episode": 0,
+        "executed": True,
+        "extracted": True,
+        "valid": True,
+        "target": None,
+        "extract": 1,
+        "box_motion": [_entry(0, displacement=0.008), _entry(2, drop=0.03, held=True)],
+    }
+    (row,) = rejudge([ch4], THR, CF)
+    assert row["success"] is True and row["strict_success"] is False
+    (row,) = rejudge([ch4 | {"valid": False}], THR, CF)
+    assert row["success"] is False  # an invalid action is never a success
+    step = {"executed": True, "placed": True, "at_place": True, "box_motion": [_entry(0)]}
+    ch5 = {"condition": "c5", "episode": 0, "branch": "simple", "end": "placed"}
+    (row,) = rejudge([ch5 | {"steps": [step]}], THR, CF)
+    assert row["success"] is True and row["strict_success"] is True
+    tipped = step | {"box_motion": [_entry(0, tilt=40.0)]}
+    (row,) = rejudge([ch5 | {"steps": [tipped], "end": "collapse"}], THR, CF)
+    assert row["success"] is False and row["strict_success"] is False
