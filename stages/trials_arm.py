@@ -64,6 +64,7 @@ def trials_arm(params: dict, base: BaseConfig) -> None:
                 cfg.max_attempts,
                 cfg.mcap_images,
                 cfg.arm,
+                collapse_free=cfg.collapse_free,
             )
             chapter = 4
         jobs += [j | {"chapter": chapter} for j in mine]

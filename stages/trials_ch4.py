@@ -44,6 +44,7 @@ def trials_ch4(params: dict, base: BaseConfig) -> None:
             sim.camera,
             cfg.max_attempts,
             cfg.mcap_images,
+            collapse_free=cfg.collapse_free,
         )
     results = run_episodes("trials_ch4", run_ch4_episode, jobs, cfg.workers)
     records = [r.record for r in results]

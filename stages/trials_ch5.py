@@ -52,6 +52,7 @@ def trials_ch5(params: dict, base: BaseConfig) -> None:
             prob,
             cond.stream.removeprefix("ch5_"),
             with_detector,
+            collapse_free=cfg.collapse_free,
         )
     results = run_episodes("trials_ch5", run_ch5_episode, jobs, cfg.workers)
     records = [r.record for r in results]

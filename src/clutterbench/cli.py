@@ -891,6 +891,7 @@ def replenish(
             mcap is not None,
             prob,
             "cli",
+            collapse_free=trials.collapse_free,
         )[0]
         job["model_path"], job["detector_path"] = model_path, detector
         state = SceneState.start(spec)

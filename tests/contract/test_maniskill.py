@@ -13,10 +13,12 @@ gym = pytest.importorskip("gymnasium")
 from clutterbench.maniskill.executor import ArmExecutor  # noqa: E402
 from clutterbench.sim.spec import SceneSpec  # noqa: E402
 from clutterbench.trials.config import ArmConfig, TrialsConfig  # noqa: E402
+from clutterbench.trials.criteria import CollapseFreeConfig  # noqa: E402
 from clutterbench.trials.protocol import SceneState, execute_pull, judge_pull, world_at  # noqa: E402
 
 STACK3 = Path(__file__).resolve().parents[1] / "data" / "stack3.json"
 THR = 0.005
+CF = CollapseFreeConfig()
 PARAMS = TrialsConfig().ch6
 
 
@@ -36,7 +38,7 @@ def _kinematic(spec, physics, box, hold=None):
     state = SceneState.start(spec)
     world = world_at(spec, state, physics)
     result = execute_pull(world, box, hold, PARAMS.pull_increment_m, PARAMS.grasp_lift_m)
-    return judge_pull(result, box, hold, state.removed, THR), SceneState.of(world)
+    return judge_pull(result, box, hold, state.removed, THR, CF), SceneState.of(world)
 
 
 @pytest.mark.parametrize("box", [0, 2])
@@ -91,7 +93,7 @@ def test_an_arm_pull_of_the_top_box_agrees_with_the_kinematic_pull(stack3, physi
     result, arm, end = ex.execute_pull(
         stack3, SceneState.start(stack3), 2, None, PARAMS.pull_increment_m, PARAMS.grasp_lift_m
     )
-    step = judge_pull(result, 2, None, frozenset(), THR)
+    step = judge_pull(result, 2, None, frozenset(), THR, CF)
     kin, _ = _kinematic(stack3, physics, 2)
     assert arm.outcome == "ok" and arm.joint_log
     assert step["extracted"] and step["success"] and kin["success"]
@@ -105,7 +107,7 @@ def test_an_unreachable_face_is_an_abort_never_a_success(stack3, physics):
     result, arm, end = ex.execute_pull(
         stack3, SceneState.start(stack3), 2, None, PARAMS.pull_increment_m, PARAMS.grasp_lift_m
     )
-    step = judge_pull(result, 2, None, frozenset(), THR)
+    step = judge_pull(result, 2, None, frozenset(), THR, CF)
     assert arm.outcome == "unreachable" and arm.failed_arm == "pull"
     assert result.increments == 0 and not result.extracted
     assert not step["success"] and not step["extracted"]
@@ -127,7 +129,7 @@ def test_the_held_box_is_released_before_the_judge(physics):
     disp, _ = ex.u.displacements()
     assert result.displacement_m[1] == pytest.approx(disp[1])
     assert result.extracted and end.removed == frozenset({0})
-    step = judge_pull(result, 0, 1, frozenset(), THR)
+    step = judge_pull(result, 0, 1, frozenset(), THR, CF)
     assert step["success"]
 
 
@@ -141,12 +143,26 @@ def test_an_arm_that_gave_up_after_moving_a_box_is_a_judged_failure():
     still = np.zeros(3)
     knocked = np.array([0.0, 0.03, 0.0])
     on_shelf = np.ones(3, dtype=bool)
+    start = np.tile([0.1, 0.0, 0.05, 1.0, 0.0, 0.0, 0.0], (3, 1))
+    fell = start.copy()
+    fell[1, 2] -= 0.03
     quiet = judge_arm_step(
-        PullResult(0, False, False, still, still, on_shelf), 0, None, frozenset(), THR
+        PullResult(0, False, False, still, still, on_shelf, start, start),
+        0,
+        None,
+        frozenset(),
+        THR,
+        CF,
     )
     assert not quiet["judged"] and quiet["success"] is None
     hit = judge_arm_step(
-        PullResult(0, False, False, knocked, knocked, on_shelf), 0, None, frozenset(), THR
+        PullResult(0, False, False, knocked, knocked, on_shelf, start, fell),
+        0,
+        None,
+        frozenset(),
+        THR,
+        CF,
     )
+    assert not hit["aborted_before_motion"] and hit["aborted_after_motion"]
     assert hit["judged"] and hit["success"] is False and hit["n_disturbed"] == 1
     assert episode_end(hit, False, True) == "collapse"

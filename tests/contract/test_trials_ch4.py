@@ -32,10 +32,12 @@ from clutterbench.trials.config import (
     SceneStreamConfig,
     TrialsConfig,
 )
+from clutterbench.trials.criteria import CollapseFreeConfig
 
 STACK3 = Path(__file__).resolve().parents[1] / "data" / "stack3.json"
 CAM = CameraConfig(image_size=64)
 THR = 0.005
+CF = CollapseFreeConfig()
 
 
 @pytest.fixture(scope="module")
@@ -50,49 +52,49 @@ def test_class_map_of_a_hand_built_pull(stack3, physics):
     world = BoxWorld.from_spec(stack3, physics, render=True)
     inst = observe(world, CAM).instance
     # the labels are the motion while the support is still held
-    dragged = pull_outcome(stack3, physics, 0, 2, THR)["displacement_held_m"]
+    dragged = pull_outcome(stack3, physics, 0, 2, THR, CF)["displacement_held_m"]
     labels = ch4_class_map(inst, 0, 2, dragged, THR)
     assert np.array_equal(labels == CLASS_E, inst == 1)
     assert np.array_equal(labels == CLASS_S, inst == 3)
     assert np.array_equal(labels == CLASS_C, inst == 2) and (labels == CLASS_C).any()
     assert np.array_equal(labels == CLASS_B, inst == 0)
-    held = pull_outcome(stack3, physics, 0, 1, THR)["displacement_held_m"]
+    held = pull_outcome(stack3, physics, 0, 1, THR, CF)["displacement_held_m"]
     assert not (ch4_class_map(inst, 0, 1, held, THR) == CLASS_C).any()
 
 
 def test_a_pull_that_drags_a_neighbour_off_the_shelf_fails(stack3, physics):
-    out = pull_outcome(stack3, physics, 0, 2, THR)
+    out = pull_outcome(stack3, physics, 0, 2, THR, CF)
     assert out["target_out"] and out["n_left_shelf"] == 1
     assert not out["success"] and not out["strict_success"]
-    nothing_held = pull_outcome(stack3, physics, 0, None, THR)
+    nothing_held = pull_outcome(stack3, physics, 0, None, THR, CF)
     assert nothing_held["n_left_shelf"] == 2 and not nothing_held["success"]
 
 
 def test_a_clean_pull_succeeds_and_is_judged_after_the_release(stack3, physics):
     # Pulling the top box while holding the middle one: still once the middle is let go.
-    out = pull_outcome(stack3, physics, 2, 1, THR)
+    out = pull_outcome(stack3, physics, 2, 1, THR, CF)
     assert out["success"] and out["strict_success"] and out["strict_success_held"]
     assert out["n_left_shelf"] == 0 and out["n_disturbed"] == 0
     # Pulling the bottom box from under the held middle one: clean while held; once released,
-    # the middle box and the top one it carries drop onto the floor (on the shelf: success,
-    # but the top box moved: not strict success).
-    out = pull_outcome(stack3, physics, 0, 1, THR)
+    # the middle box and the top one it carries drop onto the floor (on the shelf, but the
+    # top box dropped: a collapse, and not a strict success either).
+    out = pull_outcome(stack3, physics, 0, 1, THR, CF)
     assert out["success_held"] and out["strict_success_held"]
-    assert out["success"] and not out["strict_success"]
+    assert not out["success"] and not out["strict_success"] and out["n_collapsed"] == 1
     assert out["n_left_shelf"] == 0 and out["n_disturbed"] == 1
     # The middle box from under the held top one: the released top box settles onto the
     # bottom one; it was manipulated, nothing else moved: strict success.
-    out = pull_outcome(stack3, physics, 1, 2, THR)
+    out = pull_outcome(stack3, physics, 1, 2, THR, CF)
     assert out["success"] and out["strict_success"] and out["n_disturbed"] == 0
 
 
 def test_oracle_keeps_a_strict_success(stack3, physics):
     pairs = [(0, 2), (1, 0), (0, 1), (2, 0)]
-    k, tried, first = plan_oracle(stack3, physics, pairs, THR, np.random.default_rng(0))
+    k, tried, first = plan_oracle(stack3, physics, pairs, THR, CF, np.random.default_rng(0))
     assert first == k and pairs[k] in ((0, 1), (2, 0))
     assert 1 <= tried <= len(pairs)
     bad = [(0, 2), (1, 0), (0, None)]
-    k, tried, first = plan_oracle(stack3, physics, bad, THR, np.random.default_rng(0))
+    k, tried, first = plan_oracle(stack3, physics, bad, THR, CF, np.random.default_rng(0))
     assert first == -1 and tried == len(bad)
     assert bad[k] != (0, None)  # two boxes off the shelf is worse than one
 

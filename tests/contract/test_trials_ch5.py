@@ -13,6 +13,7 @@ from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.config import Ch5ConditionConfig, SceneStreamConfig, TrialsConfig
+from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import write_mcap
 from clutterbench.trials.protocol import SceneState, world_at
 
@@ -20,6 +21,7 @@ CAM = CameraConfig(image_size=64)
 STANDING = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]  # width up, thickness across
 SIZE = np.array([0.1, 0.12, 0.03])  # (D, W, H): standing, 12 cm tall and 3 cm thick
 NEW_BOX = np.array([0.1, 0.12, 0.03])
+CF = CollapseFreeConfig()
 
 
 def crowded_row() -> SceneSpec:
@@ -78,7 +80,9 @@ def test_every_held_box_is_released_before_the_judge(scene, monkeypatch):
 
     monkeypatch.setattr(ch5, "judge_step", spy)
     world = world_at(spec, state, physics, render=True)
-    out = ch5.execute(world, obs, plan, NEW_BOX, TrialsConfig().ch5, state.removed)
+    out = ch5.execute(
+        world, obs, plan, NEW_BOX, TrialsConfig().ch5, state.removed, CollapseFreeConfig()
+    )
     assert seen["moved"], "the blocker's boxes were carried"
     assert seen["held"] == [], "judged while a box was still held"
     assert set(out.record) >= {"branch", "success", "others_still", "at_place", "n_disturbed"}
@@ -205,7 +209,9 @@ def test_a_lifted_blocker_is_set_down_before_it_is_let_go(monkeypatch):
         return release(self, boxes)
 
     monkeypatch.setattr(type(world), "release", spy)
-    out = ch5.execute(world, obs, plan, new_box, TrialsConfig().ch5, state.removed)
+    out = ch5.execute(
+        world, obs, plan, new_box, TrialsConfig().ch5, state.removed, CollapseFreeConfig()
+    )
     assert gaps and max(gaps) < 0.005, gaps
     assert out.record["success"], out.record
 
@@ -267,7 +273,13 @@ def test_the_new_box_is_carried_in_from_the_front_and_pushes_what_is_in_its_way(
     assert right and right[0].occupants
     world = world_at(spec, state, physics)
     out = ch5.execute(
-        world, obs, Plan("simple", right[0], None), NEW_BOX, TrialsConfig().ch5, state.removed
+        world,
+        obs,
+        Plan("simple", right[0], None),
+        NEW_BOX,
+        TrialsConfig().ch5,
+        state.removed,
+        CF,
     )
     assert out.record["placed"] and not out.record["others_still"], out.record
     assert out.record["n_disturbed"] >= 1

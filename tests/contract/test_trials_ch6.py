@@ -27,6 +27,7 @@ from clutterbench.trials.ch6 import (
 )
 from clutterbench.trials.config import PLANNERS as PLANNER_NAMES
 from clutterbench.trials.config import ConditionConfig, SceneStreamConfig, TrialsConfig
+from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import run_episodes, write_mcap
 from clutterbench.trials.protocol import SceneState, execute_pull, judge_pull, world_at
 from clutterbench.trials.records import read_records, write_records
@@ -40,6 +41,7 @@ HOLD_QUIET = Path(__file__).resolve().parents[1] / "data" / "hold_quiet_box.json
 CAM = CameraConfig(image_size=64)
 THR = 0.005
 PARAMS = TrialsConfig().ch6
+CF = CollapseFreeConfig()
 
 
 @pytest.fixture(scope="module")
@@ -69,7 +71,7 @@ def _step(spec, physics, box, hold=None, state=None):
     state = state or SceneState.start(spec)
     world = world_at(spec, state, physics, render=True)
     r = execute_pull(world, box, hold, PARAMS.pull_increment_m, PARAMS.grasp_lift_m)
-    return judge_pull(r, box, hold, state.removed, THR), SceneState.of(world)
+    return judge_pull(r, box, hold, state.removed, THR, CF), SceneState.of(world)
 
 
 def test_pulling_the_top_is_clean_and_pulling_the_bottom_fails(stack3, physics):
@@ -145,7 +147,9 @@ def _clean_sequence_exists(oracle: SearchOracle, state: SceneState, target: int)
         )
         for h in holds:
             step, after, _ = oracle.simulate(state, (x, h))
-            if step["success"] and (x == target or _clean_sequence_exists(oracle, after, target)):
+            if step["strict_success"] and (
+                x == target or _clean_sequence_exists(oracle, after, target)
+            ):
                 return True
     return False
 
@@ -155,7 +159,7 @@ def _clean_sequence_exists(oracle: SearchOracle, state: SceneState, target: int)
 def test_the_search_oracle_finds_a_clean_sequence_whenever_one_exists(spec_path, holding, physics):
     spec = SceneSpec.load(spec_path)
     for target in range(spec.n):
-        oracle = SearchOracle(spec, physics, CAM, PARAMS, holding=holding)
+        oracle = SearchOracle(spec, physics, CAM, PARAMS, holding, CF)
         plan, _, exhausted = oracle.search(SceneState.start(spec), target)
         assert not exhausted
         assert (plan is not None) == _clean_sequence_exists(
@@ -169,9 +173,9 @@ def test_the_holding_oracle_may_hold_a_box_the_pull_leaves_in_place(physics):
     run, so an oracle that held only the boxes the pull disturbs was beaten there."""
     spec = SceneSpec.load(HOLD_QUIET)
     start = SceneState.start(spec)
-    oracle = SearchOracle(spec, physics, CAM, PARAMS, holding=True)
+    oracle = SearchOracle(spec, physics, CAM, PARAMS, True, CF)
     alone, _, disp = oracle.simulate(start, (7, None), cut_short=False)
-    assert not alone["success"]
+    assert not alone["strict_success"] and alone["success"]  # a 9 mm slide: no collapse
     plan, _, exhausted = oracle.search(start, 7)
     assert not exhausted and plan is not None
     (pull, hold), _ = plan[0]
@@ -190,6 +194,49 @@ def test_no_planner_beats_the_search_oracle_on_a_hand_built_stack(stack3):
         for planner in ("pull_target", "random", "toy_bottom_first", "oracle_hold"):
             rec = run_extraction(stack3, _job(planner)[0], target=target).record
             assert ceiling or not rec["success"], (planner, target)
+
+
+def test_no_planner_beats_either_oracle_under_either_criterion(stack3):
+    """Each search oracle is a ceiling under both criteria (strict searched first, then
+    collapse-free), on every target of the stack."""
+    for target in range(stack3.n):
+        for oracle, planners in (
+            ("oracle", ("pull_target", "toy_bottom_first")),
+            ("oracle_hold", ("pull_target", "oracle")),
+        ):
+            top = run_extraction(stack3, _job(oracle)[0], target=target).record
+            assert top["search_found"] == top["success"]
+            assert top["search_found_strict"] == top["strict_success"]
+            for planner in planners:
+                rec = run_extraction(stack3, _job(planner)[0], target=target).record
+                for key in ("success", "strict_success"):
+                    assert top[key] or not rec[key], (oracle, planner, target, key)
+
+
+def test_rejudging_the_records_at_their_thresholds_gives_the_records(stack3, tmp_path):
+    """trials/rejudge.py recomputes both criteria from the per-box fields alone; at the
+    thresholds the harness ran under it gives the records' outcomes exactly; every step
+    carries the per-box fields and consistent flags."""
+    from clutterbench.trials import rejudge
+    from clutterbench.trials.criteria import MOTION_FIELDS
+
+    records = [
+        run_extraction(stack3, _job(p)[0], target=t).record
+        for p in ("pull_target", "toy_bottom_first", "oracle")
+        for t in range(stack3.n)
+    ]
+    for r in records:
+        for s in r["steps"]:
+            assert s["executed"] or not s["judged"]
+            assert not (s["executed"] and s["aborted_before_motion"])
+            assert s["box"] not in {e["box"] for e in s["box_motion"]}
+            assert all(set(e) == set(MOTION_FIELDS) for e in s["box_motion"])
+    path = tmp_path / "records.jsonl"
+    write_records(path, records)
+    rows = rejudge.rejudge(read_records(path), THR, CF)
+    for r, row in zip(records, rows, strict=True):
+        assert (row["success"], row["strict_success"]) == (r["success"], r["strict_success"])
+    assert rejudge.main([str(path)]) == 0
 
 
 def test_the_mcap_shows_the_scene_and_the_camera(stack3, tmp_path):
@@ -254,11 +301,13 @@ def test_every_planner_gives_a_judged_record(planner, tiny_cp, tiny_ch4):
     assert rec["planner"] == planner and rec["steps"]
     assert rec["success"] == (rec["end"] == "target_out")
     for s in rec["steps"]:
-        expected = (s["extracted"] and s["others_still"]) if s["judged"] else None
+        expected = (s["extracted"] and s["collapse_free"]) if s["judged"] else None
         assert s["success"] == expected
+        strict = (s["extracted"] and s["others_still"]) if s["strict_judged"] else None
+        assert s["strict_success"] == strict
         assert not s["aborted_before_motion"], "a planner picked a box its own rule rejects"
-    # the episode stops at its first failed step
-    assert all(s["others_still"] for s in rec["steps"][:-1])
+    # the episode stops at its first (collapse-free) failed step
+    assert all(s["collapse_free"] for s in rec["steps"][:-1])
     assert all(s["success"] is not False for s in rec["steps"][:-1])
     assert rec["end"] in ("target_out", "collapse", "target_fell", "gave_up", "max_steps")
 

@@ -132,8 +132,12 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
             for step in rec["steps"]:
                 assert {"executed", "aborted_before_motion", "aborted_after_motion"} <= set(step)
                 assert {"extracted", "others_still", "success", "success_held"} <= set(step)
-            # no step follows a failed one (an abort that disturbed nothing is no failure)
+                assert {"judged", "strict_success", "collapse_free", "box_motion"} <= set(step)
+                assert not (step["executed"] and step["aborted_before_motion"])
+            # no step follows a (collapse-free) failed one; an abort that disturbed nothing
+            # is no failure; the strict episode is a prefix, so strict implies collapse-free
             assert all(s["success"] is not False for s in rec["steps"][:-1])
+            assert rec["success"] or not rec["strict_success"]
         topics = read_episode(a / "data/trials" / name / "episodes.mcap")["topics"]
         assert topics["/trial/outcome"] == cond.episodes
         # Foxglove's 3D panel: the scene as cubes and the camera the images project through
@@ -141,6 +145,8 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
         assert topics.get("/camera/calibration", 0) >= cond.episodes, name
     for rec in ch4:
         assert {"executed", "aborted_before_motion", "success_held", "risk_ties"} <= set(rec)
+        assert {"judged", "strict_success", "box_motion"} <= set(rec)
+        assert rec["valid"] or not rec["success"]  # an invalid action is never a success
     assert (a / "reports/trials_ch4/fig_4_8.png").stat().st_size > 1000
     n63 = len(load_section(ReportConfig, "report", params).table_6_3)
     for table, rows in (("table_4_1", 24 + 6), ("table_4_1_target", 3), ("table_6_3", n63)):

@@ -116,8 +116,8 @@ def test_table_4_1_rates_totals_and_thesis_beside(tmp_path):
     assert header == [
         "method [our condition]",
         "objects",
-        "success (only the pulled box left the shelf)",
-        "success (only the pulled box left the shelf) (thesis)",
+        "collapse-free success",
+        "collapse-free success (thesis)",
         "strict success (no other box moved > 5 mm)",
         "mean disturbed boxes",
         "mean disturbance (mm)",

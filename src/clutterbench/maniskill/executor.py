@@ -394,6 +394,7 @@ class ArmExecutor:
         if hold is not None and not self.bimanual:
             raise ValueError("a held box needs the bimanual executor")
         self._start(spec, state, box, hold)
+        poses_start = self.u.box_poses()
         step = ArmStep()
         step.pose_log.append((0.0, self.u.box_poses()))
         pull_arm, hold_arm = PULL_ARM, HOLD_ARM
@@ -446,5 +447,14 @@ class ArmExecutor:
             self._settle(step)
         disp, on_shelf = self.u.displacements()
         step.pose_log.append((step.control_steps * self.dt_s, self.u.box_poses()))
-        result = PullResult(increments, aborted, box in self.u.removed, held_disp, disp, on_shelf)
+        result = PullResult(
+            increments,
+            aborted,
+            box in self.u.removed,
+            held_disp,
+            disp,
+            on_shelf,
+            poses_start,
+            self.u.box_poses(),
+        )
         return result, step, SceneState(self.u.box_poses(), frozenset(self.u.removed))

@@ -46,22 +46,23 @@ def arm_table(
                 f"'{name}' repeats (rerun its kinematic stage)"
             )
         pairs = [(kin_by_episode[r["episode"]], r) for r in records]
-        kin_ok = sum(bool(k["success"]) for k, _ in pairs)
-        arm_ok = sum(bool(a["success"]) for _, a in pairs)
-        agree = sum(bool(k["success"]) == bool(a["success"]) for k, a in pairs)
+        n = len(pairs)
+        row: dict[str, Any] = {"condition": name, "repeats": of[name], "episodes": n}
+        for key, label in (("success", "collapse-free"), ("strict_success", "strict")):
+            kin_ok = sum(bool(k[key]) for k, _ in pairs)
+            arm_ok = sum(bool(a[key]) for _, a in pairs)
+            agree = sum(bool(k[key]) == bool(a[key]) for k, a in pairs)
+            row |= {
+                f"kinematic {label}": Rate(kin_ok, n).text(),
+                f"arm {label}": Rate(arm_ok, n).text(),
+                f"points (arm - kinematic), {label}": f"{100 * (arm_ok - kin_ok) / n:+.1f}"
+                if n
+                else "—",
+                f"agreement, {label}": Rate(agree, n).text(),
+            }
         steps = [s for r in records for s in _steps(r) if "arm_outcome" in s]
         kinds = Counter(s["arm_outcome"] for s in steps)
-        n = len(pairs)
-        row: dict[str, Any] = {
-            "condition": name,
-            "repeats": of[name],
-            "episodes": n,
-            "kinematic success": Rate(kin_ok, n).text(),
-            "arm success": Rate(arm_ok, n).text(),
-            "points (arm - kinematic)": f"{100 * (arm_ok - kin_ok) / n:+.1f}" if n else "—",
-            "agreement": Rate(agree, n).text(),
-            "arm steps": len(steps),
-        }
+        row["arm steps"] = len(steps)
         for kind in FAILURES:
             row[kind] = kinds.get(kind, 0)
         failed = kinds.get("unreachable", 0) + kinds.get("planning_failed", 0)
@@ -80,7 +81,10 @@ def arm_table(
             "the same planner on the same scenes and targets (the first episodes of the "
             "repeated condition); kinematic: the box is moved kinematically; arm: Pandas of "
             "the ManiSkill tasks approach, take hold (suction-like), pull and hold; one judge.",
-            "agreement: episodes whose success is the same both ways.",
+            "collapse-free: no other box left the shelf, dropped or tipped beyond "
+            "trials.collapse_free; strict: also none moved beyond the label threshold (the "
+            "strict episode: the prefix up to its first strict failure). agreement: episodes "
+            "whose success is the same both ways.",
             "unreachable: no joint state puts the tool at the face; planning_failed: no "
             "straight tool path inside the joint limits clear of the shelf; no_contact: the "
             "tool stopped short of the face (other boxes in the way, or pushed); reach / "

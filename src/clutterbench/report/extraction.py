@@ -55,10 +55,13 @@ box, the one-arm search for every other (default)."""
 
 COLUMNS = [
     Column("objects", "objects", "{}"),
-    Column("step_success", "success per step", "{}"),
-    Column("success", "success per episode", "{}"),
-    Column("below_oracle", "points below its oracle", "{}"),
-    Column("success_held", "per episode, judged while held", "{}"),
+    Column("step_success", "collapse-free success per step", "{}"),
+    Column("success", "collapse-free success per episode", "{}"),
+    Column("step_strict_success", "strict success per step", "{}"),
+    Column("strict_success", "strict success per episode", "{}"),
+    Column("below_oracle", "points below its oracle (collapse-free)", "{}"),
+    Column("below_oracle_strict", "points below its oracle (strict)", "{}"),
+    Column("success_held", "per episode, strict, judged while held", "{}"),
     Column("aborts", "aborts (nothing moved)", "{}"),
     Column("mean_steps", "mean steps", "{:.3g}"),
     Column("mean_n_disturbed", "mean disturbed boxes", "{:.2f}"),
@@ -68,8 +71,9 @@ COLUMNS = [
 
 FAMILY_COLUMNS = [
     Column("family", "family", "{}"),
-    Column("step_success", "success per step", "{}"),
-    Column("success", "success per episode", "{}"),
+    Column("step_success", "collapse-free success per step", "{}"),
+    Column("success", "collapse-free success per episode", "{}"),
+    Column("strict_success", "strict success per episode", "{}"),
     Column("mean_steps", "mean steps", "{:.3g}"),
     Column("episodes", "episodes", "{:d}"),
 ]
@@ -78,37 +82,46 @@ FAMILY_COLUMNS = [
 SUCCESS_NOTE = (
     "protocol: every step starts from a fresh world at the state the last one left; the pulled "
     "box leaves the shelf (or, aborted, is let go), every held box is released and the scene "
-    "settles, then the step is judged from physics (never from a planner's prediction). A step "
-    "succeeds when its box left the shelf and no box other than the manipulated ones (pulled, "
-    "held) moved beyond the threshold or left the shelf (the released box may settle lower but "
-    "must stay on the shelf); an episode ends at its first failed step (thesis 6.3.2: each "
-    "failed episode has one failed step), when the target is out (success), when the target "
-    "fell, or when the planner gives up. success per step: over the judged steps (executed "
-    "pulls that took their box out or disturbed the pile); aborts that moved nothing are "
-    "counted apart. Intervals: per episode, Wilson 95%; per step, a 95% cluster bootstrap over "
-    "episodes (2,000 resamples, seed 0), since the steps of one episode are not independent. "
-    "judged while held: the same episodes judged before the release, where that differs."
+    "settles, then the step is judged from physics (never from a planner's prediction). Two "
+    "criteria from one run: a step is collapse-free when its box left the shelf and no other "
+    "box left the shelf, dropped more than trials.collapse_free.drop_m or tipped more than "
+    "trials.collapse_free.tilt_deg (a horizontal slide is disturbance, not a collapse); strict "
+    "when, in addition, no box other than the manipulated ones (pulled, held) moved beyond the "
+    "label threshold (the released box may settle lower but must stay on the shelf). An "
+    "episode ends at its first collapse-free failure, when the target is out (success), when "
+    "the target fell, or when the planner gives up; the planner does not know the criterion, "
+    "so the strict episode is its prefix up to the first strict failure, and strict per-step "
+    "counts stop there. The thesis column stands beside the collapse-free one: the thesis "
+    "judged its real-robot trials by whether objects collapsed or fell, not by millimetres. "
+    "success per step: over the judged steps (executed pulls that took their box out or "
+    "disturbed the pile under that criterion); aborts that moved nothing are counted apart. "
+    "Intervals: per episode, Wilson 95%; per step, a 95% cluster bootstrap over episodes "
+    "(2,000 resamples, seed 0), since the steps of one episode are not independent. judged "
+    "while held: the strict judgement before the release, where that differs. Every record "
+    "can be re-judged under other thresholds: python -m clutterbench.trials.rejudge."
 )
 
 
-def step_rate_text(agg: Mapping[str, Any]) -> str | None:
-    """'k/n = x% [lo, hi]' of the per-step columns, the interval from the cluster bootstrap."""
-    if "step_success_k" not in agg or pd.isna(agg["step_success_k"]):
+def step_rate_text(agg: Mapping[str, Any], key: str = "success") -> str | None:
+    """'k/n = x% [lo, hi]' of the per-step columns of `key`, the interval from the cluster
+    bootstrap."""
+    p = f"step_{key}"
+    if f"{p}_k" not in agg or pd.isna(agg[f"{p}_k"]):
         return None
-    k, n = int(agg["step_success_k"]), int(agg["step_success_n"])
+    k, n = int(agg[f"{p}_k"]), int(agg[f"{p}_n"])
     if n == 0:
         return "—"
-    lo, hi = 100 * agg["step_success_lo"], 100 * agg["step_success_hi"]
+    lo, hi = 100 * agg[f"{p}_lo"], 100 * agg[f"{p}_hi"]
     return f"{k}/{n} = {100 * k / n:.1f}% [{lo:.1f}, {hi:.1f}]"
 
 
 def oracle_gaps(
-    records_by_condition: Mapping[str, Sequence[Mapping[str, Any]]],
+    records_by_condition: Mapping[str, Sequence[Mapping[str, Any]]], key: str = "success"
 ) -> dict[str, dict[str, Any]]:
     """For every condition: its matching oracle's condition on the same stream (if one ran),
-    the points its per-episode success lies below it, and the episodes it succeeded in where
-    the oracle failed (impossible unless the oracle's search budget ran out or the planner
-    left the oracle's action set)."""
+    the points its per-episode success under `key` lies below it, and the episodes it
+    succeeded in where the oracle failed (impossible unless the oracle's search budget ran
+    out or the planner left the oracle's action set)."""
     oracles: dict[tuple[str, str], str] = {}
     for cond, recs in records_by_condition.items():
         planner, stream = str(recs[0].get("planner")), str(recs[0].get("stream"))
@@ -120,8 +133,10 @@ def oracle_gaps(
         oracle = oracles.get((MATCHING_ORACLE.get(planner, "oracle"), stream))
         if oracle is None:
             continue
-        theirs = {int(r["episode"]): bool(r["success"]) for r in records_by_condition[oracle]}
-        ours = {int(r["episode"]): bool(r["success"]) for r in recs}
+        if any(key not in r for r in [*recs, *records_by_condition[oracle]]):
+            continue
+        theirs = {int(r["episode"]): bool(r[key]) for r in records_by_condition[oracle]}
+        ours = {int(r["episode"]): bool(r[key]) for r in recs}
         shared = sorted(set(ours) & set(theirs))
         if not shared:
             continue
@@ -129,6 +144,12 @@ def oracle_gaps(
         beat = [e for e in shared if ours[e] and not theirs[e]]
         out[cond] = {"oracle": oracle, "points": gap, "beat": beat, "episodes": len(shared)}
     return out
+
+
+def _gap_text(gap: Mapping[str, Any] | None, condition: str) -> str | None:
+    if gap is None or gap["oracle"] == condition:
+        return None
+    return f"{gap['points']:.1f} ({gap['oracle']}; beat it in {len(gap['beat'])})"
 
 
 def _parse_row(row: str) -> tuple[str, str]:
@@ -231,7 +252,9 @@ def extraction_table(
 
     rows: '<method>/<objects>' -> trials condition."""
     shown, raw, used = [], [], {}
-    gaps = oracle_gaps({c: _condition_records(records_by_condition, r, c) for r, c in rows.items()})
+    by_row = {c: _condition_records(records_by_condition, r, c) for r, c in rows.items()}
+    gaps = oracle_gaps(by_row)
+    strict_gaps = oracle_gaps(by_row, "strict_success")
     for row, condition in rows.items():
         method, objects = _parse_row(row)
         records = _condition_records(records_by_condition, row, condition)
@@ -248,9 +271,10 @@ def extraction_table(
             "objects": _objects_text(records, row),
             "step_success": step_rate_text(a),
             "success": rate_text(a, "success"),
-            "below_oracle": None
-            if gap is None or gap["oracle"] == condition
-            else f"{gap['points']:.1f} ({gap['oracle']}; beat it in {len(gap['beat'])})",
+            "step_strict_success": step_rate_text(a, "strict_success"),
+            "strict_success": rate_text(a, "strict_success"),
+            "below_oracle": _gap_text(gap, condition),
+            "below_oracle_strict": _gap_text(strict_gaps.get(condition), condition),
             "success_held": rate_text(a, "success_held"),
             "aborts": None if pd.isna(a.get("aborts", pd.NA)) else str(int(a["aborts"])),
             "mean_steps": a.get("mean_steps"),
@@ -269,6 +293,12 @@ def extraction_table(
                 "oracle": g["oracle"],
                 "points_below_oracle": g["points"],
                 "beat_oracle": len(g["beat"]),
+            }
+        if strict_gaps.get(condition) is not None:
+            g = strict_gaps[condition]
+            extra |= {
+                "points_below_oracle_strict": g["points"],
+                "beat_oracle_strict": len(g["beat"]),
             }
         raw.append(
             {"row": row, "method": method, **a, **extra, **_thesis_counts(figures, method, objects)}
@@ -313,6 +343,7 @@ def extraction_families_table(
                 "family": a["family"],
                 "step_success": step_rate_text(a),
                 "success": rate_text(a, "success"),
+                "strict_success": rate_text(a, "strict_success"),
                 "mean_steps": a.get("mean_steps"),
                 "episodes": a["episodes"],
             }

@@ -90,9 +90,9 @@ CATALOGUE_TEXT = {"same": "same-size", "various": "various-size", "new": "new va
 
 COLUMNS = [
     Column("objects", "objects", "{}"),
-    Column("success", "success (only the pulled box left the shelf)", "{}"),
+    Column("success", "collapse-free success", "{}"),
     Column("strict_success", "strict success (no other box moved > 5 mm)", "{}"),
-    Column("success_held", "success, judged while the support is held", "{}"),
+    Column("success_held", "no other box off the shelf, judged while the support is held", "{}"),
     Column("mean_n_disturbed", "mean disturbed boxes", "{:.2f}"),
     Column("mean_disturbance_mm", "mean disturbance (mm)", "{:.1f}"),
     Column("invalid", "invalid actions", "{:d}"),
@@ -363,11 +363,16 @@ def _notes(
         f"physics after the action settled (never from a planner's prediction); thesis: "
         f"{_thesis_trials_text(figures, table)} on a real dual-arm robot ({source}), a "
         "different robot, objects and scenes.",
-        "success (the thesis' definition): only the pulled box left the shelf. strict "
-        "success: also no box but the pulled and the supporting one moved beyond 5 mm. Both "
-        "judged after the support was released and the scene settled; 'judged while the "
-        "support is held': before the release. k/n = rate [Wilson 95% interval]; the "
-        "thesis' rates as printed.",
+        "collapse-free success (the thesis' trial notion, so the thesis column stands beside "
+        "it): the pulled box came out, no other box left the shelf, and none but the support "
+        "dropped more than trials.collapse_free.drop_m or tipped more than "
+        "trials.collapse_free.tilt_deg (a slide is disturbance, not a collapse). strict "
+        "success: also no box but the pulled and the supporting one moved beyond the label "
+        "threshold (5 mm). Both from one run, judged after the support was released and the "
+        "scene settled; 'judged while the support is held': before the release. An invalid "
+        "action (a segment of no box, or support = pulled box) is never a success. k/n = rate "
+        "[Wilson 95% interval]; the thesis' rates as printed; records re-judge under other "
+        "thresholds with python -m clutterbench.trials.rejudge.",
         "mean disturbed boxes: other boxes that moved beyond the threshold; mean "
         "disturbance: the summed displacement of the other boxes, per episode.",
         f"trial scenes: {grouped(used, lambda rs: 'stream ' + values_text(rs, 'stream'))}; "

@@ -21,6 +21,7 @@ from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.config import ArmConfig
+from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import EpisodeLog
 from clutterbench.trials.protocol import PullResult, SceneState, judge_pull, moved_others, world_at
 
@@ -109,21 +110,24 @@ def arm_pull(
 
 
 def judge_arm_step(
-    result: PullResult, box: int, hold: int | None, gone: frozenset[int], threshold_m: float
+    result: PullResult,
+    box: int,
+    hold: int | None,
+    gone: frozenset[int],
+    threshold_m: float,
+    cf: CollapseFreeConfig,
 ) -> dict[str, Any]:
     """judge_pull for an arm-level step. An arm that gave up before pulling (unreachable,
     no path, stopped short) has still moved through the shelf: when it moved a box beyond the
-    threshold or off the shelf, the step is judged (a failure), not passed over as an abort
-    that disturbed nothing."""
+    threshold or off the shelf, the step is executed and judged (a failure, aborted after
+    motion: the arm's own), not passed over as an abort that disturbed nothing."""
     manipulated = {box} | ({hold} if hold is not None else set())
     if result.increments == 0:
         n, _ = moved_others(result.displacement_m, result.on_shelf, manipulated, gone, threshold_m)
         if n:
-            judged = judge_pull(
-                dataclasses.replace(result, increments=1), box, hold, gone, threshold_m
-            )
-            return judged | {"aborted_before_motion": True}
-    return judge_pull(result, box, hold, gone, threshold_m)
+            motion = dataclasses.replace(result, increments=1, aborted=True)
+            return judge_pull(motion, box, hold, gone, threshold_m, cf)
+    return judge_pull(result, box, hold, gone, threshold_m, cf)
 
 
 def run_arm_episode(job: dict[str, Any]):

@@ -7,11 +7,15 @@ observe it, segment it (simulator instance masks, or depth alone), let the plann
 then execute the pull from the canonical start exactly as the ch. 4 labels were made
 (`act_on_spec(..., "pull", extract, support)`) and judge it from physics:
 
-- success (the thesis' definition): no box other than the pulled one left the shelf;
-- strict success: also no other box moved more than `moved_threshold_m`;
+- success (collapse-free, the thesis' trial notion; trials/criteria.py): no box other than
+  the pulled one left the shelf, and none but the support dropped or tipped beyond the
+  `trials.collapse_free` thresholds;
+- strict success: also no box but the support moved more than `moved_threshold_m`;
 
 both judged after the support was released and the scene settled (trials/protocol.py), and
-again as while the support is still held (`success_held`, `strict_success_held`).
+as while the support is still held (`success_held`: no other box left the shelf,
+`strict_success_held`: nor moved). An invalid action (a segment of no box, or the support
+the pulled box itself) is executed as chosen but never counted a success.
 
 The risk planner sees only the depth image and the masks; the oracle reads the world.
 """
@@ -42,12 +46,14 @@ from clutterbench.sim.labelling import act_on_spec
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials import criteria
 from clutterbench.trials.config import (
     ArmConfig,
     Ch4ConditionConfig,
     Ch4TrialParams,
     SceneStreamConfig,
 )
+from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
 from clutterbench.trials.protocol import SceneState
 from clutterbench.trials.scenes import draw_target, draw_trial_spec, policy_rng
@@ -120,6 +126,7 @@ def pull_outcome(
     extract: int,
     support: int | None,
     threshold_m: float,
+    cf: CollapseFreeConfig,
     world: BoxWorld | None = None,
 ) -> dict[str, Any]:
     """Pull `extract` out toward the camera with `support` held, from the canonical start (the
@@ -127,6 +134,7 @@ def pull_outcome(
     from the boxes' motion (trials/protocol.py: release, then judge). The judgement while the
     support is still held is kept beside it (`*_held`)."""
     world = world or BoxWorld.from_spec(spec, physics)
+    poses_start = world.poses()
     disp_held = act_on_spec(spec, physics, "pull", extract, support, world=world)
     on_shelf_held = spec.shelf.contains(world.positions())
     if support is not None:
@@ -136,7 +144,18 @@ def pull_outcome(
     on_shelf = spec.shelf.contains(world.positions())
     out = extract in world.removed
     return judge_ch4_pull(
-        spec.n, extract, support, threshold_m, disp_held, on_shelf_held, disp, on_shelf, out
+        spec.n,
+        extract,
+        support,
+        threshold_m,
+        cf,
+        disp_held,
+        on_shelf_held,
+        disp,
+        on_shelf,
+        out,
+        poses_start,
+        world.poses(),
     )
 
 
@@ -146,6 +165,7 @@ def arm_pull_outcome(
     extract: int,
     support: int | None,
     threshold_m: float,
+    cf: CollapseFreeConfig,
     job: dict[str, Any],
     log: EpisodeLog,
 ) -> dict[str, Any]:
@@ -172,14 +192,25 @@ def arm_pull_outcome(
         extract,
         support,
         threshold_m,
+        cf,
         r.displacement_held_m,
         done.on_shelf_held,
         r.displacement_m,
         r.on_shelf,
         r.extracted,
+        r.poses_start,
+        r.poses_end,
     )
-    reached = done.fields["arm_outcome"] == "ok"  # an arm that never took hold did nothing
-    return out | {"executed": reached, "aborted_before_motion": not reached} | done.fields
+    # An arm that never took hold pulled nothing; if it knocked a box on its way, the step
+    # was still executed (and judged: a failure), aborted after that motion.
+    reached = done.fields["arm_outcome"] == "ok"
+    executed = reached or not out["others_still"]
+    flags = {
+        "executed": executed,
+        "aborted_before_motion": not executed,
+        "aborted_after_motion": executed and not reached,
+    }
+    return out | flags | _judged_flags(out | flags) | done.fields
 
 
 def judge_ch4_pull(
@@ -187,41 +218,57 @@ def judge_ch4_pull(
     extract: int,
     support: int | None,
     threshold_m: float,
+    cf: CollapseFreeConfig,
     disp_held: np.ndarray,
     on_shelf_held: np.ndarray,
     disp: np.ndarray,
     on_shelf: np.ndarray,
     out: bool,
+    poses_start: np.ndarray,
+    poses_end: np.ndarray,
 ) -> dict[str, Any]:
-    """A ch. 4 pull's judgement from the boxes' displacements and shelf membership, while the
-    support was held and after its release (thesis 4.3.3)."""
-
-    def judge(d: np.ndarray, shelf: np.ndarray, others: list[int]) -> tuple[int, int]:
-        return sum(not shelf[k] for k in others), sum(d[k] > threshold_m for k in others)
-
-    # Left the shelf: any box but the pulled one (the released support too). Moved: the
-    # boxes other than the manipulated ones (the support may settle lower once released).
+    """A ch. 4 pull's judgement under both criteria (trials/criteria.py) from the boxes'
+    motion and shelf membership after the support's release, and while it was held (thesis
+    4.3.3)."""
+    # Every box but the pulled one is judged; the released support only on leaving the
+    # shelf (it may settle lower once released).
     others = [k for k in range(n) if k != extract]
     still = [k for k in others if k != support]
-    left = int(judge(disp, on_shelf, others)[0])
-    moved = int(judge(disp, on_shelf, still)[1])
-    left_held, moved_held = (int(v) for v in judge(disp_held, on_shelf_held, still))
-    return {
+    motion = criteria.box_motion(
+        poses_start, poses_end, on_shelf, still, [support] if support is not None else []
+    )
+    left_held = sum(not on_shelf_held[k] for k in still)
+    moved_held = sum(disp_held[k] > threshold_m for k in still)
+    step = {
         "executed": True,
         "aborted_before_motion": False,
         "aborted_after_motion": False,
         "extracted": out,
         "target_out": out,
-        "others_still": not left and not moved,
-        "n_left_shelf": left,
-        "n_disturbed": moved,
+        "others_still": criteria.still(motion, threshold_m, cf),
+        "collapse_free": criteria.collapse_free(motion, cf),
+        "n_left_shelf": sum(bool(e["left_shelf"]) for e in motion),
+        "n_disturbed": criteria.n_disturbed(motion, threshold_m, cf),
+        "n_collapsed": criteria.n_collapsed(motion, cf),
         "disturbance_m": float(np.sum(disp[others])) if others else 0.0,
-        "success": out and not left,
-        "strict_success": out and not left and not moved,
+        "box_motion": motion,
         "success_held": out and not left_held,
         "strict_success_held": out and not left_held and not moved_held,
         "displacement_m": disp,
         "displacement_held_m": disp_held,
+    }
+    return step | _judged_flags(step)
+
+
+def _judged_flags(step: dict[str, Any]) -> dict[str, Any]:
+    """`judged` / `strict_judged` and the success under each criterion of one executed (or
+    not) pull: a trial is always judged (an abort is a failure of its one attempt)."""
+    ok = step["executed"] and step["extracted"]
+    return {
+        "judged": True,
+        "strict_judged": True,
+        "success": bool(ok and step["collapse_free"]),
+        "strict_success": bool(ok and step["others_still"]),
     }
 
 
@@ -241,16 +288,18 @@ def plan_oracle(
     physics: PhysicsConfig,
     pairs: list[tuple[int, int | None]],
     threshold_m: float,
+    cf: CollapseFreeConfig,
     rng: np.random.Generator,
 ) -> tuple[int, int, int]:
     """The ceiling: simulate the candidate box pairs from the canonical start in a random
-    order and keep the best (strict success, then success, then the least disturbance).
-    A strict success cannot be beaten on success, so the search stops at the first one.
+    order and keep the best (strict success, then collapse-free success, then the least
+    disturbance): a ceiling under each criterion, since a strict success is collapse-free
+    and so cannot be beaten on either; the search stops at the first one.
     -> (index of the chosen pair, pairs simulated, index of the first strict success or -1)."""
     best, best_k, tried = None, 0, 0
     for k in rng.permutation(len(pairs)):
         x, s = pairs[int(k)]
-        out = pull_outcome(spec, physics, x, s, threshold_m)
+        out = pull_outcome(spec, physics, x, s, threshold_m, cf)
         tried += 1
         if _better(out, best):
             best, best_k = out, int(k)
@@ -335,11 +384,21 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
             chosen = random_pair(pairs, rng)
         else:
             box_pairs = [(boxes[x], boxes[s]) for x, s in pairs]
-            usable = [k for k, (x, s) in enumerate(box_pairs) if x is not None and x != s]
+            # valid actions only: an invalid one is never a success
+            usable = [
+                k
+                for k, (x, s) in enumerate(box_pairs)
+                if x is not None and s is not None and x != s
+            ]
             rng = policy_rng(job["seed"], cond.stream, job["index"], f"ch4_{cond.mode}_oracle")
             if usable:
                 k, tried, _ = plan_oracle(
-                    spec, physics, [box_pairs[k] for k in usable], params.moved_threshold_m, rng
+                    spec,
+                    physics,
+                    [box_pairs[k] for k in usable],
+                    params.moved_threshold_m,
+                    job["collapse_free"],
+                    rng,
                 )
                 chosen = pairs[usable[k]]
                 decision["simulated"] = tried
@@ -356,6 +415,7 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
             x_box,
             s_box if s_box != x_box else None,
             params.moved_threshold_m,
+            job["collapse_free"],
             job,
             log,
         )
@@ -366,6 +426,7 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
             x_box,
             s_box if s_box != x_box else None,
             params.moved_threshold_m,
+            job["collapse_free"],
             world=world,
         )
     else:  # nothing graspable chosen (no pair, or a segment of no box): nothing was pulled
@@ -376,9 +437,14 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
             "extracted": False,
             "target_out": False,
             "others_still": True,
+            "collapse_free": True,
+            "judged": True,
+            "strict_judged": True,
             "n_left_shelf": 0,
             "n_disturbed": 0,
+            "n_collapsed": 0,
             "disturbance_m": 0.0,
+            "box_motion": [],
             "success": False,
             "strict_success": False,
             "success_held": False,
@@ -388,18 +454,8 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
         log.poses(world.steps_taken * physics.timestep_s, world.poses(), world.removed)
     out.pop("displacement_m", None)
     out.pop("displacement_held_m", None)
-    if target_box is not None:  # a predetermined target: the pull must take that box out
-        hit = x_box == target_box
-        out = out | {
-            k: bool(out[k] and hit)
-            for k in (
-                "target_out",
-                "success",
-                "strict_success",
-                "success_held",
-                "strict_success_held",
-            )
-        }
+    valid = bool(valid and (target_box is None or x_box == target_box))
+    out = count_if_valid(out, valid)
     record = {
         "condition": job["condition"],
         "episode": job["index"],
@@ -420,7 +476,12 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
         # r_c is +inf where the network claims no region at all: no evidence, written null
         "risk": None if risk is None or not np.isfinite(risk) else round(risk, 6),
         "risk_ties": ties,
-        "valid": bool(valid and (target_box is None or x_box == target_box)),
+        "valid": valid,
+        "collapse_free_params": {
+            "drop_m": job["collapse_free"].drop_m,
+            "tilt_deg": job["collapse_free"].tilt_deg,
+        },
+        "moved_threshold_m": params.moved_threshold_m,
     } | {k: _plain(v) for k, v in out.items()}
     if cond.executor == "arm":  # kinematic records keep their old fields
         record["executor"] = "arm"
@@ -473,6 +534,17 @@ def draw_figure(job: dict[str, Any], out_path: Path) -> None:
     )
 
 
+OUTCOMES = ("target_out", "success", "strict_success", "success_held", "strict_success_held")
+"""A ch. 4 trial's outcome flags, all false for an invalid action."""
+
+
+def count_if_valid(out: dict[str, Any], valid: bool) -> dict[str, Any]:
+    """The judged pull `out` with every outcome flag false unless the action was valid (both
+    segments grasp boxes, two different ones, and with a given target the pulled box is it):
+    an invalid action is executed as chosen, but never counted a success."""
+    return out | {k: bool(out[k] and valid) for k in OUTCOMES}
+
+
 def _plain(v: Any) -> Any:
     """JSON-plain values; floats to 1e-6 so records read cleanly (bits stay deterministic)."""
     if isinstance(v, bool | np.bool_):
@@ -493,7 +565,9 @@ def ch4_jobs(
     max_attempts: int,
     record_images: bool,
     arm: ArmConfig | None = None,
+    collapse_free: CollapseFreeConfig | None = None,
 ) -> list[dict[str, Any]]:
+    """One job per episode (`collapse_free`: trials.collapse_free; None: its defaults)."""
     model_path = Path(f"models/{cond.model}/best.pt") if cond.model is not None else None
     return [
         {
@@ -509,6 +583,7 @@ def ch4_jobs(
             "max_attempts": max_attempts,
             "record_images": record_images,
             "arm": arm or ArmConfig(),
+            "collapse_free": collapse_free or CollapseFreeConfig(),
         }
         for i in range(cond.episodes)
     ]

@@ -55,7 +55,9 @@ from clutterbench.sim.geometry import aabb_overlap_xy, box_aabb_half_extents
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials import criteria
 from clutterbench.trials.config import Ch5ConditionConfig, Ch5TrialParams, SceneStreamConfig
+from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
 from clutterbench.trials.protocol import SceneState, world_at
 from clutterbench.trials.scenes import draw_trial_spec, policy_rng, stream_key
@@ -218,12 +220,13 @@ def execute(
     size_m: np.ndarray,
     params: Ch5TrialParams,
     gone: frozenset[int],
+    cf: CollapseFreeConfig,
 ) -> StepOutcome:
     """Execute a plan from the step's canonical start (`world`, fresh): carry the moved
     cluster (held for a placement, set down and let go for a rearrangement), insert the new
     box at the candidate, set every held box down, release it, settle, judge."""
     assert world.steps_taken == 0, "a step starts from a freshly built world"
-    start = world.positions().copy()
+    start = world.poses().copy()
     n_before = world.n
     moved: list[int] = []
     if plan.move is not None:
@@ -247,27 +250,33 @@ def execute(
     world.release(world.held())
     world.settle_action()
     return StepOutcome(
-        judge_step(world, start, n_before, moved, placed, plan, params, gone), placed
+        judge_step(world, start, n_before, moved, placed, plan, params, gone, cf), placed
     )
 
 
 def judge_step(
     world: BoxWorld,
-    start_m: np.ndarray,
+    start_poses: np.ndarray,
     n_before: int,
     moved: list[int],
     placed: int | None,
     plan: Plan,
     params: Ch5TrialParams,
     gone: frozenset[int],
+    cf: CollapseFreeConfig,
 ) -> dict[str, Any]:
-    """A step's named outcome from physics, after every held box was released and settled."""
-    now = world.positions()
-    disp = np.linalg.norm(now[:n_before] - start_m, axis=1)
+    """A step's named outcome from physics under both criteria (trials/criteria.py), after
+    every held box was released and settled: every box but the moved ones is judged, the
+    moved ones (carried, then let go) only on staying on the shelf; the new box must rest at
+    its place."""
+    poses = world.poses()
+    now = poses[:, :3]
     on_shelf = world.shelf.contains(now)
     others = [k for k in range(n_before) if k not in moved and k not in gone]
-    moved_others = [k for k in others if disp[k] > params.moved_threshold_m or not on_shelf[k]]
-    moved_on_shelf = all(bool(on_shelf[k]) for k in moved)
+    motion = criteria.box_motion(
+        start_poses, poses[:n_before], on_shelf, others, [k for k in moved if k not in gone]
+    )
+    disp = np.linalg.norm(now[:n_before] - start_poses[:, :3], axis=1)
     at_place = None
     if placed is not None:
         goal = plan.candidate.pose[:3]  # type: ignore[union-attr]
@@ -279,16 +288,29 @@ def judge_step(
             and abs(off[0]) <= params.place_tol_m
             and abs(off[1]) <= params.place_tol_m
         )
-    others_still = not moved_others and moved_on_shelf
+    others_still = criteria.still(motion, params.moved_threshold_m, cf)
+    free = criteria.collapse_free(motion, cf)
+    placed_ok = at_place if placed is not None else True
     return {
         "branch": plan.branch,
         "moved_boxes": moved,
         "placed": placed is not None,
         "at_place": at_place,
+        # a replenishment step always acts (nothing aborts): executed and judged
+        "executed": True,
+        "aborted_before_motion": False,
+        "aborted_after_motion": False,
+        "extracted": False,
         "others_still": others_still,
-        "success": bool(others_still and (at_place if placed is not None else True)),
-        "n_disturbed": len(moved_others),
+        "collapse_free": free,
+        "judged": True,
+        "strict_judged": True,
+        "success": bool(free and placed_ok),
+        "strict_success": bool(others_still and placed_ok),
+        "n_disturbed": criteria.n_disturbed(motion, params.moved_threshold_m, cf),
+        "n_collapsed": criteria.n_collapsed(motion, cf),
         "disturbance_m": float(np.sum(disp[others])) if others else 0.0,
+        "box_motion": motion,
     }
 
 
@@ -415,11 +437,11 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
             why = {re.sub(r" by -?\d+$", "", w) for w in plan.info.get("why_not", []) if w}
             gave_up_why = sorted(why)
             break
-        out = execute(world, obs, plan, size_m, params, state.removed)
+        out = execute(world, obs, plan, size_m, params, state.removed, job["collapse_free"])
         steps.append(out.record)
         t += world.steps_taken * dt
         log.poses(t, world.poses())
-        if not out.record["others_still"]:
+        if not out.record["collapse_free"]:  # the first collapse-free failure ends it
             end = "collapse"
             break
         if out.placed_box is not None:
@@ -448,6 +470,14 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
         "branch": branch,
         "first_branch": steps[0]["branch"] if steps else "none",
         "success": end == "placed",
+        # the strict episode is the prefix up to its first strict failure (criteria.py)
+        "strict_success": end == "placed" and all(s["others_still"] for s in steps),
+        "strict_steps": len(criteria.strict_prefix(steps)),
+        "collapse_free_params": {
+            "drop_m": job["collapse_free"].drop_m,
+            "tilt_deg": job["collapse_free"].tilt_deg,
+        },
+        "moved_threshold_m": params.moved_threshold_m,
         "n_disturbed": int(sum(s["n_disturbed"] for s in steps)),
         "disturbance_m": round(float(sum(s["disturbance_m"] for s in steps)), 6),
         "rejected_starts": dict(spec.meta.get("rejected", {})),
@@ -470,27 +500,35 @@ def oracle_choice(
     job: dict[str, Any],
 ) -> tuple[list[Plan], int]:
     """The first action sequence (in action_set's order, for each set of detections in
-    `views` in turn) that succeeds when simulated from the present state exactly as it would
-    be executed; none succeeds: the first one (it fails), or no plan."""
+    `views` in turn) that succeeds under the strict criterion when simulated from the present
+    state exactly as it would be executed, else the first that is collapse-free (a ceiling
+    under each criterion: a strict success is collapse-free); none: the first one (it
+    fails), or no plan."""
     options = [seq for dets in views for seq in action_set(obs, dets, size_m, rp, space)]
     params: Ch5TrialParams = job["params"]
     physics: PhysicsConfig = job["physics"]
     tried = 0
+    free: list[Plan] | None = None
     for seq in options[: params.oracle_budget]:
         tried += 1
         now, view = state, obs
-        ok = True
+        ok = {"strict_success": True, "success": True}
         for k, plan in enumerate(seq):
             world = world_at(spec, now, physics, render=k > 0)
             if k > 0:  # what execution will see before its next step
                 view = observe(world, job["camera"])
-            out = execute(world, view, plan, size_m, params, now.removed)
-            if not out.record["success"] or (out.placed_box is None and plan.candidate is not None):
-                ok = False
+            out = execute(world, view, plan, size_m, params, now.removed, job["collapse_free"])
+            lost = out.placed_box is None and plan.candidate is not None
+            ok = {key: ok[key] and out.record[key] and not lost for key in ok}
+            if not ok["success"]:
                 break
             now = SceneState.of(world)
-        if ok:
+        if ok["strict_success"]:
             return seq, tried
+        if ok["success"] and free is None:
+            free = seq
+    if free is not None:
+        return free, tried
     if options:
         return options[0], tried
     return [Plan("none", None, None)], tried
@@ -564,9 +602,11 @@ def ch5_jobs(
     prob_threshold: float,
     scene_type: str,
     oracle_detector: bool = False,
+    collapse_free: CollapseFreeConfig | None = None,
 ) -> list[dict[str, Any]]:
     """One job per episode; `oracle_detector`: an oracle also simulates the actions seen
-    through the detector (set when any condition perceives with it)."""
+    through the detector (set when any condition perceives with it); `collapse_free`:
+    trials.collapse_free (None: its defaults)."""
     return [
         {
             "condition": condition,
@@ -584,6 +624,7 @@ def ch5_jobs(
             "record_images": record_images,
             "scene_type": scene_type,
             "oracle_detector": oracle_detector,
+            "collapse_free": collapse_free or CollapseFreeConfig(),
         }
         for i in range(cond.episodes)
     ]

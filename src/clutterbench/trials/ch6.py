@@ -31,6 +31,7 @@ from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.config import ArmConfig, Ch6TrialParams, SceneStreamConfig
+from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
 from clutterbench.trials.judge import disturbance
 from clutterbench.trials.protocol import (
@@ -84,13 +85,15 @@ class SearchOracle:
         camera: CameraConfig,
         params: Ch6TrialParams,
         holding: bool,
+        cf: CollapseFreeConfig,
     ):
         self.spec, self.physics, self.camera, self.params = spec, physics, camera, params
-        self.holding = holding
+        self.holding, self.cf = holding, cf
         self.state: SceneState | None = None  # set by the harness before each decision
         self._plan: list[tuple[Action, SceneState]] = []
         self._expected: SceneState | None = None
         self.nodes = self.searches = self.exhausted = self.replanned = 0
+        self.found: dict[str, bool] = {}  # criterion -> a clean sequence found (first search)
 
     # -- simulation -------------------------------------------------------------------------
     def simulate(
@@ -117,8 +120,8 @@ class SearchOracle:
                 world, box, hold, p.pull_increment_m, p.grasp_lift_m, go_on if cut_short else None
             )
         except _CutShort:
-            return {"success": False, "cut_short": True}, None, None
-        step = judge_pull(result, box, hold, state.removed, p.moved_threshold_m)
+            return {"success": False, "strict_success": False, "cut_short": True}, None, None
+        step = judge_pull(result, box, hold, state.removed, p.moved_threshold_m, self.cf)
         return step, SceneState.of(world), result.displacement_m
 
     def candidates(self, state: SceneState, target: int) -> list[int]:
@@ -127,8 +130,14 @@ class SearchOracle:
         ids, _ = visible_objects(obs, self.params.min_pixels)
         return sorted(set(ids) | {target})
 
-    def search(self, state: SceneState, target: int) -> tuple[list | None, int, bool]:
-        """(plan: [(action, state after it)] or None, nodes expanded, budget exhausted)."""
+    def search(
+        self, state: SceneState, target: int, key: str = "strict_success"
+    ) -> tuple[list | None, int, bool]:
+        """(plan: [(action, state after it)] or None, nodes expanded, budget exhausted): a
+        sequence of steps each clean under the criterion `key` ("strict_success", pulls cut
+        short once another box moved `search_cut_m`; or "success", collapse-free, pulls never
+        cut short: a box that slid far may still be collapse-free)."""
+        cut = key == "strict_success"
         visited: set[frozenset[int]] = {state.removed}
         nodes = 0
         budget = self.params.search_node_budget
@@ -143,7 +152,7 @@ class SearchOracle:
             nodes += 1
             boxes = self.candidates(now, target)
             first, after, disp = self.simulate(now, (target, None), cut_short=False)
-            if first["success"]:
+            if first[key]:
                 return [((target, None), after)]
             # The boxes the target's pull disturbed: what stands in its way, and the holds
             # most likely to save it, so they are tried first.
@@ -151,14 +160,14 @@ class SearchOracle:
             if self.holding:
                 others = sorted((b for b in boxes if b != target), key=lambda b: (not in_way[b], b))
                 for h in others:
-                    step, after, _ = self.simulate(now, (target, h))
-                    if step["success"]:
+                    step, after, _ = self.simulate(now, (target, h), cut_short=cut)
+                    if step[key]:
                         return [((target, h), after)]
             children = []
             for x in boxes:
                 if x != target:
-                    step, after, _ = self.simulate(now, (x, None))
-                    if step["success"]:
+                    step, after, _ = self.simulate(now, (x, None), cut_short=cut)
+                    if step[key]:
                         children.append((x, after))
             children.sort(key=lambda c: (not in_way[c[0]], c[0]))
             for x, after in children:
@@ -184,11 +193,23 @@ class SearchOracle:
             self.replanned += 1  # the world left the simulated path: search again
             self._plan = []
         if not self._plan:
-            plan, nodes, exhausted = self.search(state, target)
-            self.searches += 1
-            self.nodes += nodes
-            self.exhausted += exhausted
-            info |= {"search_nodes": nodes, "found": plan is not None, "exhausted": exhausted}
+            # A ceiling under each criterion from one search tree: a strict sequence is also
+            # collapse-free, so it is searched first; only where none exists is the larger
+            # collapse-free tree searched.
+            found: dict[str, bool] = {}
+            plan = None
+            for key in ("strict_success", "success"):
+                plan, nodes, exhausted = self.search(state, target, key)
+                self.searches += 1
+                self.nodes += nodes
+                self.exhausted += exhausted
+                found[key] = plan is not None
+                info |= {f"{key}_search_nodes": nodes, f"{key}_exhausted": exhausted}
+                if plan is not None:
+                    found.setdefault("success", True)
+                    break
+            self.found = self.found or found
+            info |= {"found": found}
             self._plan = list(plan or [])
         if not self._plan:
             # No clean sequence exists (or the budget ran out): pull the target; it fails.
@@ -281,12 +302,16 @@ def _random(job: dict[str, Any], spec: SceneSpec):
 
 @register_planner("oracle")
 def _oracle(job: dict[str, Any], spec: SceneSpec):
-    return SearchOracle(spec, job["physics"], job["camera"], job["params"], holding=False)
+    return SearchOracle(
+        spec, job["physics"], job["camera"], job["params"], False, job["collapse_free"]
+    )
 
 
 @register_planner("oracle_hold")
 def _oracle_hold(job: dict[str, Any], spec: SceneSpec):
-    return SearchOracle(spec, job["physics"], job["camera"], job["params"], holding=True)
+    return SearchOracle(
+        spec, job["physics"], job["camera"], job["params"], True, job["collapse_free"]
+    )
 
 
 def _cpg_planner(job: dict[str, Any], bimanual: bool):
@@ -347,6 +372,7 @@ def execute_decision(
     cp_max: float,
     gone: frozenset[int],
     log: EpisodeLog,
+    cf: CollapseFreeConfig,
     t0: float = 0.0,
     arm: tuple[SceneSpec, SceneState, ArmConfig] | None = None,
 ) -> tuple[dict[str, Any], SceneState, float]:
@@ -406,11 +432,11 @@ def execute_decision(
         result, arm_fields = done_by_arm.result, done_by_arm.fields
         state, elapsed = done_by_arm.state, done_by_arm.elapsed_s
     if arm is None:
-        step = judge_pull(result, box, hold, gone, params.moved_threshold_m)
+        step = judge_pull(result, box, hold, gone, params.moved_threshold_m, cf)
     else:
         from clutterbench.trials.arm import judge_arm_step
 
-        step = judge_arm_step(result, box, hold, gone, params.moved_threshold_m)
+        step = judge_arm_step(result, box, hold, gone, params.moved_threshold_m, cf)
     record = {
         "box": box,
         "hold": hold,
@@ -477,6 +503,7 @@ def run_extraction(
             job["cp_max"],
             state.removed,
             log,
+            job["collapse_free"],
             t,
             arm=(spec, state, job["arm"]) if job.get("executor", "kinematic") == "arm" else None,
         )
@@ -515,6 +542,11 @@ def run_extraction(
         "perception": "instance",
         "rule": job["rule"] if job["planner"] in ("multi_step", "bimanual") else None,
         "rejected_starts": dict(spec.meta.get("rejected", {})),
+        "collapse_free_params": {
+            "drop_m": job["collapse_free"].drop_m,
+            "tilt_deg": job["collapse_free"].tilt_deg,
+        },
+        "moved_threshold_m": params.moved_threshold_m,
         "steps": [_rounded(s) for s in steps],
         "n_disturbed": overall.n_disturbed,
         "disturbance_m": overall.disturbance_m,
@@ -526,6 +558,9 @@ def run_extraction(
             "search_nodes": planner.nodes,
             "search_exhausted": planner.exhausted,
             "search_replanned": planner.replanned,
+            # what the first search proved possible under each criterion (the ceilings)
+            "search_found_strict": bool(planner.found.get("strict_success", False)),
+            "search_found": bool(planner.found.get("success", False)),
         }
     return EpisodeResult(_rounded(record), log)
 
@@ -579,6 +614,7 @@ def ch6_jobs(
     cp_max: float,
     model_path: Path,
 ) -> list[dict[str, Any]]:
+    """Condition `condition`'s episode jobs (collapse-free thresholds: trials.collapse_free)."""
     return [
         {
             "condition": condition,
@@ -591,6 +627,7 @@ def ch6_jobs(
             "physics": physics,
             "camera": camera,
             "params": trials.ch6,
+            "collapse_free": trials.collapse_free,
             "support": support,
             "cp_max": cp_max,
             "model_path": model_path,

@@ -11,6 +11,7 @@ from typing import Literal
 
 from clutterbench.config import bounded
 from clutterbench.data.config import DatasetConfig
+from clutterbench.trials.criteria import CollapseFreeConfig
 
 PLANNERS = (
     "pull_target",
@@ -309,6 +310,8 @@ class TrialsConfig:
     """Scene stream name -> the scenes it draws (seeded from base.seed and its name)."""
     ch6: Ch6TrialParams = Ch6TrialParams()
     """Chapter 6 execution and judging."""
+    collapse_free: CollapseFreeConfig = CollapseFreeConfig()
+    """Thresholds of the collapse-free criterion, every chapter's (trials/criteria.py)."""
     conditions: Mapping[str, ConditionConfig] = dataclasses.field(default_factory=dict)
     """Condition name -> planner on a stream; stage trials runs them all in one pool."""
     ch4: Ch4TrialParams = Ch4TrialParams()

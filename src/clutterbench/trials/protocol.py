@@ -9,9 +9,14 @@ protocol").
   second column); then every held box is released, the scene settles again, and the step is
   judged from physics: no box other than the manipulated ones (pulled, held) may have moved
   beyond the threshold or left the shelf, and the released box must still be on the shelf.
-- **An episode ends at its first failed step** (a box other than the pulled one moved beyond
-  the threshold or left the shelf), when the target is out, when the target is no longer on
-  the shelf (fell: a failure), or when the planner gives up.
+- **Two criteria, one run** (trials/criteria.py): a step is *collapse-free* when no box left
+  the shelf and no box other than the manipulated ones dropped or tipped beyond the
+  `trials.collapse_free` thresholds (`success`), and *strict* when also no such box moved
+  beyond the label threshold (`strict_success`). **An episode ends at its first
+  collapse-free failure**, when the target is out, when the target is no longer on the shelf
+  (fell: a failure), or when the planner gives up; the planner does not know the criterion,
+  so the strict episode is the prefix up to its first strict failure (`criteria.strict_prefix`),
+  and every strict count is taken over that prefix only.
 - **An abort before any motion is an abort, not a collapse:** nothing moved, so nothing is
   judged; an abort after motion that disturbed nothing is an abort too. Per-step success
   counts the judged steps: the executed pulls that took the box out or disturbed the pile.
@@ -28,6 +33,8 @@ import numpy as np
 from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials import criteria
+from clutterbench.trials.criteria import CollapseFreeConfig
 
 STEP_FIELDS = (
     "executed",
@@ -35,14 +42,21 @@ STEP_FIELDS = (
     "aborted_after_motion",
     "extracted",
     "others_still",
+    "collapse_free",
     "judged",
+    "strict_judged",
     "success",
+    "strict_success",
     "others_still_held",
     "success_held",
+    "box_motion",
 )
-"""The named outcome of every step record (judged from physics). `success` and
-`success_held` are booleans on judged steps and None on an abort that disturbed nothing
-(neither a success nor a failure: the episode goes on)."""
+"""The named outcome of every step record (judged from physics). `success` (collapse-free)
+and `strict_success` are booleans on the steps judged under that criterion (`judged`,
+`strict_judged`) and None on an abort that disturbed nothing under it (neither a success nor
+a failure: the episode goes on). `others_still` is the strict criterion's, `collapse_free`
+the other's; `*_held` is the strict judgement while the second arm still held.
+`box_motion`: per box, its motion over the step (trials/criteria.py)."""
 
 EPISODE_ENDS = ("target_out", "collapse", "target_fell", "gave_up", "max_steps")
 """Why an episode ended: the target left the shelf after a clean step; a step moved another
@@ -89,6 +103,10 @@ class PullResult:
     """(N,) the same after every held box was released and the scene settled again."""
     on_shelf: np.ndarray
     """(N,) bool: each box's centre inside the shelf at the end (False for boxes out)."""
+    poses_start: np.ndarray
+    """(N, 7) every box's pose [x, y, z, qw, qx, qy, qz] at the step's start."""
+    poses_end: np.ndarray
+    """(N, 7) the same at the settled end, after every held box was released."""
 
 
 def execute_pull(
@@ -105,6 +123,7 @@ def execute_pull(
     where it is. The scene settles (held judgement), every held box is released, the scene
     settles again. The one code path of executed steps and of the oracles' simulations."""
     assert world.steps_taken == 0, "a step starts from a freshly built world (world_at)"
+    poses_start = world.poses()
     if hold is not None:
         world.hold([hold])
     travel = world.pull_travel_m(box)
@@ -130,7 +149,16 @@ def execute_pull(
     released = world.displacements() if hold is not None else held
     on_shelf = world.shelf.contains(world.positions())
     on_shelf[sorted(world.removed)] = False
-    return PullResult(increments, aborted, box in world.removed, held, released, on_shelf)
+    return PullResult(
+        increments,
+        aborted,
+        box in world.removed,
+        held,
+        released,
+        on_shelf,
+        poses_start,
+        world.poses(),
+    )
 
 
 def moved_others(
@@ -151,15 +179,19 @@ def moved_others(
 
 
 def judge_pull(
-    result: PullResult | None, box: int, hold: int | None, gone: frozenset[int], threshold_m: float
+    result: PullResult | None,
+    box: int,
+    hold: int | None,
+    gone: frozenset[int],
+    threshold_m: float,
+    cf: CollapseFreeConfig,
 ) -> dict[str, Any]:
-    """A step's named outcome from physics. `result` None: aborted before any motion (nothing
-    was simulated, nothing moved). A step fails when a box other than the manipulated ones
-    (pulled, held) moved beyond the threshold or left the shelf, judged after the release
-    (what the released box carried or leaned on has settled; the released box itself may
-    settle lower, but must stay on the shelf) and, as a second column, while still held.
-    An abort that disturbed nothing is neither: `judged` false, `success` and `success_held`
-    None (the episode goes on)."""
+    """A step's named outcome from physics under both criteria (trials/criteria.py). `result`
+    None: aborted before any motion (nothing was simulated, nothing moved). Judged after the
+    release (what the released box carried or leaned on has settled; the released box itself
+    may settle lower, but must stay on the shelf) and, strict, as a second column while still
+    held. An abort that disturbed nothing under a criterion is neither a success nor a failure
+    under it (`success` / `strict_success` None; the episode goes on)."""
     if result is None or result.increments == 0:
         return {
             "executed": False,
@@ -167,17 +199,21 @@ def judge_pull(
             "aborted_after_motion": False,
             "extracted": False,
             "others_still": True,
+            "collapse_free": True,
             "judged": False,
+            "strict_judged": False,
             "success": None,
+            "strict_success": None,
             "others_still_held": True,
             "success_held": None,
             "n_disturbed": 0,
+            "n_collapsed": 0,
             "disturbance_m": 0.0,
+            "box_motion": [] if result is None else _motion(result, box, hold, gone),
         }
     manipulated = {box} | ({hold} if hold is not None else set())
-    n, total = moved_others(result.displacement_m, result.on_shelf, manipulated, gone, threshold_m)
-    if hold is not None and not result.on_shelf[hold]:
-        n += 1  # the released box fell off the shelf
+    motion = _motion(result, box, hold, gone)
+    _, total = moved_others(result.displacement_m, result.on_shelf, manipulated, gone, threshold_m)
     n_held, _ = moved_others(
         result.displacement_held_m, np.ones_like(result.on_shelf), manipulated, gone, threshold_m
     )
@@ -186,29 +222,51 @@ def judge_pull(
         "aborted_before_motion": False,
         "aborted_after_motion": result.aborted,
         "extracted": result.extracted,
-        "others_still": n == 0,
+        "others_still": criteria.still(motion, threshold_m, cf),
+        "collapse_free": criteria.collapse_free(motion, cf),
     }
-    counts = judged(step)
+    counts, strict_counts = judged(step), strict_judged(step)
     return step | {
         "judged": counts,
-        "success": result.extracted and n == 0 if counts else None,
+        "strict_judged": strict_counts,
+        "success": result.extracted and step["collapse_free"] if counts else None,
+        "strict_success": result.extracted and step["others_still"] if strict_counts else None,
         "others_still_held": n_held == 0,
-        "success_held": result.extracted and n_held == 0 if counts else None,
-        "n_disturbed": n,
+        "success_held": result.extracted and n_held == 0 if strict_counts else None,
+        "n_disturbed": criteria.n_disturbed(motion, threshold_m, cf),
+        "n_collapsed": criteria.n_collapsed(motion, cf),
         "disturbance_m": total,
+        "box_motion": motion,
     }
+
+
+def _motion(
+    result: PullResult, box: int, hold: int | None, gone: frozenset[int]
+) -> list[dict[str, Any]]:
+    """Per-box motion of every box still in the scene at the step's start but the pulled one
+    (the held one marked `held`)."""
+    n = len(result.displacement_m)
+    others = [k for k in range(n) if k != box and k != hold and k not in gone]
+    held = [hold] if hold is not None and hold not in gone else []
+    return criteria.box_motion(result.poses_start, result.poses_end, result.on_shelf, others, held)
 
 
 def judged(step: dict[str, Any]) -> bool:
-    """Whether a step counts in per-step success: an executed pull that took its box out or
-    disturbed the pile (an abort that moved nothing else is an abort, counted apart)."""
+    """Whether a step counts in collapse-free per-step success: an executed pull that took
+    its box out or made a box collapse (an abort that collapsed nothing is an abort)."""
+    return bool(step["executed"] and (step["extracted"] or not step["collapse_free"]))
+
+
+def strict_judged(step: dict[str, Any]) -> bool:
+    """Whether a step counts in strict per-step success: an executed pull that took its box
+    out or disturbed the pile beyond the label threshold."""
     return bool(step["executed"] and (step["extracted"] or not step["others_still"]))
 
 
 def episode_end(step: dict[str, Any], target_out: bool, target_on_shelf: bool) -> str | None:
-    """Why the episode ends after `step`, or None to go on (thesis 6.3.2: each failed episode
-    has exactly one failed step)."""
-    if step["executed"] and not step["others_still"]:
+    """Why the episode ends after `step`, or None to go on: at its first collapse-free failure
+    (thesis 6.3.2: each failed episode has exactly one failed step)."""
+    if step["executed"] and not step["collapse_free"]:
         return "collapse"
     if target_out:
         return "target_out"
@@ -218,22 +276,37 @@ def episode_end(step: dict[str, Any], target_out: bool, target_on_shelf: bool) -
 
 
 def judge_episode(steps: list[dict[str, Any]], end: str, target: int) -> dict[str, Any]:
-    """The episode's named outcome: success when the target came out and no step disturbed
-    the pile (the episode ended at "target_out"). `success_held`: the same judged while the
-    second arm still held, where that is decidable (it differs only when the last step pulled
-    the target and its release disturbed the pile)."""
+    """The episode's named outcome: `success` (collapse-free) when the target came out and no
+    step made a box collapse (the episode ended at "target_out"); `strict_success` when, in
+    addition, no step disturbed the pile beyond the label threshold (the strict episode, the
+    prefix up to its first strict failure, ended with the target out); their judged steps.
+    `success_held`: the strict judgement while the second arm still held, where that is
+    decidable (it differs only when the strict episode's last step pulled the target and its
+    release disturbed the pile)."""
     assert end in EPISODE_ENDS, end
-    last = steps[-1] if steps else None
+    prefix = criteria.strict_prefix(steps)
+    strict_ok = (
+        end == "target_out" and len(prefix) == len(steps) and all(s["others_still"] for s in steps)
+    )
+    last = prefix[-1] if prefix else None
     released_only = (
-        end == "collapse" and last is not None and last["box"] == target and last["success_held"]
+        not strict_ok
+        and last is not None
+        and last["box"] == target
+        and last["executed"]
+        and not last["others_still"]
+        and bool(last["success_held"])
     )
     return {
         "end": end,
         "target_out": any(s["extracted"] and s["box"] == target for s in steps),
         "others_still": all(s["others_still"] for s in steps),
         "success": end == "target_out",
-        "success_held": end == "target_out" or released_only,
+        "strict_success": strict_ok,
+        "strict_steps": len(prefix),
+        "success_held": strict_ok or released_only,
         "aborted_before_motion": sum(bool(s["aborted_before_motion"]) for s in steps),
         "aborted_after_motion": sum(bool(s["aborted_after_motion"]) for s in steps),
         "judged_steps": sum(judged(s) for s in steps),
+        "strict_judged_steps": sum(strict_judged(s) for s in prefix),
     }

@@ -86,19 +86,34 @@ def _steps(record: Mapping[str, Any]) -> list[Mapping[str, Any]]:
     return steps
 
 
-def _judged(step: Mapping[str, Any]) -> bool:
-    """A step counts in per-step success when it is judged (trials/protocol.py): an executed
-    pull that took its box out or disturbed the pile. Records of the older schema (no
-    `executed`) count every step."""
+JUDGED_BY = {"success": "judged", "strict_success": "strict_judged"}
+"""A step's success under a criterion counts where the step is judged under it."""
+
+
+def _judged(step: Mapping[str, Any], key: str = "success") -> bool:
+    """A step counts in per-step success when it is judged under the criterion of `key`
+    (trials/protocol.py): an executed pull that took its box out or disturbed the pile.
+    Records of the older schemas: without the judged flag, from the others_still flag; without
+    `executed`, every step."""
+    flag = JUDGED_BY.get(key, "judged")
+    if flag in step:
+        return bool(step[flag])
     if "executed" not in step:
         return True
     return bool(step["executed"] and (step["extracted"] or not step["others_still"]))
 
 
 def _episode_steps(record: Mapping[str, Any], key: str) -> tuple[int, int]:
+    """(successes, judged steps) of one episode under `key`; strict: over the strict
+    episode only, the prefix up to the first strict failure (trials/criteria.py)."""
+    from clutterbench.trials.criteria import strict_prefix
+
+    steps = _steps(record)
+    if key == "strict_success":
+        steps = strict_prefix(steps)
     k = n = 0
-    for i, step in enumerate(_steps(record)):
-        if _judged(step):
+    for i, step in enumerate(steps):
+        if _judged(step, key):
             k += _flag(step.get(key), key, f"{_where(record)}, step {i}")
             n += 1
     return k, n
@@ -200,6 +215,8 @@ def aggregate(records: Sequence[Mapping[str, Any]], group_by: str = "condition")
         row |= _rate_columns("success", rate(recs, "success"))
         if _has(recs, "steps", value):
             row |= _step_columns(recs, "success")
+            if all("strict_success" in s for r in recs for s in _steps(r)):
+                row |= _step_columns(recs, "strict_success")
             row["mean_steps"] = float(np.mean([len(_steps(r)) for r in recs]))
             if all("aborted_before_motion" in s for r in recs for s in _steps(r)):
                 row["aborts"] = sum(
@@ -224,6 +241,7 @@ def aggregate(records: Sequence[Mapping[str, Any]], group_by: str = "condition")
     order = [
         *always,
         *_rate_columns("step_success", Rate(0, 0)),
+        *_rate_columns("step_strict_success", Rate(0, 0)),
         "mean_steps",
         "aborts",
         "aborts_before_motion",
