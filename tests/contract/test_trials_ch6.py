@@ -275,6 +275,44 @@ def test_the_mcap_shows_the_scene_and_the_camera(stack3, tmp_path):
     assert (tf.translation.x, tf.translation.y, tf.translation.z) == tuple(t)
 
 
+@pytest.mark.parametrize("spec_path", [STACK3, TOWER6, HOLD_QUIET])
+def test_a_truth_map_covers_exactly_the_boxes_its_removal_moves(spec_path, physics):
+    """The perception ceiling's map of removing x: the visible pixels of the boxes that move
+    beyond the label threshold when x is lifted out (the labels' physics), and nothing else."""
+    from clutterbench.planning.extraction import visible_objects
+    from clutterbench.sim.render import observe
+    from clutterbench.trials.truth_maps import TruthCollapseMaps
+
+    spec = SceneSpec.load(spec_path)
+    state = SceneState.start(spec)
+    obs = observe(world_at(spec, state, physics, render=True), CAM)
+    ids, masks = visible_objects(obs, 5)
+    maps = TruthCollapseMaps(spec, physics, THR)
+    maps.at(state, obs.instance)
+    heat = maps(obs.depth_m, masks.astype(np.uint8))
+    moved, _ = truth_moved_contact(spec, physics, THR)
+    assert heat.shape == masks.shape and set(np.unique(heat)) <= {0.0, 1.0}
+    for k, x in enumerate(ids):
+        expected = np.isin(obs.instance, [i + 1 for i in range(spec.n) if moved[x, i]])
+        assert np.array_equal(heat[k] > 0, expected), x
+
+
+def test_the_truth_planner_takes_the_tower_down_and_rereads_physics_mid_pull():
+    """With physics-truth maps, Algorithm 1 takes a tower of six down from the top; the maps
+    are simulated for every visible box at each decision and again at every monitor check
+    of a pull, from the state the pull has reached."""
+    tower = SceneSpec.load(TOWER6)
+    rec = run_extraction(tower, _job("multi_step_truth")[0], target=0).record
+    assert [s["box"] for s in rec["steps"]] == [5, 4, 3, 2, 1, 0]
+    assert rec["success"] and rec["strict_success"]
+    assert rec["collapse_maps"] == "physics truth"
+    # one removal per visible box per decision (6, 5, 4, 3, 2; a lone box has no map), and
+    # one per monitor check after the first increment while another box is in view
+    decisions = sum(range(2, 7))
+    later = sum(s["increments"] - 1 for s in rec["steps"][:-1])
+    assert decisions < rec["truth_simulations"] <= decisions + later
+
+
 def test_the_registry_covers_every_planner_name():
     assert set(PLANNER_NAMES) <= set(PLANNERS)
 

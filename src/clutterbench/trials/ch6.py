@@ -43,6 +43,7 @@ from clutterbench.trials.protocol import (
     world_at,
 )
 from clutterbench.trials.scenes import draw_target, draw_trial_spec, policy_rng
+from clutterbench.trials.truth_maps import TruthCollapseMaps
 
 _PREDICTORS: dict[str, Any] = {}
 
@@ -314,9 +315,14 @@ def _oracle_hold(job: dict[str, Any], spec: SceneSpec):
     )
 
 
-def _cpg_planner(job: dict[str, Any], bimanual: bool):
-    predictor = load_predictor(job["model_path"], job["camera"].image_size)
+def _cpg_planner(job: dict[str, Any], bimanual: bool, spec: SceneSpec | None = None):
+    """Algorithm 1 with the collapse predictor, or (`spec` given) with physics-truth maps of
+    that scene through the same interface: the same planner, rule and thresholds."""
     params: Ch6TrialParams = job["params"]
+    if spec is None:
+        predictor = load_predictor(job["model_path"], job["camera"].image_size)
+    else:
+        predictor = TruthCollapseMaps(spec, job["physics"], params.moved_threshold_m)
     return CollapseGraphPlanner(
         predictor, job["support"], job["cp_max"], params.min_pixels, bimanual=bimanual
     )
@@ -330,6 +336,30 @@ def _multi_step(job: dict[str, Any], spec: SceneSpec):
 @register_planner("bimanual")
 def _bimanual(job: dict[str, Any], spec: SceneSpec):
     return _cpg_planner(job, bimanual=True)
+
+
+@register_planner("multi_step_truth")
+def _multi_step_truth(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=False, spec=spec)
+
+
+@register_planner("bimanual_truth")
+def _bimanual_truth(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=True, spec=spec)
+
+
+CP_PLANNERS = ("multi_step", "bimanual", "multi_step_truth", "bimanual_truth")
+"""The planners of Algorithm 1 (a support rule, cp_max); `*_truth` read physics-truth maps."""
+
+
+def reads_truth_maps(name: str) -> bool:
+    return name.endswith("_truth") and name in CP_PLANNERS
+
+
+def truth_maps_of(planner: Any) -> TruthCollapseMaps | None:
+    """The physics-truth maps a planner reads instead of the collapse predictor, if any."""
+    maps = getattr(planner, "predict", None)
+    return maps if isinstance(maps, TruthCollapseMaps) else None
 
 
 def load_planners(modules: Sequence[str], names: Sequence[str]) -> None:
@@ -387,10 +417,15 @@ def execute_decision(
     monitor = getattr(planner, "collapse_score", None)
     max_cp = 0.0
 
+    truth = truth_maps_of(planner)
+
     def score(done: int, now: Observation | None, t: float) -> bool:
         nonlocal max_cp
         if monitor is None:
             return True
+        if truth is not None and done:  # truth maps of the present, mid-pull state
+            assert arm is None and now is not None, "truth maps run on the kinematic executor"
+            truth.at(SceneState.of(world), now.instance, world.held())
         cp = float(monitor(obs if done == 0 else now, box, hold))
         max_cp = max(max_cp, cp)
         log.json(t, DECISION_TOPIC, {"box": box, "cp": round(cp, 4)})
@@ -479,6 +514,7 @@ def run_extraction(
             job["seed"], job["stream"], job["index"], obs, params.min_target_pixels
         )
     planner = make_planner(job, spec)
+    truth = truth_maps_of(planner)
     steps: list[dict[str, Any]] = []
     blocked: set[int] = set()
     end, t = "max_steps", 0.0
@@ -487,6 +523,8 @@ def run_extraction(
         log.poses(t, state.poses, state.removed)
         if isinstance(planner, SearchOracle):
             planner.state = state
+        if truth is not None:
+            truth.at(state, obs.instance)
         try:
             decision = planner.decide(obs, target, frozenset(blocked))
         except ValueError:  # every action the planner would take is rejected by its own rule
@@ -540,7 +578,10 @@ def run_extraction(
         "target": target,
         "planner": job["planner"],
         "perception": "instance",
-        "rule": job["rule"] if job["planner"] in ("multi_step", "bimanual") else None,
+        "rule": job["rule"] if job["planner"] in CP_PLANNERS else None,
+        "collapse_maps": None
+        if job["planner"] not in CP_PLANNERS
+        else ("physics truth" if truth is not None else "predicted"),
         "rejected_starts": dict(spec.meta.get("rejected", {})),
         "collapse_free_params": {
             "drop_m": job["collapse_free"].drop_m,
@@ -553,6 +594,8 @@ def run_extraction(
     } | judge_episode(steps, end, target)
     if job.get("executor", "kinematic") == "arm":  # kinematic records keep their old fields
         record["executor"] = "arm"
+    if truth is not None:
+        record["truth_simulations"] = truth.simulations
     if isinstance(planner, SearchOracle):
         record |= {
             "search_nodes": planner.nodes,
@@ -585,6 +628,11 @@ def condition_jobs(
     for model in {trials.ch6.model, trials.ch6.ch4_model}:
         if not Path(f"models/{model}/best.pt").exists():
             raise ClutterbenchError(f"models/{model}/best.pt missing; run train@{model}")
+    if cond.executor == "arm" and reads_truth_maps(cond.planner):
+        raise ClutterbenchError(
+            f"trials.conditions.{name}: planner {cond.planner} reads physics-truth maps, which "
+            "run on the kinematic executor only (executor: kinematic)"
+        )
     support = chosen_support(thresholds, cond.rule)
     cp_max = trials.ch6.cp_max if trials.ch6.cp_max is not None else support.score_threshold
     jobs = ch6_jobs(

@@ -18,6 +18,8 @@ PLANNERS = (
     "single_step",
     "multi_step",
     "bimanual",
+    "multi_step_truth",
+    "bimanual_truth",
     "oracle",
     "oracle_hold",
     "random",
@@ -25,8 +27,9 @@ PLANNERS = (
 """The built-in ch. 6 trial policies (registered in trials.ch6.PLANNERS): pull the
 target at once, nothing held; the thesis' single-step method (its previous work, ch. 4: pull
 the target while holding the support of least risk); Algorithm 1 with one arm; Algorithm 1
-with the bimanual option (Fig. 6.7); the search oracles with one arm and with a holding arm;
-a uniformly random visible box each step."""
+with the bimanual option (Fig. 6.7); the same two fed physics-truth collapse maps instead of
+the predictor's (the perception ceiling, trials/truth_maps.py); the search oracles with one
+arm and with a holding arm; a uniformly random visible box each step."""
 
 
 @dataclasses.dataclass(frozen=True)
