@@ -14,6 +14,7 @@ from clutterbench.report.arm_table import arm_table
 from clutterbench.report.collapse import RunSources, collapse_table
 from clutterbench.report.config import ReportConfig
 from clutterbench.report.datasets import dataset_stats, datasets_table
+from clutterbench.report.decomposition import decomposition_table
 from clutterbench.report.extraction import (
     extraction_families_table,
     extraction_table,
@@ -109,6 +110,7 @@ def report(params: dict, base: BaseConfig) -> None:
     extraction_families_table(
         records, cfg.table_6_3, Path("reports/tables"), base.scale, [trial_note]
     )
+    decomposition_table(records, Path("reports/tables"), base.scale)
 
     by_condition: dict[str, list[dict]] = {}
     for r in read_records(Path("reports/trials_ch4/records.jsonl")):

@@ -39,6 +39,8 @@ METHODS = {
     "pull_target": "pull the target at once, nothing held (naive)",
     "multi_step": "multi-step extraction (CPG order, one arm)",
     "bimanual": "multi-step + bimanual hold",
+    "multi_step_truth": "multi-step on physics-truth collapse maps (perception ceiling)",
+    "bimanual_truth": "multi-step + bimanual hold on physics-truth maps (perception ceiling)",
     "oracle": "search oracle, one arm (ceiling)",
     "oracle_hold": "search oracle, may hold one box (ceiling)",
     "random": "random (floor)",
@@ -48,6 +50,7 @@ METHODS = {
 MATCHING_ORACLE = {
     "single_step": "oracle_hold",
     "bimanual": "oracle_hold",
+    "bimanual_truth": "oracle_hold",
     "oracle_hold": "oracle_hold",
 }
 """The ceiling a planner is measured against: the holding search for planners that hold a

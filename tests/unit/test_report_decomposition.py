@@ -1,0 +1,66 @@
+"""Table 6.3 decomposed: a CP row's gap to its oracle = planning part + perception part."""
+
+from __future__ import annotations
+
+import pytest
+
+from clutterbench.report.decomposition import decompose, decomposition_table
+
+
+def _records(planner: str, stream: str, wins: int, n: int = 10, strict_wins: int | None = None):
+    strict_wins = wins if strict_wins is None else strict_wins
+    return [
+        {
+            "planner": planner,
+            "stream": stream,
+            "episode": e,
+            "success": e < wins,
+            "strict_success": e < strict_wins,
+        }
+        for e in range(n)
+    ]
+
+
+def test_the_gap_splits_into_planning_and_perception():
+    by_condition = {
+        "multi_step": _records("multi_step", "s", 3, strict_wins=2),
+        "multi_step_truth": _records("multi_step_truth", "s", 6, strict_wins=4),
+        "oracle": _records("oracle", "s", 8, strict_wins=5),
+        "bimanual": _records("bimanual", "s", 5),
+        "oracle_hold": _records("oracle_hold", "s", 9),
+    }
+    rows = {r["key"]: r for r in decompose(by_condition) if r["planner"] == "multi_step"}
+    free, strict = rows["success"], rows["strict_success"]
+    assert free["planning"] == pytest.approx(20.0) and free["perception"] == pytest.approx(30.0)
+    assert free["gap"] == pytest.approx(50.0) and free["oracle_condition"] == "oracle"
+    assert strict["planning"] == pytest.approx(10.0) and strict["perception"] == pytest.approx(20.0)
+    for r in rows.values():
+        assert r["planning_lo"] <= r["planning"] <= r["planning_hi"]
+    # bimanual has no truth row on this stream: no decomposition for it
+    assert all(r["planner"] != "bimanual" for r in decompose(by_condition))
+
+
+def test_parts_are_taken_over_the_episodes_all_three_rows_ran():
+    by_condition = {
+        "m": _records("multi_step", "s", 2, n=4),
+        "t": _records("multi_step_truth", "s", 4, n=10),
+        "o": _records("oracle", "s", 4, n=10),
+        "m_other": _records("multi_step", "other", 0),  # no truth / oracle on its stream
+    }
+    (free, _) = decompose(by_condition)
+    assert free["episodes"] == 4 and free["perception"] == pytest.approx(50.0)
+    assert free["stream"] == "s"
+
+
+def test_the_table_is_written_with_its_figure(tmp_path):
+    by_condition = {
+        "multi_step": _records("multi_step", "s", 3),
+        "multi_step_truth": _records("multi_step_truth", "s", 6),
+        "oracle": _records("oracle", "s", 8),
+    }
+    raw = decomposition_table(by_condition, tmp_path, "tiny")
+    assert raw is not None and len(raw) == 2
+    text = (tmp_path / "table_6_3_decomposition.md").read_text()
+    assert "planning part" in text and "30.0 [" in text
+    assert (tmp_path / "table_6_3_decomposition.png").stat().st_size > 0
+    assert decomposition_table({"oracle": by_condition["oracle"]}, tmp_path / "x", "tiny") is None
