@@ -152,6 +152,11 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     for table, rows in (("table_4_1", 24 + 6), ("table_4_1_target", 3), ("table_6_3", n63)):
         frame = pd.read_csv(a / "reports/tables" / f"{table}.csv")
         assert len(frame) == rows and frame["success_rate"].between(0, 1).all(), table
+    # Table 6.3 decomposed: every stream with a CP row, its truth-map row and its oracle,
+    # under both criteria; planning + perception = the gap
+    dec = pd.read_csv(a / "reports/tables/table_6_3_decomposition.csv")
+    assert len(dec) == 2 * 4 and set(dec["key"]) == {"success", "strict_success"}
+    assert ((dec["planning"] + dec["perception"] - dec["gap"]).abs() < 1e-9).all()
     t42 = pd.read_csv(a / "reports/tables/table_4_2.csv")
     assert len(t42) == 4
     # chapter 3: every variant's games, one row per slide, one MCAP per variant, Fig. 3.15
