@@ -70,8 +70,8 @@ crosscheck: setup
 learning-curve: setup
 	python -m clutterbench.collapse.learning_curve cp_focal --fractions 0.25 0.5
 
-# The ch. 4 training piles rechecked on dev streams (params dev.ch4_piles; ~35 min at default
-# scale on 2 cores): a network per pile range, the risk planner on each dev stream ->
+# The ch. 4 training piles rechecked on dev streams (params dev.ch4_piles; ~30 min at default
+# scale on 2 free cores): a network per pile range, the risk planner on each dev stream ->
 # reports/dev/ch4_piles.{json,md}; scratch data and networks in data/dev/ch4_piles/
 dev-ch4-piles: setup
 	python -m clutterbench.dev.ch4_piles

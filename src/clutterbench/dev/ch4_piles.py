@@ -1,6 +1,6 @@
 """Recheck on dev streams: the piles the ch. 4 networks are trained on.
 
-    python -m clutterbench.dev.ch4_piles       # make dev-ch4-piles (~35 min at default scale)
+    python -m clutterbench.dev.ch4_piles       # make dev-ch4-piles (~30 min at default scale)
 
 The ch. 4 networks are trained on piles of 5-10 boxes (generate.datasets.ch4_*.n_objects),
 the thesis' on piles of 6; the range was chosen after seeing Table 4.1's 10-box cells, a
