@@ -1,0 +1,83 @@
+"""Params of the dev-stream commands (section `dev`): the dev streams and each recheck.
+
+Imports no SAPIEN and no torch (the checks read configs only).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+
+from clutterbench.config import bounded
+from clutterbench.errors import ClutterbenchError
+from clutterbench.trials.config import SceneStreamConfig, TrialsConfig
+
+DEV_PREFIX = "dev_"
+"""Every dev stream's name starts with it, and no table stream's does."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Ch4PilesConfig:
+    """The ch. 4 training-pile recheck (`python -m clutterbench.dev.ch4_piles`)."""
+
+    model: str = "ch4_various"
+    """The ch. 4 network retrained on each pile range (a key of train.models)."""
+    pile_ranges: tuple[tuple[int, int], ...] = ((6, 6), (5, 10))
+    """Candidate box counts per training pile (its dataset's n_objects; all else as params')."""
+    streams: tuple[str, ...] = ("dev_ch4_10", "dev_ch4_5")
+    """Dev streams the risk planner runs on with each network (keys of dev.streams)."""
+    episodes: int = bounded(100, ge=1)
+    """Trials per network and stream."""
+    oracle: bool = True
+    """Also the oracle on the same scenes: the ceiling each network falls below."""
+
+    def __post_init__(self) -> None:
+        if len(set(self.pile_ranges)) < 2 or len(set(self.pile_ranges)) < len(self.pile_ranges):
+            raise ValueError("ch4_piles.pile_ranges: need two or more different ranges to compare")
+        for lo, hi in self.pile_ranges:
+            if not 1 <= lo <= hi:
+                raise ValueError(f"ch4_piles.pile_ranges: [{lo}, {hi}] is not a range of boxes")
+        if not self.streams:
+            raise ValueError("ch4_piles.streams: no dev stream to run on")
+
+
+@dataclasses.dataclass(frozen=True)
+class DevConfig:
+    """Dev streams and the rechecks run on them; no stage reads this section."""
+
+    streams: Mapping[str, SceneStreamConfig] = dataclasses.field(default_factory=dict)
+    """Dev stream name (dev_*) -> the scenes it draws, seeded from base.seed and its name."""
+    ch4_piles: Ch4PilesConfig = Ch4PilesConfig()
+    """The ch. 4 training-pile recheck."""
+
+    def __post_init__(self) -> None:
+        for name in self.streams:
+            if not name.startswith(DEV_PREFIX):
+                raise ValueError(f"streams.{name}: a dev stream's name starts with '{DEV_PREFIX}'")
+        for name in self.ch4_piles.streams:
+            if name not in self.streams:
+                raise ValueError(
+                    f"ch4_piles.streams: unknown dev stream '{name}' "
+                    f"(known: {', '.join(self.streams) or 'none'})"
+                )
+
+
+def check_dev_streams(dev: DevConfig, trials: TrialsConfig) -> None:
+    """Dev runs and the tables never share scenes: no table stream is named like a dev stream
+    (so no table condition, whose stream must be a table stream, runs on one), and no dev
+    stream's seed key (trials.scenes.stream_key) is a table stream's."""
+    from clutterbench.trials.scenes import stream_key
+
+    for name in trials.streams:
+        if name.startswith(DEV_PREFIX):
+            raise ClutterbenchError(
+                f"trials.streams.{name}: a table stream may not be named like a dev stream "
+                f"('{DEV_PREFIX}*'); move it to dev.streams or rename it"
+            )
+    table = {stream_key(name): name for name in trials.streams}
+    for name in dev.streams:
+        if stream_key(name) in table:
+            raise ClutterbenchError(
+                f"dev.streams.{name}: draws the scenes of table stream "
+                f"trials.streams.{table[stream_key(name)]}"
+            )
