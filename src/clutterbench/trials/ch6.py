@@ -185,6 +185,27 @@ class SearchOracle:
         except _Budget:
             return None, nodes, True
 
+    def plan_from(
+        self, state: SceneState, target: int
+    ) -> tuple[list | None, dict[str, bool], dict[str, Any]]:
+        """(plan or None, found per criterion, search info): a ceiling under each criterion
+        from one search tree: a strict sequence is also collapse-free, so it is searched
+        first; only where none exists is the larger collapse-free tree searched."""
+        found: dict[str, bool] = {}
+        info: dict[str, Any] = {}
+        plan = None
+        for key in ("strict_success", "success"):
+            plan, nodes, exhausted = self.search(state, target, key)
+            self.searches += 1
+            self.nodes += nodes
+            self.exhausted += exhausted
+            found[key] = plan is not None
+            info |= {f"{key}_search_nodes": nodes, f"{key}_exhausted": exhausted}
+            if plan is not None:
+                found.setdefault("success", True)
+                break
+        return plan, found, info
+
     # -- the planner interface --------------------------------------------------------------
     def decide(self, obs: Observation, target: int, blocked: frozenset[int]) -> Decision:
         state = self.state
@@ -194,23 +215,9 @@ class SearchOracle:
             self.replanned += 1  # the world left the simulated path: search again
             self._plan = []
         if not self._plan:
-            # A ceiling under each criterion from one search tree: a strict sequence is also
-            # collapse-free, so it is searched first; only where none exists is the larger
-            # collapse-free tree searched.
-            found: dict[str, bool] = {}
-            plan = None
-            for key in ("strict_success", "success"):
-                plan, nodes, exhausted = self.search(state, target, key)
-                self.searches += 1
-                self.nodes += nodes
-                self.exhausted += exhausted
-                found[key] = plan is not None
-                info |= {f"{key}_search_nodes": nodes, f"{key}_exhausted": exhausted}
-                if plan is not None:
-                    found.setdefault("success", True)
-                    break
+            plan, found, searched = self.plan_from(state, target)
             self.found = self.found or found
-            info |= {"found": found}
+            info |= searched | {"found": found}
             self._plan = list(plan or [])
         if not self._plan:
             # No clean sequence exists (or the budget ran out): pull the target; it fails.
@@ -346,6 +353,31 @@ def _multi_step_truth(job: dict[str, Any], spec: SceneSpec):
 @register_planner("bimanual_truth")
 def _bimanual_truth(job: dict[str, Any], spec: SceneSpec):
     return _cpg_planner(job, bimanual=True, spec=spec)
+
+
+def _physics_from_depth(job: dict[str, Any], spec: SceneSpec, holding: bool):
+    """The physics-from-depth planner (planning/physics_depth.py): boxes fitted to each
+    observation, searched in SAPIEN by the oracle's code on that estimate. Of the episode's
+    spec it gets the shelf only (fixed, a robot knows it); of its stream the catalogue."""
+    from clutterbench.planning.physics_depth import PhysicsFromDepthPlanner
+    from clutterbench.trials.physics_model import EstimatedWorldModel, make_estimator
+
+    params: Ch6TrialParams = job["params"]
+    model = EstimatedWorldModel(
+        spec.shelf, job["camera"], job["physics"], params, holding, job["collapse_free"]
+    )
+    estimate = make_estimator(job["stream_cfg"].catalogue, params.min_pixels)
+    return PhysicsFromDepthPlanner(estimate, model, holding)
+
+
+@register_planner("physics_from_depth")
+def _pfd(job: dict[str, Any], spec: SceneSpec):
+    return _physics_from_depth(job, spec, holding=False)
+
+
+@register_planner("physics_from_depth_hold")
+def _pfd_hold(job: dict[str, Any], spec: SceneSpec):
+    return _physics_from_depth(job, spec, holding=True)
 
 
 CP_PLANNERS = ("multi_step", "bimanual", "multi_step_truth", "bimanual_truth")
@@ -605,6 +637,10 @@ def run_extraction(
             "search_found_strict": bool(planner.found.get("strict_success", False)),
             "search_found": bool(planner.found.get("success", False)),
         }
+    if hasattr(planner, "first") and hasattr(planner, "steps"):  # physics from depth
+        from clutterbench.trials.physics_model import estimate_record
+
+        record |= estimate_record(planner, spec)
     return EpisodeResult(_rounded(record), log)
 
 

@@ -23,13 +23,17 @@ PLANNERS = (
     "oracle",
     "oracle_hold",
     "random",
+    "physics_from_depth",
+    "physics_from_depth_hold",
 )
 """The built-in ch. 6 trial policies (registered in trials.ch6.PLANNERS): pull the
 target at once, nothing held; the thesis' single-step method (its previous work, ch. 4: pull
 the target while holding the support of least risk); Algorithm 1 with one arm; Algorithm 1
 with the bimanual option (Fig. 6.7); the same two fed physics-truth collapse maps instead of
 the predictor's (the perception ceiling, trials/truth_maps.py); the search oracles with one
-arm and with a holding arm; a uniformly random visible box each step."""
+arm and with a holding arm; a uniformly random visible box each step; the search on boxes
+fitted to each observation instead of the true scene, one arm and holding
+(planning/physics_depth.py)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -146,6 +150,12 @@ class Ch6TrialParams:
     """A search oracle's simulated pull stops, judged failed, once another box moved more than
     this (m) mid-pull (well past moved_threshold_m: it does not come back); most pulls in a
     pile fail, so this is most of the search's saving."""
+    physics_depth_node_budget: int = bounded(40, ge=1)
+    """The physics-from-depth planners' search expands at most this many states of the
+    estimated scene per decision (their decision time)."""
+    physics_depth_settle_s: float = bounded(0.5, gt=0.0)
+    """The estimated scene settles this long before the search; not at rest by then is
+    recorded (estimate_not_at_rest)."""
     ch4_model: str = "ch4_various"
     """The chapter 4 network (a key of train.models) of the single-step rows: the thesis'
     previous method, extract while supporting (Table 6.3's single-step rows)."""

@@ -1,0 +1,136 @@
+"""The physics-from-depth planner's world model in SAPIEN (planning/physics_depth.py): the
+estimated boxes as a settled scene (sim/estimated.py), searched with the search oracle's own
+code (`SearchOracle.plan_from`, the trials' own pull, judged as an executed step is) on that
+estimated scene instead of the true one; and the scoring of estimates against the truth
+(which only the trials, holding the world, can do).
+
+Nothing here reads the world's state: `EstimatedWorldModel` is built from params, the shelf
+and the camera (fixed, known to a robot) and the catalogue of box types; it sees a
+`BoxEstimate` and nothing else.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from clutterbench.perception.box_fit import BoxEstimate, box_errors, fit_boxes
+from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.estimated import EstimatedScene, estimated_scene
+from clutterbench.sim.shelf import Shelf
+from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.config import Ch6TrialParams
+from clutterbench.trials.criteria import CollapseFreeConfig
+from clutterbench.trials.protocol import SceneState
+
+
+class EstimatedWorldModel:
+    """estimate -> settled estimated scene -> the oracle's search over sequences in it."""
+
+    def __init__(
+        self,
+        shelf: Shelf,
+        camera: CameraConfig,
+        physics: PhysicsConfig,
+        params: Ch6TrialParams,
+        holding: bool,
+        cf: CollapseFreeConfig,
+    ):
+        self.shelf, self.camera, self.physics, self.holding, self.cf = (
+            shelf,
+            camera,
+            physics,
+            holding,
+            cf,
+        )
+        # the search's node budget is the planner's own (a robot's time per decision)
+        self.params = dataclasses.replace(
+            params, search_node_budget=params.physics_depth_node_budget
+        )
+        self.last: EstimatedScene | None = None
+
+    def scene(self, est: BoxEstimate) -> EstimatedScene:
+        self.last = estimated_scene(
+            est.sizes_m,
+            est.poses,
+            est.ids,
+            self.shelf,
+            self.camera,
+            self.physics,
+            self.params.physics_depth_settle_s,
+        )
+        return self.last
+
+    def __call__(self, est: BoxEstimate, target: int) -> tuple[list | None, dict[str, Any]]:
+        from clutterbench.trials.ch6 import SearchOracle
+
+        scene = self.scene(est)
+        info: dict[str, Any] = {"estimate": scene.info()}
+        if target not in scene.kept:
+            return None, info | {"target_dropped": True}
+        t = scene.kept.index(target)
+        oracle = SearchOracle(
+            scene.spec, self.physics, self.camera, self.params, self.holding, self.cf
+        )
+        plan, found, search_info = oracle.plan_from(SceneState.start(scene.spec), t)
+        info |= search_info | {"found": found}
+        if plan is None:
+            return None, info
+        # back to the estimate's indices
+        return [(scene.kept[p], None if h is None else scene.kept[h]) for (p, h), _ in plan], info
+
+
+def catalogue_of(stream_catalogue: str) -> np.ndarray:
+    from clutterbench.sim.catalog import box_extents_m
+
+    return box_extents_m(stream_catalogue)
+
+
+def make_estimator(catalogue: str, min_pixels: int):
+    extents = catalogue_of(catalogue)
+    return lambda obs: fit_boxes(obs, extents, min_pixels)
+
+
+def estimate_errors(est: BoxEstimate, spec: SceneSpec, poses: np.ndarray) -> dict[str, Any]:
+    """The estimate of one observation against the true boxes at `poses` (all in the scene):
+    per estimated box [box, centre mm, size mm, tilt deg, yaw deg], and the boxes missing
+    (not estimated: hidden, or too few pixels)."""
+    rows = []
+    for j, box in enumerate(est.ids):
+        e = box_errors(est.sizes_m[j], est.poses[j], spec.sizes_m[box], poses[box])
+        rows.append(
+            [
+                int(box),
+                round(1000 * e["centre_m"], 2),
+                round(1000 * e["size_m"], 2),
+                round(e["tilt_deg"], 2),
+                round(e["yaw_deg"], 2),
+            ]
+        )
+    return {"n_boxes": spec.n, "missing": spec.n - est.n, "boxes": rows}
+
+
+def estimate_record(planner: Any, spec: SceneSpec) -> dict[str, Any]:
+    """The physics-from-depth fields of an episode's record: the first estimate scored
+    against the canonical start, and per decision whether the estimated scene was at rest,
+    and the search's effort."""
+    steps = planner.steps
+    est = [s.get("estimate", {}) for s in steps]
+    return {
+        "estimate_start": estimate_errors(planner.first, spec, np.asarray(spec.poses))
+        if planner.first is not None
+        else None,
+        "estimate_not_at_rest": sum(not e.get("at_rest", True) for e in est),
+        "estimate_settle_mm": [e.get("settle_move_mm") for e in est],
+        "search_nodes": sum(
+            int(s.get("strict_success_search_nodes", 0)) + int(s.get("success_search_nodes", 0))
+            for s in steps
+        ),
+        "search_exhausted": sum(
+            bool(s.get("strict_success_exhausted")) or bool(s.get("success_exhausted"))
+            for s in steps
+        ),
+        "target_missing": sum(bool(s.get("target_missing")) for s in steps),
+    }
