@@ -11,6 +11,7 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.io import read_json, write_json
 from clutterbench.platform_info import environment
 from clutterbench.report.arm_table import arm_table
+from clutterbench.report.box_estimation import estimation_table
 from clutterbench.report.collapse import RunSources, collapse_table
 from clutterbench.report.config import ReportConfig
 from clutterbench.report.datasets import dataset_stats, datasets_table
@@ -111,6 +112,7 @@ def report(params: dict, base: BaseConfig) -> None:
         records, cfg.table_6_3, Path("reports/tables"), base.scale, [trial_note]
     )
     decomposition_table(records, Path("reports/tables"), base.scale)
+    estimation_table(records, Path("reports/tables"), base.scale)
 
     by_condition: dict[str, list[dict]] = {}
     for r in read_records(Path("reports/trials_ch4/records.jsonl")):

@@ -21,6 +21,7 @@ from clutterbench.trials.harness import run_episodes, write_condition
 THRESHOLDS = Path("reports/support/thresholds.json")
 OUT = Path("reports/trials")
 DATA = Path("data/trials")
+FIGURE_SCENES = 4
 
 
 def trials(params: dict, base: BaseConfig) -> None:
@@ -55,6 +56,22 @@ def trials(params: dict, base: BaseConfig) -> None:
             "support": as_dict(support),
         }
     results = run_episodes("trials", run_ch6_episode, jobs, cfg.workers)
+    pfd = [c for c in conditions.values() if c.planner.startswith("physics_from_depth")]
+    if pfd:  # estimated vs true boxes of a few scenes of the first such stream
+        from clutterbench.report.box_estimation import estimation_figure
+        from clutterbench.trials.physics_model import estimate_panels
+
+        panels = estimate_panels(
+            pfd[0].stream,
+            cfg.streams[pfd[0].stream],
+            base.seed,
+            list(range(min(FIGURE_SCENES, pfd[0].episodes))),
+            sim.physics,
+            sim.camera,
+            cfg.max_attempts,
+            cfg.ch6.min_pixels,
+        )
+        estimation_figure(panels, OUT / "box_estimation.png")
     for name in conditions:
         summary = write_condition(name, results, about[name], OUT, DATA)
         print(

@@ -44,6 +44,8 @@ METHODS = {
     "oracle": "search oracle, one arm (ceiling)",
     "oracle_hold": "search oracle, may hold one box (ceiling)",
     "random": "random (floor)",
+    "physics_from_depth": "physics from depth: search on boxes fitted to the depth image, one arm",
+    "physics_from_depth_hold": "physics from depth, may hold one box",
 }
 """Planner (the `planner` of a trial record) -> how its row reads."""
 
@@ -52,6 +54,7 @@ MATCHING_ORACLE = {
     "bimanual": "oracle_hold",
     "bimanual_truth": "oracle_hold",
     "oracle_hold": "oracle_hold",
+    "physics_from_depth_hold": "oracle_hold",
 }
 """The ceiling a planner is measured against: the holding search for planners that hold a
 box, the one-arm search for every other (default)."""

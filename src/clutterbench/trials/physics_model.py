@@ -134,3 +134,40 @@ def estimate_record(planner: Any, spec: SceneSpec) -> dict[str, Any]:
         ),
         "target_missing": sum(bool(s.get("target_missing")) for s in steps),
     }
+
+
+def estimate_panels(
+    stream: str,
+    stream_cfg: Any,
+    seed: int,
+    indices: list[int],
+    physics: PhysicsConfig,
+    camera: CameraConfig,
+    max_attempts: int,
+    min_pixels: int,
+) -> list[dict[str, Any]]:
+    """The figure's panels (report/box_estimation.py): scenes `indices` of a trial stream at
+    their canonical start, the boxes fitted to their first observation beside the true ones."""
+    from clutterbench.sim.render import observe
+    from clutterbench.trials.protocol import world_at
+    from clutterbench.trials.scenes import draw_trial_spec
+
+    estimator = make_estimator(stream_cfg.catalogue, min_pixels)
+    panels = []
+    for i in indices:
+        spec = draw_trial_spec(stream, stream_cfg, seed, i, physics, camera, max_attempts)
+        obs = observe(world_at(spec, SceneState.start(spec), physics, render=True), camera)
+        est = estimator(obs)
+        errors = estimate_errors(est, spec, np.asarray(spec.poses))
+        centre = np.median([b[1] for b in errors["boxes"]]) if errors["boxes"] else float("nan")
+        panels.append(
+            {
+                "depth_m": obs.depth_m,
+                "camera": obs.camera,
+                "true": (spec.sizes_m, spec.poses),
+                "est": (est.sizes_m, est.poses),
+                "title": f"{stream} scene {i} ({spec.family}): {est.n}/{spec.n} boxes, "
+                f"median centre error {centre:.1f} mm",
+            }
+        )
+    return panels
