@@ -17,7 +17,8 @@ from clutterbench.progress import progress_bar
 from clutterbench.report.support_figure import SupportPanel, support_figure
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
-from clutterbench.trials.config import SupportEvalConfig
+from clutterbench.trials.config import SupportEvalConfig, TrialsConfig
+from clutterbench.trials.physics_model import SUPPORT_METHOD, SUPPORT_RULE, PhysicsDepthSupport
 from clutterbench.trials.scenes import stream_key
 from clutterbench.trials.support_eval import (
     all_scenes,
@@ -79,11 +80,13 @@ def support(params: dict, base: BaseConfig) -> None:
 
     rows, truth, panels = [], {}, []
     rng = np.random.default_rng([base.seed, 62])
+    settle_s = load_section(TrialsConfig, "trials", params).ch6.physics_depth_settle_s
+    physics_depth = PhysicsDepthSupport(cfg, sim, chosen[SUPPORT_RULE], settle_s)
     with progress_bar("support: test scenes", total=cfg.test_scenes) as advance:
         for sc in all_scenes(SCENES, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera):
             heat = predicted_heatmaps(sc, predictor)
             scene_rows, edges = evaluate_scene(sc, heat, chosen, p_edge, rng)
-            rows += scene_rows
+            rows += scene_rows + [physics_depth.row(sc)]
             truth[str(sc.index)] = sorted(map(list, sc.true_edges))
             if len(panels) < cfg.figure_scenes:
                 panels.append(
@@ -101,6 +104,7 @@ def support(params: dict, base: BaseConfig) -> None:
     scenes = pd.DataFrame(rows)
     write_text(OUT / "scenes.csv", scenes.to_csv(index=False))
     thresholds = {m: as_dict(p) for m, p in chosen.items()} | {"random": {"p_edge": p_edge}}
+    thresholds[SUPPORT_METHOD] = as_dict(chosen[SUPPORT_RULE])
     val_at = {m: val_metrics_at(sweep, m, p) for m, p in chosen.items()}
     write_json(
         OUT / "thresholds.json",

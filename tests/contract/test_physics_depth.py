@@ -134,3 +134,15 @@ def test_an_episode_runs_and_records_its_estimates(stack3):
     assert start["n_boxes"] == 3 and start["missing"] == 0
     assert max(b[1] for b in start["boxes"]) < 10.0  # centre error, mm
     assert rec["estimate_not_at_rest"] == 0
+
+
+def test_support_from_the_estimated_scene_finds_the_stack(stack3, physics):
+    """Table 6.2's physics-from-depth row: removals simulated in the boxes fitted to the
+    depth image of a 3-stack: taking out the bottom box moves the two above it, taking out
+    the top one moves nothing."""
+    from clutterbench.trials.physics_model import estimated_moved
+
+    obs = _observe(stack3, physics)
+    moved, info = estimated_moved(obs, [0, 1, 2], "same", 20, Shelf(), CAM, physics, 0.5, 0.005)
+    assert info["at_rest"]
+    assert moved[0, 1] and moved[0, 2] and not moved[2].any()

@@ -11,6 +11,7 @@ from collections.abc import Callable
 from clutterbench.bench.arm import bench_arm
 from clutterbench.bench.grouped import bench_grouped
 from clutterbench.bench.models import bench_models
+from clutterbench.bench.physics_depth import bench_physics_depth
 from clutterbench.bench.replenish import bench_ch5
 from clutterbench.bench.sim import bench_replay, bench_sim
 from clutterbench.bench.trials import bench_trials
@@ -33,6 +34,7 @@ PARTS: list[tuple[str, Callable[[], object]]] = [
     ("ch3", bench_ch3),  # ch3.json, ch3.md (the ConvNet line needs models/slide_convnet)
     ("ch5", bench_ch5),  # ch5.json, ch5.md (needs the detector and the ch. 5 network)
     ("arm", bench_arm),  # arm.json, arm.md (ManiSkill Pandas vs the kinematic pull)
+    ("physics_depth", bench_physics_depth),  # physics_depth.json, .md (no network needed)
 ]
 
 

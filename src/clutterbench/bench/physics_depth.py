@@ -1,0 +1,111 @@
+"""`make bench`, physics-from-depth part: the planner's decision time per step on one core ->
+reports/bench/physics_depth.{json,md}.
+
+Episodes of the physics-from-depth planners (one arm, holding) on bench scenes of the 3-10
+stream (seed 99, never a table's), every decision timed: box fitting, the estimated scene
+(built, settled) and the search on it, separately. Needs no trained network.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from clutterbench.bench import header, measure_table, write_result
+from clutterbench.config import load_params, load_section
+from clutterbench.platform_info import cpu_description
+
+EPISODES = 8
+
+
+def bench_physics_depth(out_dir: Path = Path("reports/bench"), episodes: int = EPISODES) -> dict:
+    import torch
+
+    from clutterbench.planning import physics_depth
+    from clutterbench.sim.config import SimConfig
+    from clutterbench.trials import physics_model
+    from clutterbench.trials.ch6 import ch6_jobs, run_ch6_episode
+    from clutterbench.trials.config import ConditionConfig, TrialsConfig
+
+    torch.set_num_threads(1)
+    params = load_params("params.yaml")
+    trials = load_section(TrialsConfig, "trials", params)
+    sim = load_section(SimConfig, "sim", params)
+    times: dict[str, list[float]] = {"decision": [], "scene": []}
+
+    decide = physics_depth.PhysicsFromDepthPlanner.decide
+    scene = physics_model.EstimatedWorldModel.scene
+
+    def timed_decide(self, *a, **k):
+        t0 = time.perf_counter()
+        out = decide(self, *a, **k)
+        times["decision"].append(time.perf_counter() - t0)
+        return out
+
+    def timed_scene(self, est):
+        t0 = time.perf_counter()
+        out = scene(self, est)
+        times["scene"].append(time.perf_counter() - t0)
+        return out
+
+    result: dict = cpu_description() | {"episodes": episodes}
+    physics_depth.PhysicsFromDepthPlanner.decide = timed_decide
+    physics_model.EstimatedWorldModel.scene = timed_scene
+    try:
+        for planner in ("physics_from_depth", "physics_from_depth_hold"):
+            for k in times:
+                times[k].clear()
+            cond = ConditionConfig(planner=planner, stream="ch6_3_10", episodes=episodes)
+            jobs = ch6_jobs(
+                "bench",
+                cond,
+                trials,
+                trials.streams["ch6_3_10"],
+                99,
+                sim.physics,
+                sim.camera,
+                None,
+                1.0,
+                Path("unused"),
+            )
+            walls = []
+            for job in jobs:
+                t0 = time.perf_counter()
+                run_ch6_episode(job | {"stream": "bench", "record_images": False})
+                walls.append(time.perf_counter() - t0)
+            result[f"{planner}_decision_s_median"] = float(np.median(times["decision"]))
+            result[f"{planner}_decision_s_p90"] = float(np.percentile(times["decision"], 90))
+            result[f"{planner}_decisions"] = len(times["decision"])
+            result[f"{planner}_estimated_scene_s_median"] = float(np.median(times["scene"]))
+            result[f"{planner}_episode_s_median"] = float(np.median(walls))
+    finally:
+        physics_depth.PhysicsFromDepthPlanner.decide = decide
+        physics_model.EstimatedWorldModel.scene = scene
+    # the box fit alone, on the bench scenes' first observations
+    from clutterbench.sim.render import observe
+    from clutterbench.trials.protocol import SceneState, world_at
+    from clutterbench.trials.scenes import draw_trial_spec
+
+    fit = physics_model.make_estimator(trials.streams["ch6_3_10"].catalogue, trials.ch6.min_pixels)
+    fits = []
+    for i in range(episodes):
+        spec = draw_trial_spec(
+            "bench", trials.streams["ch6_3_10"], 99, i, sim.physics, sim.camera, 30
+        )
+        obs = observe(world_at(spec, SceneState.start(spec), sim.physics, True), sim.camera)
+        t0 = time.perf_counter()
+        fit(obs)
+        fits.append(time.perf_counter() - t0)
+    result["box_fit_s_median"] = float(np.median(fits))
+    result["node_budget"] = trials.ch6.physics_depth_node_budget
+    lines = header("Physics from depth: decision time per step (one core)", result)
+    lines += measure_table(
+        result, skip=("cpu_model", "machine", "cpu_flags", "torch_cpu_capability")
+    )
+    write_result(out_dir, "physics_depth", result, lines)
+    for k, v in result.items():
+        if k.endswith(("_median", "_p90")):
+            print(f"{k}: {v:.3f}")
+    return result
