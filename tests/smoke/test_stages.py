@@ -157,6 +157,13 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     dec = pd.read_csv(a / "reports/tables/table_6_3_decomposition.csv")
     assert len(dec) == 2 * 4 and set(dec["key"]) == {"success", "strict_success"}
     assert ((dec["planning"] + dec["perception"] - dec["gap"]).abs() < 1e-9).all()
+    # the physics-from-depth planner's estimates: one row per stream, and the figure
+    est = pd.read_csv(a / "reports/tables/box_estimation.csv")
+    assert set(est["stream"]) == {"ch6_3_5", "ch6_10", "ch6_3_10"}
+    assert (est["estimated"] + est["missing"] == est["boxes"]).all()
+    assert (a / "reports/trials/box_estimation.png").stat().st_size > 1000
+    t62 = pd.read_csv(a / "reports/tables/table_6_2.csv")
+    assert t62.astype(str).apply(lambda c: c.str.contains("physics from depth")).any().any()
     t42 = pd.read_csv(a / "reports/tables/table_4_2.csv")
     assert len(t42) == 4
     # chapter 3: every variant's games, one row per slide, one MCAP per variant, Fig. 3.15
