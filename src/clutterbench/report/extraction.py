@@ -419,6 +419,16 @@ def search_notes(used: Mapping[str, Sequence[Mapping[str, Any]]]) -> list[str]:
     for condition, records in used.items():
         if not records or "search_nodes" not in records[0]:
             continue
+        if "estimate_settle_mm" in records[0]:  # physics from depth: a search per decision
+            decisions = sum(len(r["estimate_settle_mm"]) for r in records)
+            notes.append(
+                f"physics from depth [{condition}]: node budget exhausted in "
+                f"{sum(int(r['search_exhausted']) > 0 for r in records)}/{len(records)} "
+                f"episodes; {sum(int(r['search_nodes']) for r in records)} states of estimated "
+                f"scenes expanded over {decisions} decisions; the estimated scene was not at "
+                f"rest after settling in {sum(int(r['estimate_not_at_rest']) for r in records)}."
+            )
+            continue
         exhausted = sum(int(r["search_exhausted"]) > 0 for r in records)
         replanned = sum(int(r["search_replanned"]) > 0 for r in records)
         nodes = [int(r["search_nodes"]) for r in records]
