@@ -152,7 +152,7 @@ def estimation_figure(panels: Sequence[dict[str, Any]], path: Path) -> None:
     from clutterbench.io import atomic_path
 
     n = max(1, len(panels))
-    fig, axes = plt.subplots(1, n, figsize=(3.2 * n, 3.4), squeeze=False)
+    fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.8), squeeze=False)
     for ax, p in zip(axes[0], panels):
         depth = np.where(p["depth_m"] > 0, p["depth_m"], np.nan)
         ax.imshow(depth, cmap="viridis")

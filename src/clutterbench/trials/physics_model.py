@@ -167,8 +167,8 @@ def estimate_panels(
                 "camera": obs.camera,
                 "true": (spec.sizes_m, spec.poses),
                 "est": (est.sizes_m, est.poses),
-                "title": f"{stream} scene {i} ({spec.family}): {est.n}/{spec.n} boxes, "
-                f"median centre error {centre:.1f} mm",
+                "title": f"{stream} scene {i} ({spec.family})\n{est.n}/{spec.n} boxes "
+                f"estimated, median centre error {centre:.1f} mm",
             }
         )
     return panels
