@@ -832,6 +832,7 @@ def replenish(
         from clutterbench.config import load_section
         from clutterbench.planning.replenish import ReplenishPlanner
         from clutterbench.sim.physics import BoxWorld
+        from clutterbench.sim.pull import SceneState
         from clutterbench.sim.render import observe
         from clutterbench.sim.spec import SceneSpec
         from clutterbench.trials import ch5
@@ -842,7 +843,6 @@ def replenish(
             TrialsConfig,
         )
         from clutterbench.trials.harness import write_mcap
-        from clutterbench.trials.protocol import SceneState
 
         try:
             w, d, h = (float(v) / 1000.0 for v in box.split(","))

@@ -10,12 +10,12 @@ import clutterbench.trials.ch5 as ch5
 from clutterbench.logs.mcap_episode import read_episode
 from clutterbench.planning.replenish import ReplenishParams, ReplenishPlanner
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.pull import SceneState, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.config import Ch5ConditionConfig, SceneStreamConfig, TrialsConfig
 from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import write_mcap
-from clutterbench.trials.protocol import SceneState, world_at
 
 CAM = CameraConfig(image_size=64)
 STANDING = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]  # width up, thickness across

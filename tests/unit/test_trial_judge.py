@@ -5,15 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from clutterbench.sim.pull import PullResult
 from clutterbench.trials.criteria import CollapseFreeConfig, tilt_change_deg
 from clutterbench.trials.judge import disturbance
-from clutterbench.trials.protocol import (
-    STEP_FIELDS,
-    PullResult,
-    episode_end,
-    judge_episode,
-    judged,
-)
+from clutterbench.trials.protocol import STEP_FIELDS, episode_end, judge_episode, judged
 from clutterbench.trials.protocol import judge_pull as _judge_pull
 
 THR = 0.005

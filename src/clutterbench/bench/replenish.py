@@ -37,10 +37,10 @@ def bench_ch5(out_dir: Path = Path("reports/bench")) -> dict:
     from clutterbench.parallel import worker_init
     from clutterbench.planning.replenish import ReplenishPlanner, place_clusters
     from clutterbench.sim.config import SimConfig
+    from clutterbench.sim.pull import SceneState, world_at
     from clutterbench.sim.render import ensure_renderer, observe
     from clutterbench.trials import ch5
     from clutterbench.trials.config import TrialsConfig
-    from clutterbench.trials.protocol import SceneState, world_at
     from clutterbench.trials.scenes import draw_trial_spec
 
     params = load_params("params.yaml")

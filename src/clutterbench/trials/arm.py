@@ -16,14 +16,15 @@ from typing import Any
 
 import numpy as np
 
+from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.pull import PullResult, SceneState, moved_others, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.config import ArmConfig
 from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import EpisodeLog
-from clutterbench.trials.protocol import PullResult, SceneState, judge_pull, moved_others, world_at
+from clutterbench.trials.protocol import judge_pull
 
 JOINTS_TOPIC = "/arm/joint_states"
 """Each arm's 7 joint positions (rad) at every control step, as JSON

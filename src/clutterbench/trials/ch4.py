@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from clutterbench.errors import ClutterbenchError
+from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.perception.depth_segmentation import shelf_roi
 from clutterbench.perception.masks import Segmentation, match_segments, segment
@@ -44,18 +45,13 @@ from clutterbench.planning.risk import (
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.labelling import act_on_spec
 from clutterbench.sim.physics import BoxWorld
+from clutterbench.sim.pull import SceneState
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials import criteria
-from clutterbench.trials.config import (
-    ArmConfig,
-    Ch4ConditionConfig,
-    Ch4TrialParams,
-    SceneStreamConfig,
-)
+from clutterbench.trials.config import Ch4ConditionConfig, Ch4TrialParams, SceneStreamConfig
 from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
-from clutterbench.trials.protocol import SceneState
 from clutterbench.trials.scenes import draw_target, draw_trial_spec, policy_rng
 
 RISKS_LOGGED = 8

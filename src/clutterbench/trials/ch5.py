@@ -53,13 +53,13 @@ from clutterbench.sim.clusters import box_tilt, scene_clusters
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.geometry import aabb_overlap_xy, box_aabb_half_extents
 from clutterbench.sim.physics import BoxWorld
+from clutterbench.sim.pull import SceneState, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials import criteria
 from clutterbench.trials.config import Ch5ConditionConfig, Ch5TrialParams, SceneStreamConfig
 from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
-from clutterbench.trials.protocol import SceneState, world_at
 from clutterbench.trials.scenes import draw_trial_spec, policy_rng, stream_key
 
 ENDS = ("placed", "collapse", "misplaced", "gave_up", "max_steps")

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from clutterbench.errors import ClutterbenchError
+from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.planning.extraction import (
     CollapseGraphPlanner,
@@ -28,20 +29,14 @@ from clutterbench.planning.extraction import (
 from clutterbench.planning.support import SupportParams
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.physics import BoxWorld
+from clutterbench.sim.pull import SceneState, execute_pull, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.config import ArmConfig, Ch6TrialParams, SceneStreamConfig
+from clutterbench.trials.config import Ch6TrialParams, SceneStreamConfig
 from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
 from clutterbench.trials.judge import disturbance
-from clutterbench.trials.protocol import (
-    SceneState,
-    episode_end,
-    execute_pull,
-    judge_episode,
-    judge_pull,
-    world_at,
-)
+from clutterbench.trials.protocol import episode_end, judge_episode, judge_pull
 from clutterbench.trials.scenes import draw_target, draw_trial_spec, policy_rng
 from clutterbench.trials.truth_maps import TruthCollapseMaps
 
