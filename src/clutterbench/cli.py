@@ -673,9 +673,9 @@ def plan(
         from clutterbench.sim.physics import BoxWorld
         from clutterbench.sim.render import observe
         from clutterbench.sim.spec import SceneSpec
-        from clutterbench.trials.ch6 import PLANNERS, ch6_jobs, load_predictor, run_extraction
+        from clutterbench.trials.ch6 import PLANNERS, ch6_jobs, run_extraction
         from clutterbench.trials.config import ConditionConfig, TrialsConfig
-        from clutterbench.trials.harness import write_mcap
+        from clutterbench.trials.harness import load_predictor, write_mcap
         from clutterbench.trials.scenes import truth_moved_contact
 
         if planner not in PLANNERS:  # the registry (built-in planners and registered ones)

@@ -140,7 +140,7 @@ def test_an_arm_that_gave_up_after_moving_a_box_is_a_judged_failure():
     failed step (the episode ends in collapse), never an abort that disturbed nothing; one
     that moved nothing is the abort."""
     from clutterbench.sim.pull import PullResult
-    from clutterbench.trials.arm import judge_arm_step
+    from clutterbench.trials.executors import judge_arm_step
     from clutterbench.trials.protocol import episode_end
 
     still = np.zeros(3)

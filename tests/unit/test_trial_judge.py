@@ -205,7 +205,7 @@ def test_strict_step_counts_stop_at_the_first_strict_failure():
 
 
 def test_an_executed_judged_step_is_never_aborted_before_motion():
-    from clutterbench.trials.arm import judge_arm_step
+    from clutterbench.trials.executors import judge_arm_step
 
     # an arm that gave up before pulling but knocked a box off its bed
     r = _result([np.nan, 0.03], [np.nan, 0.03], increments=0, aborted=True, extracted=False)

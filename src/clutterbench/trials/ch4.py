@@ -27,21 +27,15 @@ from typing import Any
 
 import numpy as np
 
-from clutterbench.errors import ClutterbenchError
 from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.perception.depth_segmentation import shelf_roi
 from clutterbench.perception.masks import Segmentation, match_segments, segment
 from clutterbench.planning.risk import (
-    Pair,
-    PairChoice,
     candidate_pairs,
-    choose_safest_pair,
-    choose_support_for_target,
     random_pair,
-    risk_index,
-    soft_collapse,
 )
+from clutterbench.planning.risk_planner import plan_risk
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.labelling import act_on_spec
 from clutterbench.sim.physics import BoxWorld
@@ -51,68 +45,11 @@ from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials import criteria
 from clutterbench.trials.config import Ch4ConditionConfig, Ch4TrialParams, SceneStreamConfig
 from clutterbench.trials.criteria import CollapseFreeConfig
-from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
+from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult, load_predictor
 from clutterbench.trials.scenes import draw_target, draw_trial_spec, policy_rng
 
 RISKS_LOGGED = 8
 """The decision message lists the candidates of least risk, this many."""
-
-
-# -- the network: (depth, extraction mask, support mask) -> B / E / S / C -------------------
-def class_probs(predictor: Any, depth_m: np.ndarray, pair_masks: np.ndarray) -> np.ndarray:
-    """(A, 2, H, W) extraction + support masks of A candidates on one depth image -> (A, 4,
-    H, W) float32 class probabilities in the network's label order (planning.risk.CLASSES),
-    in batches of the predictor's batch size."""
-    import torch
-
-    from clutterbench.collapse.predict import scene_logits
-
-    assert pair_masks.ndim == 4 and pair_masks.shape[1] == 2, "pair masks must be (A, 2, H, W)"
-    depth = np.ascontiguousarray(depth_m, dtype=np.float32)
-    logits = scene_logits(predictor, depth, pair_masks.astype(np.float32, copy=False))
-    if logits.shape[1] != 4:
-        raise ValueError(
-            f"the ch. 4 planner needs a 4-class network (B/E/S/C), this one has "
-            f"{logits.shape[1]} output channels"
-        )
-    return torch.softmax(logits.float(), dim=1).numpy()
-
-
-def pair_masks(seg: Segmentation, pairs: list[Pair]) -> np.ndarray:
-    """(A, 2, H, W) float32 extraction and support masks of candidate pairs of segment indices."""
-    out = np.zeros((len(pairs), 2, *seg.masks.shape[1:]), dtype=np.float32)
-    for a, (x, s) in enumerate(pairs):
-        out[a, 0] = seg.masks[x]
-        if s is not None:
-            out[a, 1] = seg.masks[s]
-    return out
-
-
-def plan_risk(
-    predictor: Any,
-    obs: Observation,
-    seg: Segmentation,
-    target: int | None,
-    pixel_threshold: float,
-) -> tuple[PairChoice, list[Pair], np.ndarray, np.ndarray]:
-    """Eqs. (4.1), (4.2) on segment indices: every ordered pair (target None) or every support
-    of `target`, batched through the network -> (choice, candidates, risks, class probs).
-    Equal risks go to the least mean P(C) (planning.risk.soft_collapse)."""
-    ks = list(range(len(seg.ids)))
-    if target is None:
-        pairs = candidate_pairs(ks)
-    else:
-        pairs = [(target, s) for s in ks if s != target]
-    probs = class_probs(predictor, obs.depth_m, pair_masks(seg, pairs))
-    risks = risk_index(probs, pixel_threshold)
-    # r_c ties often (at 0 when no pixel reaches the threshold); the expected collapsing
-    # area decides among equal risks, the candidate order after that.
-    soft = soft_collapse(probs)
-    if target is None:
-        choice = choose_safest_pair(pairs, risks, soft)
-    else:
-        choice = choose_support_for_target(target, pairs, risks, soft)
-    return choice, pairs, risks, probs
 
 
 # -- execution and the judge -----------------------------------------------------------------
@@ -167,7 +104,7 @@ def arm_pull_outcome(
 ) -> dict[str, Any]:
     """pull_outcome with the Pandas (executor: arm): one straight pull, no lift (as the
     kinematic pull), the support held by the second arm; judged the same way."""
-    from clutterbench.trials.arm import arm_pull
+    from clutterbench.trials.executors import arm_pull
 
     done = arm_pull(
         spec,
@@ -361,8 +298,6 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
         )
         decision["candidates"] = len(pairs)
         if cond.planner == "risk":
-            from clutterbench.trials.ch6 import load_predictor
-
             predictor = load_predictor(job["model_path"], job["camera"].image_size)
             choice, pairs, risks, _ = plan_risk(
                 predictor, obs, seg, target_k, params.pixel_threshold
@@ -482,52 +417,6 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
     if cond.executor == "arm":  # kinematic records keep their old fields
         record["executor"] = "arm"
     return EpisodeResult(record, log)
-
-
-def draw_figure(job: dict[str, Any], out_path: Path) -> None:
-    """Thesis Fig. 4.8 from one episode of a risk condition in target mode: its scene, its
-    target, the network's E / S / C for the supports of least risk (run in this process)."""
-    from clutterbench.report.risk_figure import risk_figure
-    from clutterbench.sim.render import ensure_renderer
-    from clutterbench.trials.ch6 import load_predictor
-
-    cond: Ch4ConditionConfig = job["cond"]
-    params: Ch4TrialParams = job["params"]
-    ensure_renderer()
-    spec = draw_trial_spec(
-        cond.stream,
-        job["stream_cfg"],
-        job["seed"],
-        job["index"],
-        job["physics"],
-        job["camera"],
-        job["max_attempts"],
-    )
-    world = BoxWorld.from_spec(spec, job["physics"], render=True)
-    obs, seg = observe_and_segment(world, spec, job)
-    box = draw_target(job["seed"], cond.stream, job["index"], obs, params.min_target_pixels)
-    k = target_segment(seg, obs.instance, box)
-    if k is None or len(seg.ids) < 2:
-        raise ClutterbenchError(f"figure: episode {job['index']} has no target segment to draw")
-    predictor = load_predictor(job["model_path"], job["camera"].image_size)
-    _, pairs, risks, probs = plan_risk(predictor, obs, seg, k, params.pixel_threshold)
-    labels = [
-        f"segment {s}" if cond.perception == "depth" else f"box {seg.ids[s]}" for _, s in pairs
-    ]
-    risk_figure(
-        out_path,
-        obs.depth_m,
-        seg.masks[k],
-        labels,
-        probs,
-        risks,
-        f"{job['condition']}, episode {job['index']}: extract box {box} (model {cond.model})",
-        params.pixel_threshold,
-        box_masks=seg.masks,
-        box_labels=[str(s) for s in range(len(seg.ids))]
-        if cond.perception == "depth"
-        else [str(b) for b in seg.ids],
-    )
 
 
 OUTCOMES = ("target_out", "success", "strict_success", "success_held", "strict_success_held")
