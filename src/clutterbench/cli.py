@@ -835,7 +835,7 @@ def replenish(
         from clutterbench.sim.pull import SceneState
         from clutterbench.sim.render import observe
         from clutterbench.sim.spec import SceneSpec
-        from clutterbench.trials import ch5
+        from clutterbench.trials import ch5, ch5_perception
         from clutterbench.trials.config import (
             CH5_PLANNERS,
             Ch5ConditionConfig,
@@ -896,10 +896,10 @@ def replenish(
         job["model_path"], job["detector_path"] = model_path, detector
         state = SceneState.start(spec)
         obs = observe(BoxWorld.from_spec(spec, physics, render=True), spec.camera)
-        dets = ch5.perceive(job, spec, state, obs)
+        dets = ch5_perception.perceive(job, spec, state, obs)
         out: dict[str, Any] = {"box_mm": [w * 1000, d * 1000, h * 1000], "planner": planner}
         if planner in ("replenish", "no_collapse"):
-            cmap = ch5.collapse_map_fn(job) if planner == "replenish" else None
+            cmap = ch5_perception.collapse_map_fn(job) if planner == "replenish" else None
             plan = ReplenishPlanner(ch5.planner_params(job), ch5.space_of(spec), cmap).plan(
                 obs, dets, size_m
             )
