@@ -12,9 +12,10 @@ from clutterbench.config import BaseConfig, load_section
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json, write_text
 from clutterbench.precision import inference_from_params
+from clutterbench.report.risk_figure import draw_figure
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
-from clutterbench.trials.ch4 import ch4_jobs, draw_figure, run_ch4_episode
+from clutterbench.trials.ch4 import ch4_jobs, run_ch4_episode
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.harness import run_episodes, write_mcap
 from clutterbench.trials.records import write_records

@@ -10,11 +10,13 @@ import pytest
 
 gym = pytest.importorskip("gymnasium")
 
+from clutterbench.maniskill.config import ArmConfig  # noqa: E402
 from clutterbench.maniskill.executor import ArmExecutor  # noqa: E402
+from clutterbench.sim.pull import SceneState, execute_pull, world_at  # noqa: E402
 from clutterbench.sim.spec import SceneSpec  # noqa: E402
-from clutterbench.trials.config import ArmConfig, TrialsConfig  # noqa: E402
+from clutterbench.trials.config import TrialsConfig  # noqa: E402
 from clutterbench.trials.criteria import CollapseFreeConfig  # noqa: E402
-from clutterbench.trials.protocol import SceneState, execute_pull, judge_pull, world_at  # noqa: E402
+from clutterbench.trials.protocol import judge_pull  # noqa: E402
 
 STACK3 = Path(__file__).resolve().parents[1] / "data" / "stack3.json"
 THR = 0.005
@@ -47,7 +49,7 @@ def test_env_evaluate_agrees_with_the_project_judge(stack3, physics, box):
     clean); the ManiSkill env, put in the same end state, judges it the same way."""
     from sapien import physx
 
-    import clutterbench.maniskill  # noqa: F401
+    import clutterbench.maniskill.tasks  # noqa: F401
 
     def settings():
         body, shape, mat = (
@@ -137,8 +139,9 @@ def test_an_arm_that_gave_up_after_moving_a_box_is_a_judged_failure():
     """An approach that stopped short (no increment pulled) but knocked a box over is a
     failed step (the episode ends in collapse), never an abort that disturbed nothing; one
     that moved nothing is the abort."""
-    from clutterbench.trials.arm import judge_arm_step
-    from clutterbench.trials.protocol import PullResult, episode_end
+    from clutterbench.sim.pull import PullResult
+    from clutterbench.trials.executors import judge_arm_step
+    from clutterbench.trials.protocol import episode_end
 
     still = np.zeros(3)
     knocked = np.array([0.0, 0.03, 0.0])

@@ -7,15 +7,17 @@ import numpy as np
 import pytest
 
 import clutterbench.trials.ch5 as ch5
+import clutterbench.trials.ch5_execution as ch5_execution
+import clutterbench.trials.ch5_perception as ch5_perception
 from clutterbench.logs.mcap_episode import read_episode
 from clutterbench.planning.replenish import ReplenishParams, ReplenishPlanner
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.pull import SceneState, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.config import Ch5ConditionConfig, SceneStreamConfig, TrialsConfig
 from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import write_mcap
-from clutterbench.trials.protocol import SceneState, world_at
 
 CAM = CameraConfig(image_size=64)
 STANDING = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]  # width up, thickness across
@@ -45,7 +47,7 @@ def scene():
     spec = crowded_row()
     state = SceneState.start(spec)
     obs = observe(world_at(spec, state, physics, render=True), CAM)
-    dets = ch5.true_clusters(spec, state, physics, obs)
+    dets = ch5_perception.true_clusters(spec, state, physics, obs)
     return spec, state, obs, dets, physics
 
 
@@ -71,16 +73,16 @@ def test_every_held_box_is_released_before_the_judge(scene, monkeypatch):
     plan = planner.plan(obs, dets, NEW_BOX)
     assert plan.branch == "bimanual" and plan.move is not None
     seen = {}
-    judge = ch5.judge_step
+    judge = ch5_execution.judge_step
 
     def spy(world, *args, **kwargs):
         seen["held"] = world.held()
         seen["moved"] = args[2]
         return judge(world, *args, **kwargs)
 
-    monkeypatch.setattr(ch5, "judge_step", spy)
+    monkeypatch.setattr(ch5_execution, "judge_step", spy)
     world = world_at(spec, state, physics, render=True)
-    out = ch5.execute(
+    out = ch5_execution.execute(
         world, obs, plan, NEW_BOX, TrialsConfig().ch5, state.removed, CollapseFreeConfig()
     )
     assert seen["moved"], "the blocker's boxes were carried"
@@ -122,7 +124,7 @@ def planned(spec: SceneSpec, new_box: np.ndarray, camera: CameraConfig = CAM, mi
     physics = PhysicsConfig()
     state = SceneState.start(spec)
     obs = observe(world_at(spec, state, physics, render=True), camera)
-    dets = ch5.true_clusters(spec, state, physics, obs)
+    dets = ch5_perception.true_clusters(spec, state, physics, obs)
     rp = ReplenishParams(finger_m=0.012, min_points=min_points)
     planner = ReplenishPlanner(rp, ch5.space_of(spec))
     return planner.plan(obs, dets, new_box), dets
@@ -191,7 +193,7 @@ def test_a_lifted_blocker_is_set_down_before_it_is_let_go(monkeypatch):
     physics = PhysicsConfig()
     state = SceneState.start(spec)
     obs = observe(world_at(spec, state, physics, render=True), CAM)
-    dets = ch5.true_clusters(spec, state, physics, obs)
+    dets = ch5_perception.true_clusters(spec, state, physics, obs)
     planner = ReplenishPlanner(ReplenishParams(finger_m=0.012), ch5.space_of(spec))
     new_box = np.array([0.12, 0.1, 0.03])
     plan = planner.plan(obs, dets, new_box)
@@ -209,7 +211,7 @@ def test_a_lifted_blocker_is_set_down_before_it_is_let_go(monkeypatch):
         return release(self, boxes)
 
     monkeypatch.setattr(type(world), "release", spy)
-    out = ch5.execute(
+    out = ch5_execution.execute(
         world, obs, plan, new_box, TrialsConfig().ch5, state.removed, CollapseFreeConfig()
     )
     assert gaps and max(gaps) < 0.005, gaps
@@ -227,7 +229,7 @@ def test_a_leaning_box_is_carried_upright(lean_deg):
     spec = SceneSpec(sizes_m=SIZE[None], poses=np.array([[0.1, 0.0, 0.08, *quat]]), camera=CAM)
     world = world_at(spec, SceneState.start(spec), PhysicsConfig())
     assert box_tilt(SIZE, world.poses()[0, 3:])[1] == pytest.approx(lean_deg, abs=0.5)
-    world.carry_group([0], np.zeros(3), ch5.upright_angle_rad(world, [0]))
+    world.carry_group([0], np.zeros(3), ch5_execution.upright_angle_rad(world, [0]))
     assert abs(box_tilt(SIZE, world.poses()[0, 3:])[1]) < 0.5
 
 
@@ -264,7 +266,7 @@ def test_the_new_box_is_carried_in_from_the_front_and_pushes_what_is_in_its_way(
     physics = PhysicsConfig()
     state = SceneState.start(spec)
     obs = observe(world_at(spec, state, physics, render=True), CAM)
-    dets = ch5.true_clusters(spec, state, physics, obs)
+    dets = ch5_perception.true_clusters(spec, state, physics, obs)
     rp = ReplenishParams(finger_m=0.012, min_points=3)
     clusters = place_clusters(obs, dets, ch5.space_of(spec))
     row = [c.index for c in clusters if c.rect_m[0] < -0.07]
@@ -272,7 +274,7 @@ def test_the_new_box_is_carried_in_from_the_front_and_pushes_what_is_in_its_way(
     right = [c for c in cands if c.side == "right" and c.cluster == row[0]]
     assert right and right[0].occupants
     world = world_at(spec, state, physics)
-    out = ch5.execute(
+    out = ch5_execution.execute(
         world,
         obs,
         Plan("simple", right[0], None),

@@ -16,6 +16,7 @@ from clutterbench.models.vgg import VGGConfig
 from clutterbench.planning.extraction import Decision
 from clutterbench.planning.support import SupportParams
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.pull import SceneState, execute_pull, world_at
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch6 import (
     PLANNERS,
@@ -29,7 +30,7 @@ from clutterbench.trials.config import PLANNERS as PLANNER_NAMES
 from clutterbench.trials.config import ConditionConfig, SceneStreamConfig, TrialsConfig
 from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import run_episodes, write_mcap
-from clutterbench.trials.protocol import SceneState, execute_pull, judge_pull, world_at
+from clutterbench.trials.protocol import judge_pull
 from clutterbench.trials.records import read_records, write_records
 from clutterbench.trials.scenes import truth_moved_contact
 

@@ -9,8 +9,7 @@ import cv2
 import pytest
 from typer.testing import CliRunner
 
-from clutterbench import cli
-from clutterbench.cli import _physics_config, app
+from clutterbench.cli import app, common
 from clutterbench.logs.mcap_episode import read_episode
 from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.spec import SceneSpec
@@ -25,7 +24,7 @@ runner = CliRunner()
 def _isolated_cwd(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # No params.yaml from the repository: physics defaults, as stack3.json was made with.
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(cli, "PACKAGE_REPO", tmp_path / "no-repo")
+    monkeypatch.setattr(common, "PACKAGE_REPO", tmp_path / "no-repo")
 
 
 def _act(*args: str) -> dict:
@@ -139,11 +138,11 @@ def test_make_rejects_a_stack_taller_than_the_shelf(tmp_path: Path) -> None:
 
 
 def test_physics_config_from_params_yaml(tmp_path: Path) -> None:
-    assert _physics_config() == PhysicsConfig()
+    assert common.physics_config() == PhysicsConfig()
     (tmp_path / "params.yaml").write_text(
         "base: {scale: tiny}\nsim:\n  physics:\n    timestep_s: 0.002\n"
     )
-    assert _physics_config().timestep_s == 0.002
+    assert common.physics_config().timestep_s == 0.002
 
 
 def test_plan_prints_inferred_and_true_support_and_executes(tmp_path):
@@ -246,18 +245,18 @@ def test_project_root_is_found_from_a_subdirectory(tmp_path: Path, monkeypatch) 
     sub = tmp_path / "a" / "b"
     sub.mkdir(parents=True)
     monkeypatch.chdir(sub)
-    assert cli.project_root() == tmp_path.resolve()
-    assert _physics_config().timestep_s == 0.002
+    assert common.project_root() == tmp_path.resolve()
+    assert common.physics_config().timestep_s == 0.002
 
 
 def test_project_root_falls_back_to_the_package_repository(tmp_path: Path, monkeypatch) -> None:
     repo = tmp_path / "repo"
     repo.mkdir()
     (repo / "dvc.yaml").write_text("stages: {}\n")
-    monkeypatch.setattr(cli, "PACKAGE_REPO", repo)
-    assert cli.project_root() == repo
-    monkeypatch.setattr(cli, "PACKAGE_REPO", tmp_path / "not-a-repo")
-    assert cli.project_root() is None
+    monkeypatch.setattr(common, "PACKAGE_REPO", repo)
+    assert common.project_root() == repo
+    monkeypatch.setattr(common, "PACKAGE_REPO", tmp_path / "not-a-repo")
+    assert common.project_root() is None
 
 
 def test_plan_names_the_flag_of_a_missing_default_file(tmp_path: Path) -> None:

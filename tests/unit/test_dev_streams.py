@@ -25,6 +25,7 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.io import save_npz, write_json
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.scenes import stream_key
+from tests.toy_params import toy_train_params
 
 PILE = {"families": {"pile": 1}, "n_objects": [5, 5], "catalogue": "various"}
 
@@ -163,32 +164,7 @@ def test_made_with_checks_every_shard(tmp_path):
     assert not made_with(d, "abc")
 
 
-PARAMS = {
-    "base": {"seed": 0, "torch_threads": 1, "scale": "tiny"},
-    "generate": {
-        "datasets": {"toy": {"n_scenes": 8, "families": {"random": 1}, "n_objects": [2, 4]}}
-    },
-    "split": {"datasets": {"toy": {"train": 0.75, "val": 0.25, "test": 0.0}}},
-    "train": {
-        "models": {
-            "m": {
-                "arch": "collapse_map",
-                "dataset": "toy",
-                "net": {
-                    "input_size": 32,
-                    "encoder": {"width": 0.0625},
-                    "decoder_channels": [8, 8, 8, 8, 8],
-                    "mask_channels": [4, 4, 4, 4, 4],
-                },
-                "batch_size": 5,
-                "lr": 0.001,
-                "epochs": 1,
-            }
-        },
-        "precision": "fp32",
-        "channels_last": False,
-    },
-}
+PARAMS = toy_train_params(8)
 
 
 def test_a_network_is_reused_only_for_the_same_data_and_training(tmp_path):

@@ -15,6 +15,7 @@ from clutterbench.data.split import Fractions, split_dataset
 from clutterbench.data.synthetic import write_synthetic_dataset
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import read_json
+from tests.toy_params import toy_train_params
 
 RECORD = {"dataset": "toy", "config_hash": "h", "train": list(range(0, 40)), "val": [40, 41]}
 
@@ -31,31 +32,7 @@ def test_subsets_are_nested_seeded_and_leave_val_alone():
         subset_split(RECORD, 1.5, seed=0)
 
 
-PARAMS = {
-    "base": {"seed": 0, "torch_threads": 1, "scale": "tiny"},
-    "generate": {
-        "datasets": {"toy": {"n_scenes": 12, "families": {"random": 1}, "n_objects": [2, 4]}}
-    },
-    "train": {
-        "models": {
-            "m": {
-                "arch": "collapse_map",
-                "dataset": "toy",
-                "net": {
-                    "input_size": 32,
-                    "encoder": {"width": 0.0625},
-                    "decoder_channels": [8, 8, 8, 8, 8],
-                    "mask_channels": [4, 4, 4, 4, 4],
-                },
-                "batch_size": 5,  # no trailing batch of one (BatchNorm)
-                "lr": 0.001,
-                "epochs": 1,
-            }
-        },
-        "precision": "fp32",
-        "channels_last": False,
-    },
-}
+PARAMS = toy_train_params(12)
 
 
 def test_each_point_trains_on_its_subset(tmp_path: Path):

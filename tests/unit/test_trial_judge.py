@@ -5,15 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from clutterbench.sim.pull import PullResult
 from clutterbench.trials.criteria import CollapseFreeConfig, tilt_change_deg
 from clutterbench.trials.judge import disturbance
-from clutterbench.trials.protocol import (
-    STEP_FIELDS,
-    PullResult,
-    episode_end,
-    judge_episode,
-    judged,
-)
+from clutterbench.trials.protocol import STEP_FIELDS, episode_end, judge_episode, judged
 from clutterbench.trials.protocol import judge_pull as _judge_pull
 
 THR = 0.005
@@ -210,7 +205,7 @@ def test_strict_step_counts_stop_at_the_first_strict_failure():
 
 
 def test_an_executed_judged_step_is_never_aborted_before_motion():
-    from clutterbench.trials.arm import judge_arm_step
+    from clutterbench.trials.executors import judge_arm_step
 
     # an arm that gave up before pulling but knocked a box off its bed
     r = _result([np.nan, 0.03], [np.nan, 0.03], increments=0, aborted=True, extracted=False)

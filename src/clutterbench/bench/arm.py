@@ -36,8 +36,8 @@ def bench_arm(out_dir: Path = Path("reports/bench")) -> dict:
     from clutterbench.maniskill.motion import face_pose, plan_line
     from clutterbench.parallel import worker_init
     from clutterbench.sim.config import SimConfig
+    from clutterbench.sim.pull import SceneState, execute_pull, world_at
     from clutterbench.trials.config import TrialsConfig
-    from clutterbench.trials.protocol import SceneState, execute_pull, world_at
     from clutterbench.trials.scenes import draw_trial_spec
 
     params = load_params("params.yaml")

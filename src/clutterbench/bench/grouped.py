@@ -259,25 +259,25 @@ def _calls_recorded() -> Iterator[list[tuple[int, float]]]:
 
 
 def _use_predictor(model: Path, image_size: int, new: bool) -> CollapsePredictor:
-    """Make the trials' workers (trials.ch6.load_predictor) use the predictor of this path:
+    """Make the trials' workers (trials.harness.load_predictor) use the predictor of this path:
     new = the scene encoded once, BatchNorm folded, a decision's heatmaps reused for its
     collapse scores; old = none of these (the code before them)."""
     from clutterbench.planning.extraction import CollapseGraphPlanner
-    from clutterbench.trials import ch6
+    from clutterbench.trials import harness
 
     predictor = CollapsePredictor.from_checkpoint(
         model, image_size=image_size, encode_once=new, fold_bn=new
     )
-    ch6._PREDICTORS[str(model)] = predictor
+    harness._PREDICTORS[str(model)] = predictor
     CollapseGraphPlanner.reuse_maps = new
     return predictor
 
 
 def _ch4_plan(params: dict[str, Any], sim: Any, trials: Any, piles: int) -> dict[str, float]:
     from clutterbench.perception.masks import masks_from_instance
+    from clutterbench.planning.risk_planner import plan_risk
     from clutterbench.sim.physics import BoxWorld
     from clutterbench.sim.render import observe
-    from clutterbench.trials.ch4 import plan_risk
     from clutterbench.trials.scenes import draw_trial_spec
 
     model = Path(f"models/{trials.ch6.ch4_model}/best.pt")

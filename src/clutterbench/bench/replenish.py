@@ -37,10 +37,10 @@ def bench_ch5(out_dir: Path = Path("reports/bench")) -> dict:
     from clutterbench.parallel import worker_init
     from clutterbench.planning.replenish import ReplenishPlanner, place_clusters
     from clutterbench.sim.config import SimConfig
+    from clutterbench.sim.pull import SceneState, world_at
     from clutterbench.sim.render import ensure_renderer, observe
-    from clutterbench.trials import ch5
+    from clutterbench.trials import ch5, ch5_perception
     from clutterbench.trials.config import TrialsConfig
-    from clutterbench.trials.protocol import SceneState, world_at
     from clutterbench.trials.scenes import draw_trial_spec
 
     params = load_params("params.yaml")
@@ -100,10 +100,10 @@ def bench_ch5(out_dir: Path = Path("reports/bench")) -> dict:
                     observe, world_at(spec, state, sim.physics, render=True), sim.camera
                 )
                 parts["observe"].append(t)
-                dets, t = _timed(ch5.perceive, job, spec, state, obs)
+                dets, t = _timed(ch5_perception.perceive, job, spec, state, obs)
                 parts["detect"].append(t)
                 space = ch5.space_of(spec)
-                cmap = ch5.collapse_map_fn(job)
+                cmap = ch5_perception.collapse_map_fn(job)
                 clusters = place_clusters(obs, dets, space)
                 if clusters:
                     parts["collapse_map"].append(_timed(cmap, obs, clusters[0].mask)[1])

@@ -22,8 +22,9 @@ from clutterbench.platform_info import cpu_description
 from clutterbench.sim.config import SimConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import ensure_renderer, observe
-from clutterbench.trials.ch6 import ch6_jobs, load_predictor, run_ch6_episode
+from clutterbench.trials.ch6 import ch6_jobs, run_ch6_episode
 from clutterbench.trials.config import ConditionConfig, TrialsConfig
+from clutterbench.trials.harness import load_predictor
 from clutterbench.trials.scenes import draw_trial_spec
 
 THRESHOLDS = Path("reports/support/thresholds.json")
@@ -33,7 +34,8 @@ def bench_ch4(trials: TrialsConfig, sim: SimConfig, scenes: int) -> dict:
     """Ch. 4 planning latency: every ordered pair of a 10-box pile through the network
     (thesis eqs. 4.1, 4.2), and the median wall time of one trial per ch. 4 planner."""
     from clutterbench.perception.masks import masks_from_instance
-    from clutterbench.trials.ch4 import ch4_jobs, plan_risk, run_ch4_episode
+    from clutterbench.planning.risk_planner import plan_risk
+    from clutterbench.trials.ch4 import ch4_jobs, run_ch4_episode
     from clutterbench.trials.config import Ch4ConditionConfig
 
     out: dict = {}

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from clutterbench.maniskill.config import ArmConfig
 from clutterbench.maniskill.motion import (
     NEAR_LINKS,
     SIDE_BY_SIDE_ROLLS_DEG,
@@ -44,9 +45,8 @@ from clutterbench.maniskill.motion import (
 from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.geometry import box_aabb_half_extents, quat_to_matrix
 from clutterbench.sim.physics import CONTACT_SEPARATION_M, PULL_CLEARANCE_M
+from clutterbench.sim.pull import PullResult, SceneState
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.config import ArmConfig
-from clutterbench.trials.protocol import PullResult, SceneState
 
 ARM_OUTCOMES = ("ok", "unreachable", "planning_failed", "no_contact")
 """How an arm's part of a step ended: done; no joint state puts the tool at the box's face;
@@ -127,7 +127,7 @@ class ArmExecutor:
         if self.env is None:
             import gymnasium as gym
 
-            import clutterbench.maniskill  # noqa: F401  (registers the tasks)
+            import clutterbench.maniskill.tasks  # noqa: F401  (registers the tasks)
 
             name = "ClutterShelfBimanual-v1" if self.bimanual else "ClutterShelfExtract-v1"
             self.env = gym.make(

@@ -4,7 +4,7 @@ the project's depth camera, with one Panda (`ClutterShelfExtract-v1`) or two
 lengthened: rod_robot), standing in front of the shelf, on the CPU backend.
 
     import gymnasium as gym
-    import clutterbench.maniskill  # registers the tasks
+    import clutterbench.maniskill.tasks  # registers the tasks
     env = gym.make("ClutterShelfExtract-v1", spec=spec, target=2, obs_mode="state",
                    reward_mode="none", render_backend="none")
 
@@ -37,13 +37,13 @@ from mani_skill.utils.structs.types import DefaultMaterialsConfig, SceneConfig, 
 from sapien import physx
 
 from clutterbench.errors import ClutterbenchError
+from clutterbench.maniskill.config import ArmConfig
 from clutterbench.maniskill.motion import base_quat, make_planner, solve_ik, tool_quat
 from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.geometry import box_aabb_half_extents
 from clutterbench.sim.physics import ROOM_FLOOR_BELOW_SHELF_M
+from clutterbench.sim.pull import moved_others
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.config import ArmConfig
-from clutterbench.trials.protocol import moved_others
 
 PARK_POSE = sapien.Pose([0.0, 0.0, -50.0])
 """Where a box taken out of the scene is kept (kinematic, touching nothing), as BoxWorld."""

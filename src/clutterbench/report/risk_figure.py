@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -139,3 +140,54 @@ def risk_figure(
     with atomic_path(Path(out_path)) as tmp:
         fig.savefig(tmp, dpi=DPI, format="png", metadata={"Software": None})
     plt.close(fig)
+
+
+def draw_figure(job: dict[str, Any], out_path: Path) -> None:
+    """Thesis Fig. 4.8 from one episode of a risk condition in target mode: its scene, its
+    target, the network's E / S / C for the supports of least risk (run in this process).
+    The simulator and the trials' helpers load only when it is called, so the report stage
+    that imports this module loads no SAPIEN and the trials import nothing of the report."""
+    from clutterbench.errors import ClutterbenchError
+    from clutterbench.planning.risk_planner import plan_risk
+    from clutterbench.sim.physics import BoxWorld
+    from clutterbench.sim.render import ensure_renderer
+    from clutterbench.trials.ch4 import observe_and_segment, target_segment
+    from clutterbench.trials.harness import load_predictor
+    from clutterbench.trials.scenes import draw_target, draw_trial_spec
+
+    cond, params = job["cond"], job["params"]
+    ensure_renderer()
+    spec = draw_trial_spec(
+        cond.stream,
+        job["stream_cfg"],
+        job["seed"],
+        job["index"],
+        job["physics"],
+        job["camera"],
+        job["max_attempts"],
+    )
+    world = BoxWorld.from_spec(spec, job["physics"], render=True)
+    obs, seg = observe_and_segment(world, spec, job)
+    box = draw_target(job["seed"], cond.stream, job["index"], obs, params.min_target_pixels)
+    k = target_segment(seg, obs.instance, box)
+    if k is None or len(seg.ids) < 2:
+        raise ClutterbenchError(f"figure: episode {job['index']} has no target segment to draw")
+    predictor = load_predictor(job["model_path"], job["camera"].image_size)
+    _, pairs, risks, probs = plan_risk(predictor, obs, seg, k, params.pixel_threshold)
+    labels = [
+        f"segment {s}" if cond.perception == "depth" else f"box {seg.ids[s]}" for _, s in pairs
+    ]
+    risk_figure(
+        out_path,
+        obs.depth_m,
+        seg.masks[k],
+        labels,
+        probs,
+        risks,
+        f"{job['condition']}, episode {job['index']}: extract box {box} (model {cond.model})",
+        params.pixel_threshold,
+        box_masks=seg.masks,
+        box_labels=[str(s) for s in range(len(seg.ids))]
+        if cond.perception == "depth"
+        else [str(b) for b in seg.ids],
+    )

@@ -27,285 +27,27 @@ from typing import Any
 
 import numpy as np
 
-from clutterbench.errors import ClutterbenchError
+from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.perception.depth_segmentation import shelf_roi
 from clutterbench.perception.masks import Segmentation, match_segments, segment
 from clutterbench.planning.risk import (
-    Pair,
-    PairChoice,
     candidate_pairs,
-    choose_safest_pair,
-    choose_support_for_target,
     random_pair,
-    risk_index,
-    soft_collapse,
 )
+from clutterbench.planning.risk_planner import plan_risk
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
-from clutterbench.sim.labelling import act_on_spec
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials import criteria
-from clutterbench.trials.config import (
-    ArmConfig,
-    Ch4ConditionConfig,
-    Ch4TrialParams,
-    SceneStreamConfig,
-)
+from clutterbench.trials.ch4_execution import arm_pull_outcome, plan_oracle, pull_outcome
+from clutterbench.trials.config import Ch4ConditionConfig, Ch4TrialParams, SceneStreamConfig
 from clutterbench.trials.criteria import CollapseFreeConfig
-from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
-from clutterbench.trials.protocol import SceneState
+from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult, load_predictor
 from clutterbench.trials.scenes import draw_target, draw_trial_spec, policy_rng
 
 RISKS_LOGGED = 8
 """The decision message lists the candidates of least risk, this many."""
-
-
-# -- the network: (depth, extraction mask, support mask) -> B / E / S / C -------------------
-def class_probs(predictor: Any, depth_m: np.ndarray, pair_masks: np.ndarray) -> np.ndarray:
-    """(A, 2, H, W) extraction + support masks of A candidates on one depth image -> (A, 4,
-    H, W) float32 class probabilities in the network's label order (planning.risk.CLASSES),
-    in batches of the predictor's batch size."""
-    import torch
-
-    from clutterbench.collapse.predict import scene_logits
-
-    assert pair_masks.ndim == 4 and pair_masks.shape[1] == 2, "pair masks must be (A, 2, H, W)"
-    depth = np.ascontiguousarray(depth_m, dtype=np.float32)
-    logits = scene_logits(predictor, depth, pair_masks.astype(np.float32, copy=False))
-    if logits.shape[1] != 4:
-        raise ValueError(
-            f"the ch. 4 planner needs a 4-class network (B/E/S/C), this one has "
-            f"{logits.shape[1]} output channels"
-        )
-    return torch.softmax(logits.float(), dim=1).numpy()
-
-
-def pair_masks(seg: Segmentation, pairs: list[Pair]) -> np.ndarray:
-    """(A, 2, H, W) float32 extraction and support masks of candidate pairs of segment indices."""
-    out = np.zeros((len(pairs), 2, *seg.masks.shape[1:]), dtype=np.float32)
-    for a, (x, s) in enumerate(pairs):
-        out[a, 0] = seg.masks[x]
-        if s is not None:
-            out[a, 1] = seg.masks[s]
-    return out
-
-
-def plan_risk(
-    predictor: Any,
-    obs: Observation,
-    seg: Segmentation,
-    target: int | None,
-    pixel_threshold: float,
-) -> tuple[PairChoice, list[Pair], np.ndarray, np.ndarray]:
-    """Eqs. (4.1), (4.2) on segment indices: every ordered pair (target None) or every support
-    of `target`, batched through the network -> (choice, candidates, risks, class probs).
-    Equal risks go to the least mean P(C) (planning.risk.soft_collapse)."""
-    ks = list(range(len(seg.ids)))
-    if target is None:
-        pairs = candidate_pairs(ks)
-    else:
-        pairs = [(target, s) for s in ks if s != target]
-    probs = class_probs(predictor, obs.depth_m, pair_masks(seg, pairs))
-    risks = risk_index(probs, pixel_threshold)
-    # r_c ties often (at 0 when no pixel reaches the threshold); the expected collapsing
-    # area decides among equal risks, the candidate order after that.
-    soft = soft_collapse(probs)
-    if target is None:
-        choice = choose_safest_pair(pairs, risks, soft)
-    else:
-        choice = choose_support_for_target(target, pairs, risks, soft)
-    return choice, pairs, risks, probs
-
-
-# -- execution and the judge -----------------------------------------------------------------
-def pull_outcome(
-    spec: SceneSpec,
-    physics: PhysicsConfig,
-    extract: int,
-    support: int | None,
-    threshold_m: float,
-    cf: CollapseFreeConfig,
-    world: BoxWorld | None = None,
-) -> dict[str, Any]:
-    """Pull `extract` out toward the camera with `support` held, from the canonical start (the
-    code path of the ch. 4 labels), then release the support, let the scene settle and judge
-    from the boxes' motion (trials/protocol.py: release, then judge). The judgement while the
-    support is still held is kept beside it (`*_held`)."""
-    world = world or BoxWorld.from_spec(spec, physics)
-    poses_start = world.poses()
-    disp_held = act_on_spec(spec, physics, "pull", extract, support, world=world)
-    on_shelf_held = spec.shelf.contains(world.positions())
-    if support is not None:
-        world.release([support])
-        world.settle_action()
-    disp = world.displacements()
-    on_shelf = spec.shelf.contains(world.positions())
-    out = extract in world.removed
-    return judge_ch4_pull(
-        spec.n,
-        extract,
-        support,
-        threshold_m,
-        cf,
-        disp_held,
-        on_shelf_held,
-        disp,
-        on_shelf,
-        out,
-        poses_start,
-        world.poses(),
-    )
-
-
-def arm_pull_outcome(
-    spec: SceneSpec,
-    physics: PhysicsConfig,
-    extract: int,
-    support: int | None,
-    threshold_m: float,
-    cf: CollapseFreeConfig,
-    job: dict[str, Any],
-    log: EpisodeLog,
-) -> dict[str, Any]:
-    """pull_outcome with the Pandas (executor: arm): one straight pull, no lift (as the
-    kinematic pull), the support held by the second arm; judged the same way."""
-    from clutterbench.trials.arm import arm_pull
-
-    done = arm_pull(
-        spec,
-        SceneState.start(spec),
-        extract,
-        support,
-        float("inf"),
-        0.0,
-        physics,
-        job["arm"],
-        log,
-        0.0,
-    )
-    r = done.result
-    log.poses(done.elapsed_s, done.state.poses, done.state.removed)
-    out = judge_ch4_pull(
-        spec.n,
-        extract,
-        support,
-        threshold_m,
-        cf,
-        r.displacement_held_m,
-        done.on_shelf_held,
-        r.displacement_m,
-        r.on_shelf,
-        r.extracted,
-        r.poses_start,
-        r.poses_end,
-    )
-    # An arm that never took hold pulled nothing; if it knocked a box on its way, the step
-    # was still executed (and judged: a failure), aborted after that motion.
-    reached = done.fields["arm_outcome"] == "ok"
-    executed = reached or not out["others_still"]
-    flags = {
-        "executed": executed,
-        "aborted_before_motion": not executed,
-        "aborted_after_motion": executed and not reached,
-    }
-    return out | flags | _judged_flags(out | flags) | done.fields
-
-
-def judge_ch4_pull(
-    n: int,
-    extract: int,
-    support: int | None,
-    threshold_m: float,
-    cf: CollapseFreeConfig,
-    disp_held: np.ndarray,
-    on_shelf_held: np.ndarray,
-    disp: np.ndarray,
-    on_shelf: np.ndarray,
-    out: bool,
-    poses_start: np.ndarray,
-    poses_end: np.ndarray,
-) -> dict[str, Any]:
-    """A ch. 4 pull's judgement under both criteria (trials/criteria.py) from the boxes'
-    motion and shelf membership after the support's release, and while it was held (thesis
-    4.3.3)."""
-    # Every box but the pulled one is judged; the released support only on leaving the
-    # shelf (it may settle lower once released).
-    others = [k for k in range(n) if k != extract]
-    still = [k for k in others if k != support]
-    motion = criteria.box_motion(
-        poses_start, poses_end, on_shelf, still, [support] if support is not None else []
-    )
-    left_held = sum(not on_shelf_held[k] for k in still)
-    moved_held = sum(disp_held[k] > threshold_m for k in still)
-    step = {
-        "executed": True,
-        "aborted_before_motion": False,
-        "aborted_after_motion": False,
-        "extracted": out,
-        "target_out": out,
-        "others_still": criteria.still(motion, threshold_m, cf),
-        "collapse_free": criteria.collapse_free(motion, cf),
-        "n_left_shelf": sum(bool(e["left_shelf"]) for e in motion),
-        "n_disturbed": criteria.n_disturbed(motion, threshold_m, cf),
-        "n_collapsed": criteria.n_collapsed(motion, cf),
-        "disturbance_m": float(np.sum(disp[others])) if others else 0.0,
-        "box_motion": motion,
-        "success_held": out and not left_held,
-        "strict_success_held": out and not left_held and not moved_held,
-        "displacement_m": disp,
-        "displacement_held_m": disp_held,
-    }
-    return step | _judged_flags(step)
-
-
-def _judged_flags(step: dict[str, Any]) -> dict[str, Any]:
-    """`judged` / `strict_judged` and the success under each criterion of one executed (or
-    not) pull: a trial is always judged (an abort is a failure of its one attempt)."""
-    ok = step["executed"] and step["extracted"]
-    return {
-        "judged": True,
-        "strict_judged": True,
-        "success": bool(ok and step["collapse_free"]),
-        "strict_success": bool(ok and step["others_still"]),
-    }
-
-
-def _better(a: dict[str, Any], b: dict[str, Any] | None) -> bool:
-    if b is None:
-        return True
-    key = ("strict_success", "success")
-    return (tuple(a[k] for k in key), -a["n_disturbed"], -a["disturbance_m"]) > (
-        tuple(b[k] for k in key),
-        -b["n_disturbed"],
-        -b["disturbance_m"],
-    )
-
-
-def plan_oracle(
-    spec: SceneSpec,
-    physics: PhysicsConfig,
-    pairs: list[tuple[int, int | None]],
-    threshold_m: float,
-    cf: CollapseFreeConfig,
-    rng: np.random.Generator,
-) -> tuple[int, int, int]:
-    """The ceiling: simulate the candidate box pairs from the canonical start in a random
-    order and keep the best (strict success, then collapse-free success, then the least
-    disturbance): a ceiling under each criterion, since a strict success is collapse-free
-    and so cannot be beaten on either; the search stops at the first one.
-    -> (index of the chosen pair, pairs simulated, index of the first strict success or -1)."""
-    best, best_k, tried = None, 0, 0
-    for k in rng.permutation(len(pairs)):
-        x, s = pairs[int(k)]
-        out = pull_outcome(spec, physics, x, s, threshold_m, cf)
-        tried += 1
-        if _better(out, best):
-            best, best_k = out, int(k)
-        if out["strict_success"]:
-            return best_k, tried, best_k
-    return best_k, tried, -1
 
 
 # -- one episode ---------------------------------------------------------------------------
@@ -365,8 +107,6 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
         )
         decision["candidates"] = len(pairs)
         if cond.planner == "risk":
-            from clutterbench.trials.ch6 import load_predictor
-
             predictor = load_predictor(job["model_path"], job["camera"].image_size)
             choice, pairs, risks, _ = plan_risk(
                 predictor, obs, seg, target_k, params.pixel_threshold
@@ -486,52 +226,6 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
     if cond.executor == "arm":  # kinematic records keep their old fields
         record["executor"] = "arm"
     return EpisodeResult(record, log)
-
-
-def draw_figure(job: dict[str, Any], out_path: Path) -> None:
-    """Thesis Fig. 4.8 from one episode of a risk condition in target mode: its scene, its
-    target, the network's E / S / C for the supports of least risk (run in this process)."""
-    from clutterbench.report.risk_figure import risk_figure
-    from clutterbench.sim.render import ensure_renderer
-    from clutterbench.trials.ch6 import load_predictor
-
-    cond: Ch4ConditionConfig = job["cond"]
-    params: Ch4TrialParams = job["params"]
-    ensure_renderer()
-    spec = draw_trial_spec(
-        cond.stream,
-        job["stream_cfg"],
-        job["seed"],
-        job["index"],
-        job["physics"],
-        job["camera"],
-        job["max_attempts"],
-    )
-    world = BoxWorld.from_spec(spec, job["physics"], render=True)
-    obs, seg = observe_and_segment(world, spec, job)
-    box = draw_target(job["seed"], cond.stream, job["index"], obs, params.min_target_pixels)
-    k = target_segment(seg, obs.instance, box)
-    if k is None or len(seg.ids) < 2:
-        raise ClutterbenchError(f"figure: episode {job['index']} has no target segment to draw")
-    predictor = load_predictor(job["model_path"], job["camera"].image_size)
-    _, pairs, risks, probs = plan_risk(predictor, obs, seg, k, params.pixel_threshold)
-    labels = [
-        f"segment {s}" if cond.perception == "depth" else f"box {seg.ids[s]}" for _, s in pairs
-    ]
-    risk_figure(
-        out_path,
-        obs.depth_m,
-        seg.masks[k],
-        labels,
-        probs,
-        risks,
-        f"{job['condition']}, episode {job['index']}: extract box {box} (model {cond.model})",
-        params.pixel_threshold,
-        box_masks=seg.masks,
-        box_labels=[str(s) for s in range(len(seg.ids))]
-        if cond.perception == "depth"
-        else [str(b) for b in seg.ids],
-    )
 
 
 OUTCOMES = ("target_out", "success", "strict_success", "success_held", "strict_success_held")

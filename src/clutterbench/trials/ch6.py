@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from clutterbench.errors import ClutterbenchError
+from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.planning.extraction import (
     CollapseGraphPlanner,
@@ -28,35 +29,16 @@ from clutterbench.planning.extraction import (
 from clutterbench.planning.support import SupportParams
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.physics import BoxWorld
+from clutterbench.sim.pull import SceneState, execute_pull, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.config import ArmConfig, Ch6TrialParams, SceneStreamConfig
+from clutterbench.trials.config import Ch6TrialParams, SceneStreamConfig
 from clutterbench.trials.criteria import CollapseFreeConfig
-from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
+from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult, load_predictor
 from clutterbench.trials.judge import disturbance
-from clutterbench.trials.protocol import (
-    SceneState,
-    episode_end,
-    execute_pull,
-    judge_episode,
-    judge_pull,
-    world_at,
-)
+from clutterbench.trials.protocol import episode_end, judge_episode, judge_pull
 from clutterbench.trials.scenes import draw_target, draw_trial_spec, policy_rng
 from clutterbench.trials.truth_maps import TruthCollapseMaps
-
-_PREDICTORS: dict[str, Any] = {}
-
-
-def load_predictor(path: Path, image_size: int):
-    """The collapse predictor, loaded once per worker process; returns predict(depth, masks)."""
-    from clutterbench.collapse.predict import CollapsePredictor
-
-    key = str(path)
-    if key not in _PREDICTORS:
-        _PREDICTORS[key] = CollapsePredictor.from_checkpoint(Path(path), image_size=image_size)
-    return _PREDICTORS[key]
-
 
 Action = tuple[int, "int | None"]
 """(box to pull, box the second arm holds or None)."""
@@ -245,7 +227,7 @@ class SupportWhilePullPlanner:
 
     def decide(self, obs: Observation, target: int, blocked: frozenset[int]) -> Decision:
         from clutterbench.perception.masks import segment
-        from clutterbench.trials.ch4 import plan_risk
+        from clutterbench.planning.risk_planner import plan_risk
 
         seg = segment(obs, "instance", min_pixels=self.params.min_pixels)
         if target not in seg.ids or len(seg.ids) < 2:
@@ -479,7 +461,7 @@ def execute_decision(
         )
         state, elapsed = SceneState.of(world), world.steps_taken * dt
     else:
-        from clutterbench.trials.arm import arm_pull
+        from clutterbench.trials.executors import arm_pull
 
         spec, start, arm_cfg = arm
         done_by_arm = arm_pull(
@@ -501,7 +483,7 @@ def execute_decision(
     if arm is None:
         step = judge_pull(result, box, hold, gone, params.moved_threshold_m, cf)
     else:
-        from clutterbench.trials.arm import judge_arm_step
+        from clutterbench.trials.executors import judge_arm_step
 
         step = judge_arm_step(result, box, hold, gone, params.moved_threshold_m, cf)
     record = {

@@ -28,6 +28,19 @@ DECISION_TOPIC = "/planner/decision"
 OUTCOME_TOPIC = "/trial/outcome"
 
 
+_PREDICTORS: dict[str, Any] = {}
+
+
+def load_predictor(path: Path, image_size: int):
+    """The collapse predictor, loaded once per worker process; returns predict(depth, masks)."""
+    from clutterbench.collapse.predict import CollapsePredictor
+
+    key = str(path)
+    if key not in _PREDICTORS:
+        _PREDICTORS[key] = CollapsePredictor.from_checkpoint(Path(path), image_size=image_size)
+    return _PREDICTORS[key]
+
+
 @dataclasses.dataclass(frozen=True)
 class SceneInfo:
     """What the MCAP needs to draw an episode's scene: the boxes, the shelf, the camera."""

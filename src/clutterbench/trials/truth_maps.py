@@ -19,8 +19,8 @@ import numpy as np
 
 from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.physics import BoxWorld
+from clutterbench.sim.pull import SceneState
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.protocol import SceneState
 
 
 class TruthCollapseMaps:

@@ -1,0 +1,5 @@
+"""`python -m clutterbench.cli`: the `clutterbench` command."""
+
+from clutterbench.cli import main
+
+main()

@@ -1,0 +1,194 @@
+"""`clutterbench plan`: the ch. 6 planners on one scene spec (thesis Algorithm 1), optionally
+executed and logged."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+
+from clutterbench.cli.common import (
+    app,
+    check_indices,
+    check_out_file,
+    default_path,
+    physics_config,
+    project_params,
+    require_file,
+    user_errors,
+    warn_if_not_at_rest,
+)
+from clutterbench.errors import ClutterbenchError
+
+if TYPE_CHECKING:
+    pass
+
+
+@app.command("plan")
+def plan(
+    spec_path: Annotated[Path, typer.Argument(metavar="SPEC.json", help="Scene spec to plan on.")],
+    target: Annotated[int, typer.Option("--target", metavar="K", help="Box to extract.")],
+    execute: Annotated[
+        bool, typer.Option("--execute", help="Run the plan in simulation and judge it.")
+    ] = False,
+    planner: Annotated[
+        str,
+        typer.Option(
+            "--planner",
+            help="multi_step | bimanual | single_step | pull_target | oracle | oracle_hold | "
+            "random (only multi_step and bimanual need the collapse predictor)",
+        ),
+    ] = "multi_step",
+    rule: Annotated[
+        str, typer.Option("--rule", help="Support rule: coverage_gap | coverage | iou | iou_gap.")
+    ] = "coverage_gap",
+    model: Annotated[
+        Path | None,
+        typer.Option(
+            "--model", help="Collapse predictor checkpoint (default: models/cp_focal/best.pt)."
+        ),
+    ] = None,
+    thresholds: Annotated[
+        Path | None,
+        typer.Option(
+            "--thresholds",
+            help="Val-chosen thresholds of the support stage "
+            "(default: reports/support/thresholds.json).",
+        ),
+    ] = None,
+    mcap: Annotated[
+        Path | None, typer.Option("--mcap", help="With --execute: write the episode as MCAP.")
+    ] = None,
+) -> None:
+    """Infer the support graph of one scene (thesis 6.2.2), print it beside the physics truth
+    with the extraction order and the bimanual option as JSON; --execute runs the plan."""
+    with user_errors():
+        import numpy as np
+
+        from clutterbench.config import load_section
+        from clutterbench.io import read_json
+        from clutterbench.planning.cpg import bimanual_plan, build_cpg, extraction_order
+        from clutterbench.planning.extraction import CollapseGraphPlanner
+        from clutterbench.planning.support import SupportParams
+        from clutterbench.sim.physics import BoxWorld
+        from clutterbench.sim.render import observe
+        from clutterbench.sim.spec import SceneSpec
+        from clutterbench.trials.ch6 import PLANNERS, ch6_jobs, run_extraction
+        from clutterbench.trials.config import ConditionConfig, TrialsConfig
+        from clutterbench.trials.harness import load_predictor, write_mcap
+        from clutterbench.trials.scenes import truth_moved_contact
+
+        if planner not in PLANNERS:  # the registry (built-in planners and registered ones)
+            raise ClutterbenchError(f"--planner {planner}: not one of {', '.join(PLANNERS)}")
+        if rule not in ("coverage", "iou", "coverage_gap", "iou_gap"):
+            raise ClutterbenchError(
+                f"--rule {rule}: not one of coverage, iou, coverage_gap, iou_gap"
+            )
+        if mcap is not None:
+            check_out_file(mcap, "--mcap", "episode.mcap")
+        spec = SceneSpec.load(spec_path)
+        check_indices(spec.n, target, None, "--target")
+        physics = physics_config()
+        warn_if_not_at_rest(spec, spec_path, physics)
+        params = project_params()
+        trials = (
+            load_section(TrialsConfig, "trials", params) if "trials" in params else TrialsConfig()
+        )
+        # The collapse predictor and the support thresholds are needed by the CP planners
+        # (and to print the inferred graph); oracle, random and pull_target run without them.
+        model_path = default_path(model, f"models/{trials.ch6.model}/best.pt")
+        thresholds_path = default_path(thresholds, "reports/support/thresholds.json")
+        use_cp = planner in ("multi_step", "bimanual") or (
+            model is not None or (model_path.exists() and thresholds_path.exists())
+        )
+        obs = observe(BoxWorld.from_spec(spec, physics, render=True), spec.camera)
+        if target not in obs.visible_boxes(trials.ch6.min_pixels):
+            raise ClutterbenchError(f"--target {target}: the camera does not see that box")
+        moved, contact = truth_moved_contact(spec, physics, trials.ch6.moved_threshold_m)
+        out: dict[str, Any] = {
+            "target": target,
+            "visible": obs.visible_boxes(trials.ch6.min_pixels),
+            "true_edges": [
+                {"supporter": int(a), "supported": int(b)}
+                for a, b in zip(*np.nonzero(moved & contact))
+            ],
+        }
+        support, cp_max = None, 0.0
+        if use_cp:
+            model_path = require_file(
+                model_path, "--model", "a checkpoint; `dvc repro train@cp_focal` makes the default"
+            )
+            thresholds_path = require_file(
+                thresholds_path, "--thresholds", "`dvc repro support` makes the default"
+            )
+            chosen = read_json(thresholds_path)
+            if not isinstance(chosen, dict) or rule not in chosen.get("chosen", {}):
+                raise ClutterbenchError(f"{thresholds_path}: no thresholds for rule '{rule}'")
+            support = SupportParams(**chosen["chosen"][rule])
+            cp_max = trials.ch6.cp_max if trials.ch6.cp_max is not None else support.score_threshold
+            predict = load_predictor(model_path, spec.camera.image_size)
+            cp = CollapseGraphPlanner(predict, support, cp_max, trials.ch6.min_pixels)
+            edges = cp.support_edges(obs)
+            graph = build_cpg(edges, target)
+            bim = bimanual_plan(graph, target)
+            out |= {
+                "thresholds": chosen["chosen"][rule],
+                "inferred_edges": [
+                    {"supporter": e.supporter, "supported": e.supported, "score": round(e.score, 4)}
+                    for e in edges
+                ],
+                "extraction_order": extraction_order(graph, target),
+                "bimanual": {
+                    "hold": bim.hold,
+                    "pull": bim.pull,
+                    "steps_to_target": bim.steps_to_target,
+                },
+            }
+        else:
+            out["inferred_edges"] = None  # no collapse predictor: pass --model to infer them
+        if execute:
+            cond = ConditionConfig(planner=planner, stream=next(iter(trials.streams), "cli"))
+            streams = trials.streams or {}
+            job = ch6_jobs(
+                "cli",
+                cond,
+                trials,
+                streams.get(cond.stream),
+                0,
+                physics,
+                spec.camera,
+                support,
+                cp_max,
+                model_path,
+            )[0]
+            job["ch4_model_path"] = (
+                require_file(
+                    default_path(None, str(job["ch4_model_path"])),
+                    "ch4 model",
+                    f"`dvc repro train@{trials.ch6.ch4_model}` makes it",
+                )
+                if planner == "single_step"
+                else job["ch4_model_path"]
+            )
+            result = run_extraction(spec, job, target)
+            if mcap is not None:
+                write_mcap(mcap, [result], {"spec": spec_path.name, "planner": planner})
+            rec = result.record
+            out["execute"] = {
+                k: rec[k]
+                for k in (
+                    "planner",
+                    "success",
+                    "target_out",
+                    "others_still",
+                    "end",
+                    "n_disturbed",
+                    "disturbance_m",
+                    "aborted_before_motion",
+                    "aborted_after_motion",
+                    "steps",
+                )
+            }
+        typer.echo(json.dumps(out))

@@ -1,0 +1,149 @@
+"""`clutterbench replenish`: the ch. 5 replenishment planner on one scene spec, optionally
+executed and logged."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+
+from clutterbench.cli.common import (
+    app,
+    check_out_file,
+    default_path,
+    physics_config,
+    project_params,
+    require_file,
+    user_errors,
+    warn_if_not_at_rest,
+)
+from clutterbench.errors import ClutterbenchError
+
+if TYPE_CHECKING:
+    pass
+
+
+@app.command("replenish")
+def replenish(
+    spec_path: Annotated[Path, typer.Argument(metavar="SPEC.json", help="Scene spec to fill.")],
+    box: Annotated[
+        str, typer.Option("--box", metavar="W,D,H", help="New box: width, depth, height in mm.")
+    ],
+    execute: Annotated[
+        bool, typer.Option("--execute", help="Run the plan in simulation and judge it.")
+    ] = False,
+    planner: Annotated[
+        str,
+        typer.Option(
+            "--planner",
+            help="replenish (with collapse prediction) | no_collapse | random | oracle",
+        ),
+    ] = "replenish",
+    perception: Annotated[
+        str,
+        typer.Option(
+            "--perception",
+            help="clusters (the generator's ground truth) | detector (models/detector)",
+        ),
+    ] = "clusters",
+    model: Annotated[
+        Path | None,
+        typer.Option("--model", help="Collapse map network (default: models/cmn_bs32/best.pt)."),
+    ] = None,
+    mcap: Annotated[
+        Path | None, typer.Option("--mcap", help="With --execute: write the episode as MCAP.")
+    ] = None,
+) -> None:
+    """Plan the replenishment of one scene with a box of known size (thesis 5.2.3): print the
+    clusters, the candidates, the branch taken and its move as JSON; --execute runs it and
+    prints the judged outcome."""
+    with user_errors():
+        import numpy as np
+
+        from clutterbench.config import load_section
+        from clutterbench.planning.replenish import ReplenishPlanner
+        from clutterbench.sim.physics import BoxWorld
+        from clutterbench.sim.pull import SceneState
+        from clutterbench.sim.render import observe
+        from clutterbench.sim.spec import SceneSpec
+        from clutterbench.trials import ch5, ch5_perception
+        from clutterbench.trials.config import (
+            CH5_PLANNERS,
+            Ch5ConditionConfig,
+            SceneStreamConfig,
+            TrialsConfig,
+        )
+        from clutterbench.trials.harness import write_mcap
+
+        try:
+            w, d, h = (float(v) / 1000.0 for v in box.split(","))
+        except ValueError:
+            raise ClutterbenchError(f"--box {box}: expected W,D,H in mm, e.g. 100,120,30") from None
+        if min(w, d, h) <= 0:
+            raise ClutterbenchError(f"--box {box}: sizes must be positive")
+        if planner not in CH5_PLANNERS:
+            raise ClutterbenchError(f"--planner {planner}: not one of {', '.join(CH5_PLANNERS)}")
+        if perception not in ("clusters", "detector"):
+            raise ClutterbenchError(f"--perception {perception}: not clusters or detector")
+        if mcap is not None:
+            check_out_file(mcap, "--mcap", "episode.mcap")
+        size_m = np.array([d, w, h])
+        spec = SceneSpec.load(spec_path)
+        physics = physics_config()
+        warn_if_not_at_rest(spec, spec_path, physics)
+        params = project_params()
+        trials = (
+            load_section(TrialsConfig, "trials", params) if "trials" in params else TrialsConfig()
+        )
+        model_path = default_path(model, f"models/{trials.ch5.model}/best.pt")
+        if planner == "replenish":
+            require_file(model_path, "--model", f"`dvc repro train@{trials.ch5.model}` makes it")
+        detector = default_path(None, "models/detector/best.pt")
+        if perception == "detector":
+            require_file(detector, "detector", "`dvc repro detector` makes it")
+        prob = trials.ch5.prob_threshold
+        if prob is None:
+            metrics = default_path(None, f"reports/evaluate/{trials.ch5.model}_ch5/metrics.json")
+            prob = (
+                float(json.loads(metrics.read_text())["val_chosen_threshold"])
+                if metrics.exists()
+                else 0.5
+            )
+        cond = Ch5ConditionConfig(planner=planner, stream="cli", perception=perception)
+        job = ch5.ch5_jobs(
+            "cli",
+            cond,
+            trials.ch5,
+            SceneStreamConfig(families={"shelved": 1.0}),
+            0,
+            physics,
+            spec.camera,
+            trials.max_attempts,
+            mcap is not None,
+            prob,
+            "cli",
+            collapse_free=trials.collapse_free,
+        )[0]
+        job["model_path"], job["detector_path"] = model_path, detector
+        state = SceneState.start(spec)
+        obs = observe(BoxWorld.from_spec(spec, physics, render=True), spec.camera)
+        dets = ch5_perception.perceive(job, spec, state, obs)
+        out: dict[str, Any] = {"box_mm": [w * 1000, d * 1000, h * 1000], "planner": planner}
+        if planner in ("replenish", "no_collapse"):
+            cmap = ch5_perception.collapse_map_fn(job) if planner == "replenish" else None
+            plan = ReplenishPlanner(ch5.planner_params(job), ch5.space_of(spec), cmap).plan(
+                obs, dets, size_m
+            )
+            out["plan"] = ch5.plan_json(plan) | {"clusters": plan.info["clusters"]}
+        if execute:
+            result = ch5.replenish(spec, job, size_m)
+            if mcap is not None:
+                write_mcap(mcap, [result], {"spec": spec_path.name, "planner": planner})
+            rec = result.record
+            out["execute"] = {
+                k: rec[k]
+                for k in ("success", "end", "branch", "n_disturbed", "disturbance_m", "steps")
+            }
+        typer.echo(json.dumps(out))

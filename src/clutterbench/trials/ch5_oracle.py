@@ -1,0 +1,112 @@
+"""The floor and the ceiling of Table 5.2: every action the planner could take from an
+observation (`action_set`), and the oracle that simulates them from the present state exactly
+as they would be executed and takes the first that succeeds."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from clutterbench.observation import Observation
+from clutterbench.perception.boxes import Detection
+from clutterbench.planning.replenish import (
+    Move,
+    Plan,
+    ReplenishParams,
+    WorkingSpace,
+    candidates,
+    in_working_space,
+    move_goal,
+    new_box_extent_m,
+    place_clusters,
+    rearrange_goal,
+)
+from clutterbench.sim.config import PhysicsConfig
+from clutterbench.sim.pull import SceneState, world_at
+from clutterbench.sim.render import observe
+from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.ch5_execution import execute
+from clutterbench.trials.config import Ch5TrialParams
+
+
+# -- the floor and the ceiling -------------------------------------------------------------
+def action_set(
+    obs: Observation,
+    dets: list[Detection],
+    size_m: np.ndarray,
+    params: ReplenishParams,
+    space: WorkingSpace,
+) -> list[list[Plan]]:
+    """Every action the planner could take from this observation, as step sequences: a
+    placement at every candidate; a blocker carried aside per eq. (5.6) and held while placing;
+    an obstacle of the blocker moved per eq. (5.9) first, then the same."""
+    clusters = place_clusters(obs, dets, space)
+    cands = candidates(obs, clusters, size_m, params, space)
+    simple = [[Plan("simple", c, None)] for c in cands]
+    held, first = [], []
+    g = params.finger_m
+    for c in cands:
+        if not c.occupants or c.occupants[0] < 0 or c.occupants[0] == c.cluster:
+            continue
+        s = clusters[c.occupants[0]]
+        w_new, h_new = new_box_extent_m(size_m, c.side)
+        goal = move_goal(s.rect_m, c.side, w_new, h_new, g)
+        if not in_working_space(np.array([*goal, *s.rect_m[2:]]), space):
+            continue
+        move_s = Move(s.index, s.box_px, s.rect_m[:2].copy(), goal, s.cls in ("C^r", "C^l"))
+        held.append([Plan("bimanual", c, move_s)])
+        for k in clusters:
+            if k.index in (s.index, c.cluster):
+                continue
+            goal_k = rearrange_goal(k.rect_m, s.rect_m, g, goal)
+            if not in_working_space(np.array([*goal_k, *k.rect_m[2:]]), space):
+                continue
+            move_k = Move(k.index, k.box_px, k.rect_m[:2].copy(), goal_k, k.cls in ("C^r", "C^l"))
+            first.append([Plan("rearrange", None, move_k), Plan("bimanual", c, move_s)])
+    return simple + held + first
+
+
+def oracle_choice(
+    spec: SceneSpec,
+    state: SceneState,
+    obs: Observation,
+    views: list[list[Detection]],
+    size_m: np.ndarray,
+    rp: ReplenishParams,
+    space: WorkingSpace,
+    job: dict[str, Any],
+) -> tuple[list[Plan], int]:
+    """The first action sequence (in action_set's order, for each set of detections in
+    `views` in turn) that succeeds under the strict criterion when simulated from the present
+    state exactly as it would be executed, else the first that is collapse-free (a ceiling
+    under each criterion: a strict success is collapse-free); none: the first one (it
+    fails), or no plan."""
+    options = [seq for dets in views for seq in action_set(obs, dets, size_m, rp, space)]
+    params: Ch5TrialParams = job["params"]
+    physics: PhysicsConfig = job["physics"]
+    tried = 0
+    free: list[Plan] | None = None
+    for seq in options[: params.oracle_budget]:
+        tried += 1
+        now, view = state, obs
+        ok = {"strict_success": True, "success": True}
+        for k, plan in enumerate(seq):
+            world = world_at(spec, now, physics, render=k > 0)
+            if k > 0:  # what execution will see before its next step
+                view = observe(world, job["camera"])
+            out = execute(world, view, plan, size_m, params, now.removed, job["collapse_free"])
+            lost = out.placed_box is None and plan.candidate is not None
+            ok = {key: ok[key] and out.record[key] and not lost for key in ok}
+            if not ok["success"]:
+                break
+            now = SceneState.of(world)
+        if ok["strict_success"]:
+            return seq, tried
+        if ok["success"] and free is None:
+            free = seq
+    if free is not None:
+        return free, tried
+    if options:
+        return options[0], tried
+    return [Plan("none", None, None)], tried
