@@ -9,19 +9,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clutterbench.perception.box_fit import box_errors, fit_boxes
+from clutterbench.perception.box_fit import fit_boxes
 from clutterbench.planning.physics_depth import PhysicsFromDepthPlanner
 from clutterbench.planning.support import SupportParams
 from clutterbench.sim.catalog import box_extents_m
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.estimated import estimated_scene, resolve_overlaps
 from clutterbench.sim.geometry import quat_from_axis_angle
+from clutterbench.sim.pull import SceneState, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.shelf import Shelf
 from clutterbench.sim.spec import SceneSpec, deepest_overlap
 from clutterbench.trials.ch6 import PLANNERS, ch6_jobs, run_extraction
 from clutterbench.trials.config import ConditionConfig, SceneStreamConfig, TrialsConfig
-from clutterbench.trials.protocol import SceneState, world_at
+from clutterbench.trials.physics_model import box_errors
 
 CAM = CameraConfig(image_size=128)
 VARIOUS = box_extents_m("various")  # (D, W, H) of the five types

@@ -91,8 +91,8 @@ def bench_physics_depth(out_dir: Path = Path("reports/bench"), episodes: int = E
         physics_depth.PhysicsFromDepthPlanner.decide = decide
         physics_model.EstimatedWorldModel.scene = scene
     # the box fit alone, on the bench scenes' first observations
+    from clutterbench.sim.pull import SceneState, world_at
     from clutterbench.sim.render import observe
-    from clutterbench.trials.protocol import SceneState, world_at
     from clutterbench.trials.scenes import draw_trial_spec
 
     fit = physics_model.make_estimator(trials.streams["ch6_3_10"].catalogue, trials.ch6.min_pixels)

@@ -355,27 +355,3 @@ def matrix_to_quat(R: np.ndarray) -> np.ndarray:
     q = np.array(q)
     q /= np.linalg.norm(q)
     return q if q[0] >= 0 else -q
-
-
-def box_errors(
-    est_size: np.ndarray, est_pose: np.ndarray, true_size: np.ndarray, true_pose: np.ndarray
-) -> dict[str, float]:
-    """Errors of one fitted box against the true one: centre distance (m), size error (mean
-    absolute difference of the sorted extents, m), tilt (angle between the axes nearest to
-    vertical, degrees) and yaw (about the vertical, of the box's horizontal axes, modulo 90
-    degrees since a box's faces repeat every quarter turn)."""
-    from clutterbench.sim.geometry import quat_to_matrix
-
-    Re, Rt = quat_to_matrix(est_pose[3:]), quat_to_matrix(true_pose[3:])
-    ve, vt = int(np.argmax(np.abs(Re[2]))), int(np.argmax(np.abs(Rt[2])))
-    tilt = np.degrees(np.arccos(np.clip(abs(Re[:, ve] @ Rt[:, vt]), 0.0, 1.0)))
-    he = Re[:, (ve + 1) % 3]
-    ht = Rt[:, (vt + 1) % 3]
-    yaw_e, yaw_t = np.arctan2(he[1], he[0]), np.arctan2(ht[1], ht[0])
-    d = np.mod(np.degrees(yaw_e - yaw_t), 90.0)
-    return {
-        "centre_m": float(np.linalg.norm(est_pose[:3] - true_pose[:3])),
-        "size_m": float(np.mean(np.abs(np.sort(est_size) - np.sort(true_size)))),
-        "tilt_deg": float(tilt),
-        "yaw_deg": float(min(d, 90.0 - d)),
-    }

@@ -346,7 +346,13 @@ def _physics_from_depth(job: dict[str, Any], spec: SceneSpec, holding: bool):
 
     params: Ch6TrialParams = job["params"]
     model = EstimatedWorldModel(
-        spec.shelf, job["camera"], job["physics"], params, holding, job["collapse_free"]
+        spec.shelf,
+        job["camera"],
+        job["physics"],
+        params,
+        holding,
+        job["collapse_free"],
+        SearchOracle,
     )
     estimate = make_estimator(job["stream_cfg"].catalogue, params.min_pixels)
     return PhysicsFromDepthPlanner(estimate, model, holding)

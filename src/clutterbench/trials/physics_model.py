@@ -17,14 +17,15 @@ from typing import Any
 import numpy as np
 
 from clutterbench.observation import Observation
-from clutterbench.perception.box_fit import BoxEstimate, box_errors, fit_boxes
+from clutterbench.perception.box_fit import BoxEstimate, fit_boxes
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.estimated import EstimatedScene, estimated_scene
+from clutterbench.sim.geometry import quat_to_matrix
+from clutterbench.sim.pull import SceneState
 from clutterbench.sim.shelf import Shelf
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.config import Ch6TrialParams
 from clutterbench.trials.criteria import CollapseFreeConfig
-from clutterbench.trials.protocol import SceneState
 
 
 class EstimatedWorldModel:
@@ -38,6 +39,7 @@ class EstimatedWorldModel:
         params: Ch6TrialParams,
         holding: bool,
         cf: CollapseFreeConfig,
+        search_cls: Any,
     ):
         self.shelf, self.camera, self.physics, self.holding, self.cf = (
             shelf,
@@ -46,6 +48,9 @@ class EstimatedWorldModel:
             holding,
             cf,
         )
+        self.search_cls = search_cls
+        """The search: trials.ch6.SearchOracle, passed in (trials/ch6.py imports this
+        module; importing it back would be a loop)."""
         # the search's node budget is the planner's own (a robot's time per decision)
         self.params = dataclasses.replace(
             params, search_node_budget=params.physics_depth_node_budget
@@ -65,14 +70,12 @@ class EstimatedWorldModel:
         return self.last
 
     def __call__(self, est: BoxEstimate, target: int) -> tuple[list | None, dict[str, Any]]:
-        from clutterbench.trials.ch6 import SearchOracle
-
         scene = self.scene(est)
         info: dict[str, Any] = {"estimate": scene.info()}
         if target not in scene.kept:
             return None, info | {"target_dropped": True}
         t = scene.kept.index(target)
-        oracle = SearchOracle(
+        oracle = self.search_cls(
             scene.spec, self.physics, self.camera, self.params, self.holding, self.cf
         )
         plan, found, search_info = oracle.plan_from(SceneState.start(scene.spec), t)
@@ -92,6 +95,28 @@ def catalogue_of(stream_catalogue: str) -> np.ndarray:
 def make_estimator(catalogue: str, min_pixels: int):
     extents = catalogue_of(catalogue)
     return lambda obs: fit_boxes(obs, extents, min_pixels)
+
+
+def box_errors(
+    est_size: np.ndarray, est_pose: np.ndarray, true_size: np.ndarray, true_pose: np.ndarray
+) -> dict[str, float]:
+    """Errors of one fitted box against the true one: centre distance (m), size error (mean
+    absolute difference of the sorted extents, m), tilt (angle between the axes nearest to
+    vertical, degrees) and yaw (about the vertical, of the box's horizontal axes, modulo 90
+    degrees since a box's faces repeat every quarter turn)."""
+    Re, Rt = quat_to_matrix(est_pose[3:]), quat_to_matrix(true_pose[3:])
+    ve, vt = int(np.argmax(np.abs(Re[2]))), int(np.argmax(np.abs(Rt[2])))
+    tilt = np.degrees(np.arccos(np.clip(abs(Re[:, ve] @ Rt[:, vt]), 0.0, 1.0)))
+    he = Re[:, (ve + 1) % 3]
+    ht = Rt[:, (vt + 1) % 3]
+    yaw_e, yaw_t = np.arctan2(he[1], he[0]), np.arctan2(ht[1], ht[0])
+    d = np.mod(np.degrees(yaw_e - yaw_t), 90.0)
+    return {
+        "centre_m": float(np.linalg.norm(est_pose[:3] - true_pose[:3])),
+        "size_m": float(np.mean(np.abs(np.sort(est_size) - np.sort(true_size)))),
+        "tilt_deg": float(tilt),
+        "yaw_deg": float(min(d, 90.0 - d)),
+    }
 
 
 def estimate_errors(est: BoxEstimate, spec: SceneSpec, poses: np.ndarray) -> dict[str, Any]:
@@ -149,8 +174,8 @@ def estimate_panels(
 ) -> list[dict[str, Any]]:
     """The figure's panels (report/box_estimation.py): scenes `indices` of a trial stream at
     their canonical start, the boxes fitted to their first observation beside the true ones."""
+    from clutterbench.sim.pull import world_at
     from clutterbench.sim.render import observe
-    from clutterbench.trials.protocol import world_at
     from clutterbench.trials.scenes import draw_trial_spec
 
     estimator = make_estimator(stream_cfg.catalogue, min_pixels)
