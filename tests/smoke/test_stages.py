@@ -184,13 +184,19 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     assert (a / "reports/train_slide/candidates.png").stat().st_size > 1000
     # arm-level conditions: the Pandas' records, joint states in the MCAP, the comparison
     trials = load_section(TrialsConfig, "trials", params)
+    executed = 0
     for name, arm in trials.arm_conditions.items():
         recs = read_records(a / "reports/trials_arm" / name / "records.jsonl")
         assert len(recs) == arm.episodes and all(r["executor"] == "arm" for r in recs)
         steps = [s for r in recs for s in r.get("steps", [r])]
-        assert steps and all("arm_outcome" in s for s in steps), name
+        assert all("arm_outcome" in s for s in steps), name
+        # a tiny network may give up before its first step (no step, no arm motion);
+        # otherwise the Pandas moved and their joint states are in the MCAP
+        assert steps or all(r["end"] == "gave_up" for r in recs), name
         topics = read_episode(a / "data/trials_arm" / name / "episodes.mcap")["topics"]
-        assert topics.get("/arm/joint_states", 0) > 0, name
+        assert (topics.get("/arm/joint_states", 0) > 0) == bool(steps), name
+        executed += len(steps)
+    assert executed, "no arm-level condition executed a step (the ch. 4 one always pulls)"
     arm_vs = pd.read_csv(a / "reports/tables/arm_vs_kinematic.csv")
     assert list(arm_vs["condition"]) == list(trials.arm_conditions)
     status = run(["dvc", "status"], a).stdout
