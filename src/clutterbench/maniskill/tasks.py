@@ -50,7 +50,7 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.types import DefaultMaterialsConfig, SceneConfig, SimConfig
 from sapien import physx
 
-from clutterbench.errors import ClutterbenchError
+from clutterbench.errors import ActionError, ClutterbenchError
 from clutterbench.maniskill.motion import base_quat, make_planner, solve_ik, tool_quat
 from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.geometry import box_aabb_half_extents
@@ -529,10 +529,6 @@ class ClutterShelfEnv(BaseEnv):
             "box_out": torch.as_tensor([out]),
             "target": torch.tensor([self.target]),
         }
-
-
-class ActionError(ClutterbenchError, ValueError):
-    """An action the env refuses (NaN, or a box that is not there): one line naming it."""
 
 
 def _has_nan(action: Any) -> bool:

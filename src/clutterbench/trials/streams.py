@@ -58,17 +58,17 @@ class StreamSource:
     camera: CameraConfig
     trials: TrialsConfig
 
-    def episode(self, index: int) -> tuple[SceneSpec, int]:
-        """Scene `index` of the stream, settled, and its target (cached per process)."""
+    def spec(self, index: int) -> SceneSpec:
+        """Scene `index` of the stream, settled: its canonical start (cached per process)."""
         if not isinstance(index, int) or index < 0:
             raise ClutterbenchError(f"episode {index!r}: an episode index is an integer >= 0")
-        key = (self.name, repr(self.cfg), self.seed, self.physics, self.camera, self.scale, index)
-        if key not in _EPISODES:
-            from clutterbench.sim.physics import BoxWorld
-            from clutterbench.sim.render import observe
-            from clutterbench.trials.scenes import draw_target, draw_trial_spec
+        key = (self.name, repr(self.cfg), self.seed, self.physics, self.camera, index)
+        if key not in _SPECS:
+            from clutterbench.trials.scenes import draw_trial_spec
 
-            spec = draw_trial_spec(
+            if len(_SPECS) > 256:
+                _SPECS.clear()
+            _SPECS[key] = draw_trial_spec(
                 self.name,
                 self.cfg,
                 self.seed,
@@ -77,17 +77,22 @@ class StreamSource:
                 self.camera,
                 self.trials.max_attempts,
             )
-            obs = observe(BoxWorld.from_spec(spec, self.physics, render=True), self.camera)
-            target = draw_target(
-                self.seed, self.name, index, obs, self.trials.ch6.min_target_pixels
-            )
-            if len(_EPISODES) > 256:
-                _EPISODES.clear()
-            _EPISODES[key] = (spec, target)
-        return _EPISODES[key]
+        return _SPECS[key]
+
+    def episode(self, index: int) -> tuple[SceneSpec, int]:
+        """Scene `index` of the stream and its target (the trials' target stream, drawn from
+        the canonical start's observation)."""
+        from clutterbench.sim.render import observe
+        from clutterbench.trials.protocol import SceneState, world_at
+        from clutterbench.trials.scenes import draw_target
+
+        spec = self.spec(index)  # the episode's canonical start, as trials.ch6.Extraction's
+        obs = observe(world_at(spec, SceneState.start(spec), self.physics, True), self.camera)
+        target = draw_target(self.seed, self.name, index, obs, self.trials.ch6.min_target_pixels)
+        return spec, target
 
 
-_EPISODES: dict[Any, tuple[SceneSpec, int]] = {}
+_SPECS: dict[Any, SceneSpec] = {}
 
 
 def stream_source(
