@@ -8,6 +8,7 @@
     clutterbench scene get DATASET INDEX --out spec.json
     clutterbench plan SPEC.json --target K [--execute] [--mcap out.mcap]
     clutterbench replenish SPEC.json --box W,D,H [--execute] [--mcap out.mcap]
+    clutterbench evaluate-agent MODULE:FACTORY [--stream S] [--episodes N] [--out DIR]
 
 User-facing problems (ClutterbenchError) end a command with one red line on stderr,
 "error: <message>", and exit code 2. Heavy imports (SAPIEN, matplotlib) happen inside the
@@ -1044,6 +1045,51 @@ def yamakuzushi_validate(
                 f"choice: min_probability {best[0]} (most pieces per game at >= 90% per slide, "
                 "interval's lower end)"
             )
+
+
+@app.command("evaluate-agent")
+def evaluate_agent(
+    agent: Annotated[
+        str,
+        typer.Argument(
+            metavar="MODULE:FACTORY",
+            help="FACTORY(env) -> a policy (obs -> action, or .act(obs)); MODULE: an importable "
+            "module or a .py file (e.g. docs/examples/random_agent.py:make_agent).",
+        ),
+    ],
+    stream: Annotated[
+        str, typer.Option("--stream", help="Scene stream (a key of trials.streams).")
+    ] = "ch6_3_10",
+    episodes: Annotated[int, typer.Option("--episodes", min=1, help="Episodes 0..N-1.")] = 20,
+    first: Annotated[int, typer.Option("--first", min=0, help="First episode index.")] = 0,
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", help="Output root (default: reports/agents): OUT/NAME/records.jsonl"),
+    ] = None,
+    name: Annotated[
+        str | None, typer.Option("--name", help="Condition name (default: FACTORY).")
+    ] = None,
+    scale: Annotated[
+        str | None, typer.Option("--scale", help="Scale profile (default: base.scale).")
+    ] = None,
+) -> None:
+    """Run an agent through ClutterShelfPlan-v1 on episodes of a stream (the trials' scenes
+    and targets, the episode protocol, judged from physics) and write the trials' records,
+    summary (both success criteria) and MCAP; print the summary's headline."""
+    with _user_errors():
+        from clutterbench.envs.evaluate import evaluate_agent as run
+
+        out_dir = _default_path(out, "reports/agents")
+        if out_dir.exists() and not out_dir.is_dir():
+            raise ClutterbenchError(f"--out {out_dir}: is a file, not a directory")
+        summary = run(agent, stream, episodes, out_dir, name=name, first=first, scale=scale)
+        cond = summary["condition"]
+        typer.echo(
+            f"{cond} on {summary['stream']} ({summary['episodes']} episodes): "
+            f"success (collapse-free) {summary['success_k']}/{summary['success_n']}, "
+            f"strict {summary['strict_success_k']}/{summary['strict_success_n']}; "
+            f"wrote {out_dir / cond}/records.jsonl, summary.json"
+        )
 
 
 if __name__ == "__main__":

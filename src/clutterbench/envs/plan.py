@@ -16,7 +16,8 @@ history, as the trials hand it to their planners).
 Action: (box to pull, box to hold), MultiDiscrete([MAX_BOXES + 1] * 2); NO_BOX (=
 MAX_BOXES) holds nothing, and as the box to pull gives up (the episode ends, "gave_up").
 A box not in the scene is refused (ActionError); `info["action_mask"]` masks the visible
-boxes (and the target) for `action_space.sample(mask=...)`.
+boxes (and the target) for `action_space.sample(mask=...)`; the held box must differ from the
+pulled one.
 
 Each step is one step of the trials' episode protocol (trials.ch6.Extraction, the object the
 trials stage drives): executed by the kinematic executor from the step's canonical start,
@@ -60,10 +61,10 @@ def observation_dict(obs: Observation, target: int, blocked: set[int]) -> dict[s
     mask = np.zeros(MAX_BOXES, dtype=np.int8)
     mask[sorted(blocked)] = 1
     return {
-        "depth_m": obs.depth_m,
-        "instance": obs.instance,
-        "K": np.asarray(obs.camera.K, dtype=np.float64),
-        "T_world_from_cam": np.asarray(obs.camera.T_world_from_cam, dtype=np.float64),
+        "depth_m": obs.depth_m.copy(),  # fresh arrays each call (a policy may keep them)
+        "instance": obs.instance.copy(),
+        "K": np.array(obs.camera.K, dtype=np.float64),
+        "T_world_from_cam": np.array(obs.camera.T_world_from_cam, dtype=np.float64),
         "target": np.int64(target),
         "blocked": mask,
     }

@@ -236,6 +236,14 @@ class ClutterShelfEnv(BaseEnv):
         super().__init__(*args, robot_uids=uids, **kwargs)
         self._streams_live = True
 
+    def _setup_scene(self) -> None:
+        # One renderer per process: SAPIEN renders on one device only, and ManiSkill's "cpu"
+        # device is not the one the project's renderer (sim/renderer.py, SAPIEN's default:
+        # lavapipe's Vulkan device) opened, so the env renders on that one too.
+        if self._render_device is not None and self._render_device.is_cpu():
+            self._render_device = _process_render_device()
+        super()._setup_scene()
+
     @property
     def obs_boxes(self) -> int:
         """How many boxes the box observations hold (stream-drawn: MAX_BOXES, padded)."""
@@ -529,6 +537,19 @@ class ClutterShelfEnv(BaseEnv):
             "box_out": torch.as_tensor([out]),
             "target": torch.tensor([self.target]),
         }
+
+
+_RENDER_DEVICE: list[sapien.Device] = []
+
+
+def _process_render_device() -> sapien.Device:
+    """The device of the process-wide renderer (SAPIEN's default render device)."""
+    if not _RENDER_DEVICE:
+        from clutterbench.sim.renderer import ensure_renderer
+
+        ensure_renderer()
+        _RENDER_DEVICE.append(sapien.render.RenderSystem().device)
+    return _RENDER_DEVICE[0]
 
 
 def _has_nan(action: Any) -> bool:
