@@ -221,3 +221,103 @@ def test_actions_naming_no_box_of_the_scene_are_refused(plan_env):
         plan_env.step((n, NO_BOX))
     with pytest.raises(ClutterbenchError, match="hold"):
         plan_env.step((0, 0))
+
+
+@pytest.fixture(scope="module")
+def tiny_cp(tmp_path_factory) -> Path:
+    """An untrained collapse predictor (64 px): the plumbing, not skill."""
+    import torch
+
+    from clutterbench.models import build_model
+    from clutterbench.models.checkpoint import save_checkpoint
+    from clutterbench.models.collapse_map import CollapseMapConfig
+    from clutterbench.models.vgg import VGGConfig
+
+    torch.manual_seed(0)
+    cfg = CollapseMapConfig(
+        input_size=64, encoder=VGGConfig(width=0.125), decoder_channels=(32, 16, 16, 8, 8)
+    )
+    path = tmp_path_factory.mktemp("cp") / "best.pt"
+    save_checkpoint(path, "collapse_map", build_model("collapse_map", cfg), {"epoch": 0})
+    return path
+
+
+class _AbortAfterFirstIncrement:
+    """Pull the target; its collapse score is 0 on the observation it decided on and 1 on
+    every later one, so each pull aborts after one increment (the monitor's path)."""
+
+    cp_max = 0.5
+
+    def decide(self, obs, target, blocked):
+        from clutterbench.planning.extraction import Decision
+
+        self.seen = obs
+        return Decision(target, None, {"policy": "toy_abort"})
+
+    def collapse_score(self, obs, box, hold=None):
+        return 0.0 if obs is self.seen else 1.0
+
+    # the same as an agent of the planning env
+    def act(self, obs):
+        self.seen = obs
+        return int(obs["target"]), NO_BOX
+
+
+def _trials_records(env, planner: str, episodes: int, support, cp_max: float, cp: Path):
+    from clutterbench.trials.ch6 import ch6_jobs, run_ch6_episode
+    from clutterbench.trials.config import ConditionConfig
+
+    src = env.unwrapped.source
+    cond = ConditionConfig(planner=planner, stream=src.name, episodes=episodes, rule="coverage")
+    jobs = ch6_jobs(
+        planner, cond, src.trials, src.cfg, src.seed, src.physics, src.camera, support, cp_max, cp
+    )
+    return [run_ch6_episode(j | {"record_images": False}).record for j in jobs]
+
+
+def _same_records(got, want):
+    drop = {"rule"}  # the agent's record does not know the planner's support rule
+    assert [{k: v for k, v in r.items() if k not in drop} for r in got] == [
+        {k: v for k, v in r.items() if k not in drop} for r in want
+    ]
+
+
+@pytest.mark.parametrize("prob_threshold", [0.5, 0.4])
+def test_the_multi_step_planner_as_an_agent_gives_the_trials_records(tiny_cp, prob_threshold):
+    """evaluate-agent's loop with the project's multi-step planner wrapped as an agent writes,
+    on the tiny profile, exactly the records the trials stage writes for that planner (the
+    same scenes, targets, decisions and outcomes, bit for bit; collapses at 0.5, give-ups at
+    0.4)."""
+    from clutterbench.envs.agents import PlannerAgent
+    from clutterbench.envs.evaluate import run_agent
+    from clutterbench.parallel import worker_init
+    from clutterbench.planning.support import SupportParams
+
+    worker_init(1)
+    support = SupportParams("coverage", prob_threshold, 0.3, 2, 0.0)
+    env = gym.make(PLAN_ENV_ID, scale="tiny", name="multi_step")
+    agent = PlannerAgent(
+        env, "multi_step", rule="coverage", support=support, cp_max=0.5, model_path=tiny_cp
+    )
+    got = [r.record for r in run_agent(env, agent, range(3))]
+    want = _trials_records(env, "multi_step", 3, support, 0.5, tiny_cp)
+    _same_records(got, want)
+    assert {r["end"] for r in got} >= {"target_out"}
+    env.close()
+
+
+def test_a_monitored_pull_aborts_in_the_env_as_in_the_trials():
+    """A policy's collapse score stops its pull in the env exactly as the trials' monitor
+    stops a planner's (aborted after motion, blocked, the episode goes on)."""
+    from clutterbench.envs.evaluate import run_agent
+    from clutterbench.trials.ch6 import PLANNERS, register_planner
+
+    if "toy_abort" not in PLANNERS:
+        register_planner("toy_abort")(lambda job, spec: _AbortAfterFirstIncrement())
+    env = gym.make(PLAN_ENV_ID, scale="tiny", name="toy_abort")
+    got = [r.record for r in run_agent(env, _AbortAfterFirstIncrement(), range(1))]
+    want = _trials_records(env, "toy_abort", 1, None, 0.5, Path("unused"))
+    _same_records(got, want)
+    steps = got[0]["steps"]
+    assert steps[0]["aborted_after_motion"] and steps[0]["increments"] == 1
+    env.close()

@@ -28,7 +28,18 @@ class PlannerAgent:
     thresholds chosen on validation scenes by the support stage, cp_max, random stream), so
     on a table's stream it makes the trials' decisions."""
 
-    def __init__(self, env: Any, planner: str, rule: str = "coverage_gap"):
+    def __init__(
+        self,
+        env: Any,
+        planner: str,
+        rule: str = "coverage_gap",
+        support: Any = None,
+        cp_max: float | None = None,
+        model_path: Path | None = None,
+        ch4_model_path: Path | None = None,
+    ):
+        """`support`, `cp_max`, `model_path`, `ch4_model_path`: instead of the project's
+        (the support stage's thresholds, trials.ch6.cp_max, models/<trials.ch6.model>/...)."""
         from clutterbench.trials.ch6 import chosen_support
 
         if planner not in OBSERVATION_PLANNERS:
@@ -43,15 +54,19 @@ class PlannerAgent:
         job = self.env.job(0) | {"planner": planner, "rule": rule}
         self.cp_max = np.inf
         if planner in ("multi_step", "bimanual"):
-            support = chosen_support(root / "reports/support/thresholds.json", rule)
-            self.cp_max = ch6.cp_max if ch6.cp_max is not None else support.score_threshold
+            if support is None:
+                support = chosen_support(root / "reports/support/thresholds.json", rule)
+            if cp_max is None:
+                cp_max = ch6.cp_max if ch6.cp_max is not None else support.score_threshold
+            self.cp_max = cp_max
             job |= {
                 "support": support,
-                "cp_max": self.cp_max,
-                "model_path": _require(root / f"models/{ch6.model}/best.pt", ch6.model),
+                "cp_max": cp_max,
+                "model_path": model_path
+                or _require(root / f"models/{ch6.model}/best.pt", ch6.model),
             }
         if planner == "single_step":
-            job["ch4_model_path"] = _require(
+            job["ch4_model_path"] = ch4_model_path or _require(
                 root / f"models/{ch6.ch4_model}/best.pt", ch6.ch4_model
             )
         self.name, self.job = planner, job
