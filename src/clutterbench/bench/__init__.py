@@ -4,7 +4,8 @@ Parts, in order (`__main__.PARTS`): simulation throughput and label replay (`sim
 train / inference speed plus the peak RSS of a training epoch (`models`, `memory`), the
 grouped (scene encoded once) vs per-pair paths of the collapse networks (`grouped`), and
 support-graph latency and wall time per trial (`trials`), a Yamakuzushi game's parts
-(`ch3`), and an arm-level step against the kinematic one (`arm`). Results go to reports/bench/: one
+(`ch3`), an arm-level step against the kinematic one (`arm`), and every registered
+environment made with defaults, reset and stepped (`envs`). Results go to reports/bench/: one
 JSON per part and a markdown table beside most; each records the CPU model it ran on.
 """
 

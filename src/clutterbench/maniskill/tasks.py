@@ -236,6 +236,15 @@ class ClutterShelfEnv(BaseEnv):
         super().__init__(*args, robot_uids=uids, **kwargs)
         self._streams_live = True
 
+    def _reconfigure(self, options: dict | None = None) -> None:
+        # ManiSkill sets the camera shader directory process-wide for its sensors; every
+        # other camera of the process (sim/render.py's) is made with SAPIEN's default one.
+        shader_dir = sapien.render.get_camera_shader_dir()
+        try:
+            super()._reconfigure(options if options is not None else {})
+        finally:
+            sapien.render.set_camera_shader_dir(shader_dir)
+
     def _setup_scene(self) -> None:
         # One renderer per process: SAPIEN renders on one device only, and ManiSkill's "cpu"
         # device is not the one the project's renderer (sim/renderer.py, SAPIEN's default:

@@ -22,9 +22,6 @@ def _camera(world: BoxWorld, cam: CameraConfig):
     pipeline rebuild each time)."""
     if world.camera is None:
         ensure_renderer()
-        # SAPIEN's default shader ("Position", "Segmentation" pictures): a ManiSkill env of
-        # the same process sets the shader directory process-wide for its own sensors.
-        sapien.render.set_camera_shader_dir("default")
         world.camera = world.scene.add_camera(
             "depth", cam.image_size, cam.image_size, np.deg2rad(cam.fovy_deg), cam.near_m, cam.far_m
         )
