@@ -6,3 +6,8 @@ Stage scripts catch it at the top and exit non-zero with its one-line message.
 
 class ClutterbenchError(Exception):
     """A problem the user can fix; its message is one line naming the problem."""
+
+
+class ActionError(ClutterbenchError, ValueError):
+    """An action an environment refuses (NaN, a box that is not there): one line naming it;
+    a ValueError too, as gymnasium and ManiSkill expect of a bad action."""

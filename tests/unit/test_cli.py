@@ -429,3 +429,33 @@ def test_yamakuzushi_validate_rejects_a_probability_outside_0_1() -> None:
     assert result.exit_code == 2
     assert "--min-probability 1.5" in result.output
     assert len(result.output.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    "agent, message",
+    [
+        ("no_colon", "MODULE:FACTORY"),
+        ("no_such_module_xyz:make", "cannot import"),
+        ("docs/examples/none.py:make", "no file"),
+        ("clutterbench.envs.agents:no_such_factory", "no callable"),
+    ],
+)
+def test_evaluate_agent_refuses_a_bad_agent_in_one_line(agent: str, message: str) -> None:
+    result = runner.invoke(app, ["evaluate-agent", agent, "--episodes", "1"])
+    assert result.exit_code == 2, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0]
+
+
+def test_evaluate_agent_writes_records_and_summary(tmp_path: Path) -> None:
+    """The README's random agent, one tiny episode: the trials' records and summary."""
+    example = Path(__file__).resolve().parents[2] / "docs" / "examples" / "random_agent.py"
+    agent = f"{example}:make_agent"
+    args = ["evaluate-agent", agent, "--episodes", "1", "--scale", "tiny", "--out", str(tmp_path)]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    out = tmp_path / "make_agent"
+    records = [json.loads(line) for line in (out / "records.jsonl").read_text().splitlines()]
+    summary = json.loads((out / "summary.json").read_text())
+    assert len(records) == 1 and records[0]["stream"] == "ch6_3_10"
+    assert summary["success_n"] == 1 and "strict_success_k" in summary

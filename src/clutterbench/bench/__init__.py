@@ -4,8 +4,9 @@ Parts, in order (`__main__.PARTS`): simulation throughput and label replay (`sim
 train / inference speed plus the peak RSS of a training epoch (`models`, `memory`), the
 grouped (scene encoded once) vs per-pair paths of the collapse networks (`grouped`), and
 support-graph latency and wall time per trial (`trials`), a Yamakuzushi game's parts
-(`ch3`), an arm-level step against the kinematic one (`arm`), and the physics-from-depth
-planner's decision time per step (`physics_depth`). Results go to reports/bench/: one
+(`ch3`), an arm-level step against the kinematic one (`arm`), the physics-from-depth
+planner's decision time per step (`physics_depth`), and every registered environment made
+with defaults, reset and stepped (`envs`). Results go to reports/bench/: one
 JSON per part and a markdown table beside most; each records the CPU model it ran on.
 """
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from clutterbench.bench.arm import bench_arm
+from clutterbench.bench.envs import bench_envs
 from clutterbench.bench.grouped import bench_grouped
 from clutterbench.bench.models import bench_models
 from clutterbench.bench.physics_depth import bench_physics_depth
@@ -35,6 +36,7 @@ PARTS: list[tuple[str, Callable[[], object]]] = [
     ("ch5", bench_ch5),  # ch5.json, ch5.md (needs the detector and the ch. 5 network)
     ("arm", bench_arm),  # arm.json, arm.md (ManiSkill Pandas vs the kinematic pull)
     ("physics_depth", bench_physics_depth),  # physics_depth.json, .md (no network needed)
+    ("envs", bench_envs),  # envs.json, envs.md (every registered env: make, reset, 5 steps)
 ]
 
 

@@ -5,14 +5,29 @@ lengthened: rod_robot), standing in front of the shelf, on the CPU backend.
 
     import gymnasium as gym
     import clutterbench.maniskill.tasks  # registers the tasks
+    env = gym.make("ClutterShelfExtract-v1")          # scenes of the stream ch6_3_10
+    obs, info = env.reset(seed=17)                     # = the pipeline's episode 17 (scene, target)
     env = gym.make("ClutterShelfExtract-v1", spec=spec, target=2, obs_mode="state",
-                   reward_mode="none", render_backend="none")
+                   reward_mode="none", render_backend="none")   # one scene of your own
+
+With no `spec`, `reset(seed=i)` draws episode i of a named stream (DEFAULT_SCENE_SOURCE,
+trials/streams.py: the pipeline's scene i of that stream, its canonical settled start and its
+target; `scene_source=` plugs in another); the stream is
+`stream=` (a key of trials.streams, default ch6_3_10) or `family=` / `n_objects=` /
+`catalogue=`, as make kwargs or reset options (`scale=`: the params' scale profile). Box
+observations are then padded to MAX_BOXES (a padded slot is out of the scene), so the
+observation space stays fixed across scenes. Obs modes: SUPPORTED_OBS_MODES (the sensor modes
+render on the CPU backend). An action holding NaN is refused (ValueError).
 
 `evaluate()` judges the scene as the project's judge does (trials/protocol.py), with the
 same function: `target_out` (the target is out of the shelf, in front of its opening),
 `others_still` (no box but the target and the held one moved beyond the threshold or left
 the shelf, measured from the episode's start), `released` (no tool holds a box) and
-`success` (all three). The sparse reward is `success`.
+`success` (all three). The sparse reward is `success`. The dense reward (reward_mode="dense")
+is the target's progress out of the shelf (0 at the start, 1 once its back face is past the
+opening) minus the other boxes' displacement (each box still in the scene: its displacement
+from the start over the moved threshold, capped at 1, averaged over those boxes; a box off
+the shelf counts 1), plus 1 on success: at most 2 ("normalized_dense": the same over 2).
 
 Physics is the project's (sim.physics): the same timestep, friction, restitution and
 density, and PhysX's solver and contact settings left at SAPIEN's defaults, which every
@@ -22,8 +37,10 @@ BoxWorld of the process uses (a ManiSkill env sets them process-wide).
 from __future__ import annotations
 
 import hashlib
+import importlib
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +53,7 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.types import DefaultMaterialsConfig, SceneConfig, SimConfig
 from sapien import physx
 
-from clutterbench.errors import ClutterbenchError
+from clutterbench.errors import ActionError, ClutterbenchError
 from clutterbench.maniskill.config import ArmConfig
 from clutterbench.maniskill.motion import base_quat, make_planner, solve_ik, tool_quat
 from clutterbench.sim.config import PhysicsConfig
@@ -58,6 +75,11 @@ MIRROR_OFFSETS = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -np.pi / 2])
 """A Panda's joint state mirrored in its base's x-z plane: q -> q * signs + offsets (the
 hand is mounted at -45 degrees about the last joint; the mirror image of the tool is the
 tool turned half a turn about its rod, which the rod does not feel: tool_quat)."""
+MAX_BOXES = 30
+"""Box observations of a stream-drawn env are padded to this many boxes (SceneStreamConfig
+allows at most 30)."""
+SENSOR_OBS_MODES = ("sensor_data", "depth+segmentation")
+"""Obs modes that render (they need a render backend: the CPU one by default)."""
 ROD_START_M = 0.05
 """ManiSkill's `panda_stick` rod starts this far in front of the hand's origin (8 mm radius)."""
 
@@ -143,14 +165,38 @@ def _sapien_physx_defaults() -> SceneConfig:
     )
 
 
+DEFAULT_SCENE_SOURCE = "clutterbench.trials.streams:stream_source"
+"""What draws a spec-less env's scenes: a factory `(stream, family, n_objects, catalogue,
+scale) -> source`, the source giving `.episode(i) -> (spec, target)`, `.physics` and `.trials`
+(its `arm` and `ch6.moved_threshold_m`). The default is the pipeline's named streams, named as
+gymnasium names entry points ("module:function") and imported only when a spec-less env is
+made: the arm level imports nothing of the trials, and `scene_source=` (a name or a callable)
+plugs in another source."""
+
+
+def resolve_scene_source(source: str | Callable[..., Any]) -> Callable[..., Any]:
+    """A scene-source factory from itself or its "module:function" name."""
+    if callable(source):
+        return source
+    module, _, name = str(source).partition(":")
+    try:
+        return getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError) as exc:
+        raise ClutterbenchError(
+            f"scene_source {source!r}: no such module:function ({exc})"
+        ) from None
+
+
 class ClutterShelfEnv(BaseEnv):
     """The shelf scene of a SceneSpec with Pandas in front of it (see the module's doc).
 
-    kwargs: `spec` (SceneSpec, required), `target` (the box to take out), `hold` (the box a
-    second arm holds, or None), `poses` ((N, 7) start poses, default the spec's) and
-    `removed` (boxes already out), `physics` (PhysicsConfig), `arm` (ArmConfig),
-    `moved_threshold_m`. `reset(options=...)` takes the same keys (with `reconfigure=True`
-    when the boxes change) to start another scene or step in the same env."""
+    kwargs: `spec` (SceneSpec; None: scenes drawn from a stream, see the module's doc),
+    `target` (the box to take out), `hold` (the box a second arm holds, or None), `poses`
+    ((N, 7) start poses, default the spec's) and `removed` (boxes already out), `physics`
+    (PhysicsConfig), `arm` (ArmConfig), `moved_threshold_m`; with no spec also `stream`,
+    `family`, `n_objects`, `catalogue`, `scale`. `reset(options=...)` takes the same keys
+    (with `reconfigure=True` when the boxes change) to start another scene or step in the
+    same env."""
 
     SUPPORTED_OBS_MODES = ("none", "state", "state_dict", "sensor_data", "depth+segmentation")
     N_ARMS = 1
@@ -165,11 +211,34 @@ class ClutterShelfEnv(BaseEnv):
         removed: tuple[int, ...] = (),
         physics: PhysicsConfig | None = None,
         arm: ArmConfig | None = None,
-        moved_threshold_m: float = 0.005,
+        moved_threshold_m: float | None = None,
+        stream: str | None = None,
+        family: Any = None,
+        n_objects: Any = None,
+        catalogue: str | None = None,
+        scale: str | None = None,
+        scene_source: str | Callable[..., Any] = DEFAULT_SCENE_SOURCE,
         **kwargs: Any,
     ):
+        self.stream_source = None
+        self._source_factory = scene_source
+        self._streams_live = False  # BaseEnv.__init__ resets once with its own seed
+        self._next_episode = 0
         if spec is None:
-            raise ClutterbenchError("ClutterShelf env: spec= (a SceneSpec) is required")
+            stream_source = resolve_scene_source(scene_source)
+            self.stream_source = stream_source(stream, family, n_objects, catalogue, scale)
+            spec, target = self.stream_source.episode(0)
+            self.episode_index = 0
+            physics = physics or self.stream_source.physics
+            arm = arm or self.stream_source.trials.arm
+            if moved_threshold_m is None:
+                moved_threshold_m = self.stream_source.trials.ch6.moved_threshold_m
+        elif any(v is not None for v in (stream, family, n_objects, catalogue, scale)):
+            raise ClutterbenchError(
+                "ClutterShelf env: stream/family/n_objects/catalogue/scale draw the scene; "
+                "not with spec="
+            )
+        moved_threshold_m = 0.005 if moved_threshold_m is None else moved_threshold_m
         physics, arm = physics or PhysicsConfig(), arm or ArmConfig()
         self.physics, self.arm_cfg = physics, arm
         self.moved_threshold_m = moved_threshold_m
@@ -186,9 +255,62 @@ class ClutterShelfEnv(BaseEnv):
         uids = robot if self.N_ARMS == 1 else (robot,) * self.N_ARMS
         self.SUPPORTED_ROBOTS = [uids]
         kwargs.setdefault("sim_backend", "physx_cpu")
-        kwargs.setdefault("render_backend", "none")
+        sensors = kwargs.get("obs_mode", "state") in SENSOR_OBS_MODES
+        kwargs.setdefault("render_backend", "cpu" if sensors else "none")
+        kwargs.setdefault("obs_mode", "state")
         kwargs.setdefault("control_mode", "pd_joint_pos")
         super().__init__(*args, robot_uids=uids, **kwargs)
+        self._streams_live = True
+
+    def _reconfigure(self, options: dict | None = None) -> None:
+        # ManiSkill sets the camera shader directory process-wide for its sensors; every
+        # other camera of the process (sim/render.py's) is made with SAPIEN's default one.
+        shader_dir = sapien.render.get_camera_shader_dir()
+        try:
+            super()._reconfigure(options if options is not None else {})
+        finally:
+            sapien.render.set_camera_shader_dir(shader_dir)
+
+    def _setup_scene(self) -> None:
+        # One renderer per process: SAPIEN renders on one device only, and ManiSkill's "cpu"
+        # device is not the one the project's renderer (sim/renderer.py, SAPIEN's default:
+        # lavapipe's Vulkan device) opened, so the env renders on that one too.
+        if self._render_device is not None and self._render_device.is_cpu():
+            self._render_device = _process_render_device()
+        super()._setup_scene()
+
+    @property
+    def obs_boxes(self) -> int:
+        """How many boxes the box observations hold (stream-drawn: MAX_BOXES, padded)."""
+        return self.scene_spec.n if self.stream_source is None else MAX_BOXES
+
+    def reset(self, seed: Any = None, options: dict | None = None):
+        """ManiSkill's reset; with no spec, `seed` (an int >= 0) is the episode index of the
+        stream (None: the next one) and the options may name another stream."""
+        options = dict(options or {})
+        if self.stream_source is not None and self._streams_live and "spec" not in options:
+            keys = ("stream", "family", "n_objects", "catalogue", "scale")
+            if any(k in options for k in keys):
+                stream_source = resolve_scene_source(self._source_factory)
+                self.stream_source = stream_source(*(options.pop(k, None) for k in keys))
+            if seed is None:
+                index = self._next_episode
+            elif isinstance(seed, int | np.integer) and seed >= 0:
+                index = int(seed)
+            else:
+                raise ClutterbenchError(f"reset(seed={seed!r}): an episode index, an int >= 0")
+            spec, target = self.stream_source.episode(index)
+            self.episode_index, self._next_episode = index, index + 1
+            if spec is not self.scene_spec or target != self.target:
+                options |= {"spec": spec, "target": target, "reconfigure": True}
+        return super().reset(seed=seed, options=options)
+
+    def step(self, action: Any):
+        if _has_nan(action):
+            raise ActionError(
+                "ClutterShelf env: the action holds NaN (a policy produced NaN; refused)"
+            )
+        return super().step(action)
 
     def _set_scene(self, spec, target, hold, poses, removed) -> None:
         if not 0 <= target < spec.n or (hold is not None and not 0 <= hold < spec.n):
@@ -294,6 +416,7 @@ class ClutterShelfEnv(BaseEnv):
                 body.set_angular_velocity(np.zeros(3))
         self.removed = set(self.start_removed)
         self.reference = self.start_poses[:, :3].copy()
+        self.target_back0_m = self._back_face_m(self.target)
         for agent, qpos in zip(self.agents, self.ready_qpos(), strict=True):
             agent.reset(qpos)
 
@@ -399,13 +522,7 @@ class ClutterShelfEnv(BaseEnv):
         n, _ = moved_others(disp, on_shelf, manipulated, self.start_removed, self.moved_threshold_m)
         if self.hold is not None and self.hold not in self.removed and not on_shelf[self.hold]:
             n += 1  # the held box fell off the shelf
-        if k in self.removed:
-            out = True
-        else:
-            pose = self.box_poses()[k]
-            out = bool(
-                pose[0] + box_aabb_half_extents(self.scene_spec.sizes_m[k], pose[3:])[0] < 0.0
-            )
+        out = k in self.removed or self._back_face_m(k) < 0.0
         released = not self.attached
         flags = {
             "target_out": out,
@@ -415,16 +532,69 @@ class ClutterShelfEnv(BaseEnv):
         }
         return {name: torch.tensor([v]) for name, v in flags.items()}
 
+    def _back_face_m(self, box: int) -> float:
+        """x of `box`'s face farthest into the shelf (its AABB's back; < 0: out of the shelf)."""
+        pose = self.box_poses()[box]
+        return float(pose[0] + box_aabb_half_extents(self.scene_spec.sizes_m[box], pose[3:])[0])
+
     def compute_sparse_reward(self, obs: Any, action: Any, info: dict) -> torch.Tensor:
         return info["success"].float()
 
+    def compute_dense_reward(self, obs: Any, action: Any, info: dict) -> torch.Tensor:
+        """Target progress out of the shelf minus the others' displacement (module doc)."""
+        k = self.target
+        if k in self.removed or self.target_back0_m <= 0.0:
+            progress = 1.0
+        else:
+            progress = float(np.clip(1.0 - self._back_face_m(k) / self.target_back0_m, 0.0, 1.0))
+        disp, on_shelf = self.displacements()
+        others = [
+            j for j in range(self.scene_spec.n) if j not in (k, self.hold) and j not in self.removed
+        ]
+        share = 0.0
+        if others:
+            moved = np.minimum(np.nan_to_num(disp[others], nan=0.0) / self.moved_threshold_m, 1.0)
+            share = float(np.mean(np.where(on_shelf[others], moved, 1.0)))
+        reward = progress - share + float(info["success"].item())
+        return torch.tensor([reward], dtype=torch.float32)
+
+    def compute_normalized_dense_reward(self, obs: Any, action: Any, info: dict) -> torch.Tensor:
+        return self.compute_dense_reward(obs, action, info) / 2.0
+
     def _get_obs_extra(self, info: dict) -> dict[str, torch.Tensor]:
-        poses = self.box_poses()
+        n, m = self.scene_spec.n, self.obs_boxes
+        poses = np.zeros((m, 7))
+        poses[:n] = self.box_poses()
+        out = [k >= n or k in self.removed for k in range(m)]
         return {
             "box_poses": torch.as_tensor(poses, dtype=torch.float32).reshape(1, -1),
-            "box_out": torch.as_tensor([[k in self.removed for k in range(self.scene_spec.n)]]),
+            "box_out": torch.as_tensor([out]),
             "target": torch.tensor([self.target]),
         }
+
+
+_RENDER_DEVICE: list[sapien.Device] = []
+
+
+def _process_render_device() -> sapien.Device:
+    """The device of the process-wide renderer (SAPIEN's default render device)."""
+    if not _RENDER_DEVICE:
+        from clutterbench.sim.renderer import ensure_renderer
+
+        ensure_renderer()
+        _RENDER_DEVICE.append(sapien.render.RenderSystem().device)
+    return _RENDER_DEVICE[0]
+
+
+def _has_nan(action: Any) -> bool:
+    if action is None:
+        return False
+    if isinstance(action, dict):
+        return any(_has_nan(v) for v in action.values())
+    if isinstance(action, torch.Tensor):
+        return bool(torch.isnan(action).any())
+    a = np.asarray(action)
+    return a.dtype.kind in "fc" and bool(np.isnan(a).any())
 
 
 @register_env("ClutterShelfExtract-v1", max_episode_steps=2000)

@@ -521,115 +521,170 @@ def run_extraction(
     """Extract `target` (None: drawn from the stream's target stream) from the settled `spec`
     with the job's planner under the episode protocol (trials/protocol.py) -> the episode's
     record and MCAP events."""
-    physics: PhysicsConfig = job["physics"]
-    camera: CameraConfig = job["camera"]
-    params: Ch6TrialParams = job["params"]
-    state = SceneState.start(spec)
-    world = world_at(spec, state, physics, render=True)
-    log = EpisodeLog(record_images=job["record_images"])
-    obs = observe(world, camera)
-    log.scene(0.0, spec.sizes_m, spec.shelf.boards(), obs.camera, obs.depth_m.shape)
-    if target is None:
-        target = draw_target(
-            job["seed"], job["stream"], job["index"], obs, params.min_target_pixels
-        )
+    episode = Extraction(spec, job, target)
     planner = make_planner(job, spec)
-    truth = truth_maps_of(planner)
-    steps: list[dict[str, Any]] = []
-    blocked: set[int] = set()
-    end, t = "max_steps", 0.0
-    while len(steps) < params.max_steps:
-        log.observation(t, obs.depth_m, obs.instance)
-        log.poses(t, state.poses, state.removed)
-        if isinstance(planner, SearchOracle):
-            planner.state = state
-        if truth is not None:
-            truth.at(state, obs.instance)
+    while not episode.done:
+        episode.before_decision(planner)
         try:
-            decision = planner.decide(obs, target, frozenset(blocked))
+            decision = planner.decide(episode.obs, episode.target, frozenset(episode.blocked))
         except ValueError:  # every action the planner would take is rejected by its own rule
-            end = "gave_up"
+            episode.give_up()
             break
-        log.json(t, DECISION_TOPIC, {"pull": decision.pull, "hold": decision.hold} | decision.state)
-        step, state, elapsed = execute_decision(
-            world,
-            obs,
+        episode.step(decision, planner)
+    return episode.result(planner)
+
+
+class Extraction:
+    """One ch. 6 extraction episode as a stepping object: the canonical start, then one
+    `step(decision, planner)` per decision under the episode protocol (trials/protocol.py)
+    until `done`; `result()` is the episode's record. The trials' loop (run_extraction) and
+    the planning env (envs/plan.py) both drive it, so both run one protocol. `planner` is
+    whatever made the decision: its `collapse_score` (if any) monitors the pull, as
+    Algorithm 1 does; a planner that reads the world (oracle, truth maps) is handed the
+    state in `before_decision`."""
+
+    def __init__(self, spec: SceneSpec, job: dict[str, Any], target: int | None = None):
+        self.spec, self.job = spec, job
+        self.physics: PhysicsConfig = job["physics"]
+        self.camera: CameraConfig = job["camera"]
+        self.params: Ch6TrialParams = job["params"]
+        self.state = SceneState.start(spec)
+        self.world = world_at(spec, self.state, self.physics, render=True)
+        self.log = EpisodeLog(record_images=job["record_images"])
+        self.obs = observe(self.world, self.camera)
+        self.log.scene(
+            0.0, spec.sizes_m, spec.shelf.boards(), self.obs.camera, self.obs.depth_m.shape
+        )
+        if target is None:
+            target = draw_target(
+                job["seed"], job["stream"], job["index"], self.obs, self.params.min_target_pixels
+            )
+        self.target = target
+        self.steps: list[dict[str, Any]] = []
+        self.blocked: set[int] = set()
+        """Boxes whose last pull aborted (planners skip them until a step succeeds)."""
+        self.end: str | None = None
+        """Why the episode ended (protocol.EPISODE_ENDS), None while it goes on."""
+        self.t = 0.0
+
+    @property
+    def done(self) -> bool:
+        return self.end is not None
+
+    def before_decision(self, planner: Any) -> None:
+        """Log the observation the next decision reads; give world-reading planners the
+        state (the oracle's search, physics-truth maps)."""
+        self.log.observation(self.t, self.obs.depth_m, self.obs.instance)
+        self.log.poses(self.t, self.state.poses, self.state.removed)
+        if isinstance(planner, SearchOracle):
+            planner.state = self.state
+        truth = truth_maps_of(planner)
+        if truth is not None:
+            truth.at(self.state, self.obs.instance)
+
+    def give_up(self) -> None:
+        """The planner has no action left: the episode ends."""
+        self.end = "gave_up"
+
+    def step(self, decision: Decision, planner: Any) -> dict[str, Any]:
+        """Execute `decision` from the step's canonical start, judge it, and decide whether
+        the episode goes on (then the next step's canonical start is built) -> the step."""
+        assert not self.done, "the episode has ended"
+        job, params, spec = self.job, self.params, self.spec
+        t = self.t
+        self.log.json(
+            t, DECISION_TOPIC, {"pull": decision.pull, "hold": decision.hold} | decision.state
+        )
+        arm = job.get("executor", "kinematic") == "arm"
+        step, self.state, elapsed = execute_decision(
+            self.world,
+            self.obs,
             decision,
             planner,
-            camera,
+            self.camera,
             params,
             job["cp_max"],
-            state.removed,
-            log,
+            self.state.removed,
+            self.log,
             job["collapse_free"],
             t,
-            arm=(spec, state, job["arm"]) if job.get("executor", "kinematic") == "arm" else None,
+            arm=(spec, self.state, job["arm"]) if arm else None,
         )
-        steps.append(step)
-        t += elapsed
+        self.steps.append(step)
+        self.t = t + elapsed
         if step["aborted_before_motion"] or step["aborted_after_motion"]:
-            blocked.add(decision.pull)
+            self.blocked.add(decision.pull)
         else:
-            blocked.clear()
-        target_out = target in state.removed
-        on_shelf = bool(spec.shelf.contains(state.poses[target : target + 1])[0])
-        stop = episode_end(step, target_out, target_out or on_shelf)
-        if stop is not None:
-            end = stop
-            break
-        world = world_at(spec, state, physics, render=True)  # the next step's canonical start
-        obs = observe(world, camera)
-    log.poses(t, state.poses, state.removed)
-    touched = {s["box"] for s in steps}
-    overall = disturbance(
-        np.asarray(spec.poses)[:, :3],
-        state.poses[:, :3],
-        touched,
-        set(state.removed) - touched,
-        params.moved_threshold_m,
-    )
-    record = {
-        "condition": job["condition"],
-        "episode": job["index"],
-        "seed": job["seed"],
-        "stream": job["stream"],
-        "family": spec.family,
-        "n_objects": spec.n,
-        "target": target,
-        "planner": job["planner"],
-        "perception": "instance",
-        "rule": job["rule"] if job["planner"] in CP_PLANNERS else None,
-        "collapse_maps": None
-        if job["planner"] not in CP_PLANNERS
-        else ("physics truth" if truth is not None else "predicted"),
-        "rejected_starts": dict(spec.meta.get("rejected", {})),
-        "collapse_free_params": {
-            "drop_m": job["collapse_free"].drop_m,
-            "tilt_deg": job["collapse_free"].tilt_deg,
-        },
-        "moved_threshold_m": params.moved_threshold_m,
-        "steps": [_rounded(s) for s in steps],
-        "n_disturbed": overall.n_disturbed,
-        "disturbance_m": overall.disturbance_m,
-    } | judge_episode(steps, end, target)
-    if job.get("executor", "kinematic") == "arm":  # kinematic records keep their old fields
-        record["executor"] = "arm"
-    if truth is not None:
-        record["truth_simulations"] = truth.simulations
-    if isinstance(planner, SearchOracle):
-        record |= {
-            "search_nodes": planner.nodes,
-            "search_exhausted": planner.exhausted,
-            "search_replanned": planner.replanned,
-            # what the first search proved possible under each criterion (the ceilings)
-            "search_found_strict": bool(planner.found.get("strict_success", False)),
-            "search_found": bool(planner.found.get("success", False)),
-        }
-    if hasattr(planner, "first") and hasattr(planner, "steps"):  # physics from depth
-        from clutterbench.trials.physics_model import estimate_record
+            self.blocked.clear()
+        target = self.target
+        target_out = target in self.state.removed
+        on_shelf = bool(spec.shelf.contains(self.state.poses[target : target + 1])[0])
+        self.end = episode_end(step, target_out, target_out or on_shelf)
+        if self.end is None:
+            # the next step's canonical start
+            self.world = world_at(spec, self.state, self.physics, render=True)
+            self.obs = observe(self.world, self.camera)
+            if len(self.steps) >= params.max_steps:
+                self.end = "max_steps"
+        return step
 
-        record |= estimate_record(planner, spec)
-    return EpisodeResult(_rounded(record), log)
+    def result(self, planner: Any) -> EpisodeResult:
+        """The episode's record (trials/records.py) and its MCAP events."""
+        assert self.done, "the episode has not ended"
+        job, params, spec, state, steps = self.job, self.params, self.spec, self.state, self.steps
+        truth = truth_maps_of(planner)
+        log = self.log
+        log.poses(self.t, state.poses, state.removed)
+        touched = {s["box"] for s in steps}
+        overall = disturbance(
+            np.asarray(spec.poses)[:, :3],
+            state.poses[:, :3],
+            touched,
+            set(state.removed) - touched,
+            params.moved_threshold_m,
+        )
+        record = {
+            "condition": job["condition"],
+            "episode": job["index"],
+            "seed": job["seed"],
+            "stream": job["stream"],
+            "family": spec.family,
+            "n_objects": spec.n,
+            "target": self.target,
+            "planner": job["planner"],
+            "perception": "instance",
+            "rule": job["rule"] if job["planner"] in CP_PLANNERS else None,
+            "collapse_maps": None
+            if job["planner"] not in CP_PLANNERS
+            else ("physics truth" if truth is not None else "predicted"),
+            "rejected_starts": dict(spec.meta.get("rejected", {})),
+            "collapse_free_params": {
+                "drop_m": job["collapse_free"].drop_m,
+                "tilt_deg": job["collapse_free"].tilt_deg,
+            },
+            "moved_threshold_m": params.moved_threshold_m,
+            "steps": [_rounded(s) for s in steps],
+            "n_disturbed": overall.n_disturbed,
+            "disturbance_m": overall.disturbance_m,
+        } | judge_episode(steps, self.end, self.target)
+        if job.get("executor", "kinematic") == "arm":  # kinematic records keep their old fields
+            record["executor"] = "arm"
+        if truth is not None:
+            record["truth_simulations"] = truth.simulations
+        if isinstance(planner, SearchOracle):
+            record |= {
+                "search_nodes": planner.nodes,
+                "search_exhausted": planner.exhausted,
+                "search_replanned": planner.replanned,
+                # what the first search proved possible under each criterion (the ceilings)
+                "search_found_strict": bool(planner.found.get("strict_success", False)),
+                "search_found": bool(planner.found.get("success", False)),
+            }
+        if hasattr(planner, "first") and hasattr(planner, "steps"):  # physics from depth
+            from clutterbench.trials.physics_model import estimate_record
+
+            record |= estimate_record(planner, spec)
+        return EpisodeResult(_rounded(record), log)
 
 
 def _rounded(d: dict[str, Any]) -> dict[str, Any]:

@@ -1,0 +1,57 @@
+"""`clutterbench evaluate-agent`: any gymnasium policy through ClutterShelfPlan-v1 on a stream's
+episodes, written as the trials' records."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from clutterbench.cli.common import app, default_path, user_errors
+from clutterbench.errors import ClutterbenchError
+
+
+@app.command("evaluate-agent")
+def evaluate_agent(
+    agent: Annotated[
+        str,
+        typer.Argument(
+            metavar="MODULE:FACTORY",
+            help="FACTORY(env) -> a policy (obs -> action, or .act(obs)); MODULE: an importable "
+            "module or a .py file (e.g. docs/examples/random_agent.py:make_agent).",
+        ),
+    ],
+    stream: Annotated[
+        str, typer.Option("--stream", help="Scene stream (a key of trials.streams).")
+    ] = "ch6_3_10",
+    episodes: Annotated[int, typer.Option("--episodes", min=1, help="Episodes 0..N-1.")] = 20,
+    first: Annotated[int, typer.Option("--first", min=0, help="First episode index.")] = 0,
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", help="Output root (default: reports/agents): OUT/NAME/records.jsonl"),
+    ] = None,
+    name: Annotated[
+        str | None, typer.Option("--name", help="Condition name (default: FACTORY).")
+    ] = None,
+    scale: Annotated[
+        str | None, typer.Option("--scale", help="Scale profile (default: base.scale).")
+    ] = None,
+) -> None:
+    """Run an agent through ClutterShelfPlan-v1 on episodes of a stream (the trials' scenes
+    and targets, the episode protocol, judged from physics) and write the trials' records,
+    summary (both success criteria) and MCAP; print the summary's headline."""
+    with user_errors():
+        from clutterbench.envs.evaluate import evaluate_agent as run
+
+        out_dir = default_path(out, "reports/agents")
+        if out_dir.exists() and not out_dir.is_dir():
+            raise ClutterbenchError(f"--out {out_dir}: is a file, not a directory")
+        summary = run(agent, stream, episodes, out_dir, name=name, first=first, scale=scale)
+        cond = summary["condition"]
+        typer.echo(
+            f"{cond} on {summary['stream']} ({summary['episodes']} episodes): "
+            f"success (collapse-free) {summary['success_k']}/{summary['success_n']}, "
+            f"strict {summary['strict_success_k']}/{summary['strict_success_n']}; "
+            f"wrote {out_dir / cond}/records.jsonl, summary.json"
+        )

@@ -1,0 +1,30 @@
+"""The shelf scenes as environments others can plug into (gymnasium ids, all registered when
+this package is imported):
+
+- `ClutterShelfExtract-v1`, `ClutterShelfBimanual-v1`: ManiSkill 3 tasks, one or two Pandas
+  (maniskill/tasks.py); joint-level control.
+- `ClutterShelfPlan-v1`: the thesis' planning-level decision (envs/plan.py): observe, then
+  choose the box to pull and the box to hold; each step executed and judged under the
+  trials' episode protocol.
+
+With no arguments every env draws its scenes from the stream ch6_3_10: `reset(seed=i)` is
+the pipeline's episode i (scene and target). `clutterbench evaluate-agent` runs a policy
+through the planning env and writes records like the trials stage (envs/evaluate.py).
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+
+import clutterbench.maniskill.tasks  # noqa: F401  (registers the ManiSkill tasks)
+
+PLAN_ENV_ID = "ClutterShelfPlan-v1"
+ENV_IDS = ("ClutterShelfExtract-v1", "ClutterShelfBimanual-v1", PLAN_ENV_ID)
+"""Every environment this project registers (the contract tests parametrize over them)."""
+
+if PLAN_ENV_ID not in gym.registry:
+    gym.register(PLAN_ENV_ID, entry_point="clutterbench.envs.plan:ClutterShelfPlanEnv")
+
+from clutterbench.envs.plan import NO_BOX  # noqa: E402
+
+__all__ = ["ENV_IDS", "NO_BOX", "PLAN_ENV_ID"]

@@ -1,0 +1,112 @@
+"""Evaluate any agent on the planning env: episodes of a stream -> the trials' records and
+summary (`clutterbench evaluate-agent MODULE:FACTORY`).
+
+The agent runs through `ClutterShelfPlan-v1` exactly as a trials condition runs a planner:
+the same scenes and targets (episode i of the stream), the same episode protocol
+(trials.ch6.Extraction), one process with one torch thread (the trials workers' setting), and
+the records, summary and MCAP are written by the trials' own writer (harness.write_condition),
+both success criteria (`success`: collapse-free; `strict_success`) included, so a row is
+comparable with Table 6.3's row on that stream.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from clutterbench.errors import ClutterbenchError
+
+
+def load_factory(ref: str) -> Callable[[Any], Any]:
+    """MODULE:FACTORY -> the factory; MODULE is an importable module or a .py file."""
+    module_name, sep, attr = ref.rpartition(":")
+    if not sep or not module_name or not attr:
+        raise ClutterbenchError(f"agent {ref!r}: give MODULE:FACTORY (e.g. my_agent.py:make)")
+    if module_name.endswith(".py") or "/" in module_name:
+        path = Path(module_name)
+        if not path.is_file():
+            raise ClutterbenchError(f"agent {ref!r}: no file {path}")
+        spec = importlib.util.spec_from_file_location(f"_agent_{path.stem}", path)
+        module = importlib.util.module_from_spec(spec)
+        try:
+            spec.loader.exec_module(module)
+        except Exception as exc:
+            raise ClutterbenchError(f"agent {ref!r}: {path} failed to load ({exc})") from None
+    else:
+        try:
+            module = importlib.import_module(module_name)
+        except ImportError as exc:
+            raise ClutterbenchError(f"agent {ref!r}: cannot import {module_name} ({exc})") from None
+    factory = getattr(module, attr, None)
+    if not callable(factory):
+        raise ClutterbenchError(f"agent {ref!r}: {module_name} has no callable {attr!r}")
+    return factory
+
+
+def run_agent(env: Any, agent: Any, episodes: range, label: str = "episodes") -> list[Any]:
+    """Run `agent` on each episode index of `episodes` -> their EpisodeResults, in order."""
+    from clutterbench.progress import progress_bar
+
+    u = env.unwrapped
+    policy = agent if callable(agent) else getattr(agent, "act", None)
+    if policy is None:
+        raise ClutterbenchError("agent: the factory returned neither a callable nor an act(obs)")
+    monitor = getattr(agent, "collapse_score", None)
+    if monitor is not None:
+        u.set_monitor(monitor, getattr(agent, "cp_max", float("inf")))
+    results = []
+    with progress_bar(label, total=len(episodes)) as advance:
+        for i in episodes:
+            obs, _ = env.reset(seed=i)
+            if hasattr(agent, "reset"):
+                agent.reset(i)
+            done = False
+            while not done:
+                obs, _, terminated, truncated, _ = env.step(policy(obs))
+                done = terminated or truncated
+            results.append(u.episode_result())
+            advance(1)
+    return results
+
+
+def evaluate_agent(
+    ref: str,
+    stream: str,
+    episodes: int,
+    out_dir: Path,
+    name: str | None = None,
+    first: int = 0,
+    scale: str | None = None,
+    record_images: bool = False,
+) -> dict[str, Any]:
+    """Agent `ref` (MODULE:FACTORY) on episodes first..first+episodes-1 of `stream` ->
+    out_dir/<name>/records.jsonl, summary.json and episodes.mcap; returns the summary."""
+    import gymnasium as gym
+
+    import clutterbench.envs  # noqa: F401  (registers the envs)
+    from clutterbench.envs import PLAN_ENV_ID
+    from clutterbench.parallel import worker_init
+    from clutterbench.trials.harness import write_condition
+
+    if episodes < 1 or first < 0:
+        raise ClutterbenchError(f"--episodes {episodes} / --first {first}: need >= 1 / >= 0")
+    factory = load_factory(ref)
+    name = name or ref.rpartition(":")[2]
+    worker_init(1)  # one renderer, torch on one thread: the trials workers' setting
+    env = gym.make(PLAN_ENV_ID, stream=stream, scale=scale, name=name, record_images=record_images)
+    agent = factory(env)
+    results = run_agent(env, agent, range(first, first + episodes), label=name)
+    source = env.unwrapped.source
+    about = {
+        "condition": name,
+        "planner": name,
+        "agent": ref,
+        "stream": source.name,
+        "first_episode": first,
+        "scale": source.scale,
+    }
+    env.close()
+    return write_condition(name, results, about, out_dir, out_dir)

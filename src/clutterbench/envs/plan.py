@@ -1,0 +1,277 @@
+"""`ClutterShelfPlan-v1`: the thesis' planning-level decision as a gymnasium environment.
+
+    import gymnasium as gym
+    import clutterbench.envs  # registers it
+    env = gym.make("ClutterShelfPlan-v1")              # stream ch6_3_10
+    obs, info = env.reset(seed=17)                      # the pipeline's episode 17
+    obs, reward, terminated, truncated, info = env.step((pull, hold))
+
+Observation (what the robot sees, nothing else): `depth_m` (H, W) float32 metres along the
+optical axis (0: nothing hit), `instance` (H, W) uint8 (0 background, k + 1 = box k: the
+simulator's instance image, as the trials' `perception: instance`), the camera's `K` (3, 3)
+and `T_world_from_cam` (4, 4, OpenCV camera frame in the shelf frame), the `target` box
+and `blocked` (MAX_BOXES,) int8: the boxes whose last pull aborted (the episode's own
+history, as the trials hand it to their planners).
+
+Action: (box to pull, box to hold), MultiDiscrete([MAX_BOXES + 1] * 2); NO_BOX (=
+MAX_BOXES) holds nothing, and as the box to pull gives up (the episode ends, "gave_up").
+A box not in the scene is refused (ActionError); `info["action_mask"]` masks the visible
+boxes (and the target) for `action_space.sample(mask=...)`; the held box must differ from the
+pulled one.
+
+Each step is one step of the trials' episode protocol (trials.ch6.Extraction, the object the
+trials stage drives): executed by the kinematic executor from the step's canonical start,
+the held box released and the scene settled, judged from physics. `info` carries the step
+record's named booleans (protocol.STEP_FIELDS), `end` (protocol.EPISODE_ENDS, None while it
+goes on) and, once it ended, `episode` (the episode's named outcome: `success`, collapse-free,
+and `strict_success`). terminated: the protocol ended the episode; truncated: its attempt cap
+(trials.ch6.max_steps). Reward (sparse): 1 on the step that ends a collapse-free success.
+
+A policy may also monitor its pulls as Algorithm 1 does: `env.unwrapped.set_monitor(score,
+cp_max)` with `score(obs, pull, hold) -> float`, called before every pull increment with
+the observation of that moment (the first: the one the decision read); a score above cp_max
+stops the pull (an abort, as in the trials).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from clutterbench.errors import ActionError, ClutterbenchError
+from clutterbench.observation import CameraModel, Observation
+from clutterbench.planning.extraction import Decision
+from clutterbench.trials.harness import EpisodeResult
+from clutterbench.trials.protocol import STEP_FIELDS, judge_episode
+from clutterbench.trials.streams import StreamSource, stream_source
+
+MAX_BOXES = 30
+"""Box indices an action can name (SceneStreamConfig allows at most 30 boxes)."""
+NO_BOX = MAX_BOXES
+"""The action's `hold` for nothing held; as `pull`: give up."""
+Monitor = Callable[[dict[str, Any], int, "int | None"], float]
+
+
+def observation_dict(obs: Observation, target: int, blocked: set[int]) -> dict[str, Any]:
+    """The env's observation of a rendered view (trials' Observation)."""
+    mask = np.zeros(MAX_BOXES, dtype=np.int8)
+    mask[sorted(blocked)] = 1
+    return {
+        "depth_m": obs.depth_m.copy(),  # fresh arrays each call (a policy may keep them)
+        "instance": obs.instance.copy(),
+        "K": np.array(obs.camera.K, dtype=np.float64),
+        "T_world_from_cam": np.array(obs.camera.T_world_from_cam, dtype=np.float64),
+        "target": np.int64(target),
+        "blocked": mask,
+    }
+
+
+def as_observation(obs: dict[str, Any]) -> Observation:
+    """The planners' Observation of an env observation (the same arrays)."""
+    return Observation(
+        depth_m=obs["depth_m"],
+        instance=obs["instance"],
+        camera=CameraModel(K=obs["K"], T_world_from_cam=obs["T_world_from_cam"]),
+    )
+
+
+class _Decider:
+    """What the episode protocol asks of whoever decided a step: here nothing (no monitor)."""
+
+
+class _Monitored:
+    """... or a collapse score monitoring the pull (Algorithm 1), read on env observations."""
+
+    def __init__(self, env: ClutterShelfPlanEnv, score: Monitor):
+        self.env, self.score = env, score
+
+    def collapse_score(self, obs: Observation, box: int, hold: int | None = None) -> float:
+        return float(self.score(self.env._as_dict(obs), box, hold))
+
+
+class ClutterShelfPlanEnv(gym.Env):
+    """Pull which box, hold which (see the module's doc). kwargs: `stream` (a key of
+    trials.streams, default ch6_3_10) or `family` / `n_objects` / `catalogue`; `scale` (the
+    params' scale profile, default base.scale); `name` (the records' condition and planner
+    fields); `record_images` (depth and instance images in the episode's MCAP events)."""
+
+    metadata = {"render_modes": []}
+
+    def __init__(
+        self,
+        stream: str | None = None,
+        family: Any = None,
+        n_objects: Any = None,
+        catalogue: str | None = None,
+        scale: str | None = None,
+        name: str = "agent",
+        record_images: bool = False,
+    ):
+        self.source: StreamSource = stream_source(stream, family, n_objects, catalogue, scale)
+        self.name, self.record_images = name, record_images
+        size = self.source.camera.image_size
+        self.observation_space = spaces.Dict(
+            {
+                "depth_m": spaces.Box(0.0, np.inf, (size, size), np.float32),
+                "instance": spaces.Box(0, 255, (size, size), np.uint8),
+                "K": spaces.Box(-np.inf, np.inf, (3, 3), np.float64),
+                "T_world_from_cam": spaces.Box(-np.inf, np.inf, (4, 4), np.float64),
+                "target": spaces.Discrete(MAX_BOXES),
+                "blocked": spaces.MultiBinary(MAX_BOXES),
+            }
+        )
+        self.action_space = spaces.MultiDiscrete([MAX_BOXES + 1, MAX_BOXES + 1])
+        self.monitor: Monitor | None = None
+        self.cp_max = np.inf
+        self.episode = None
+        self.episode_index: int | None = None
+        self._next_episode = 0
+        self._obs: dict[str, Any] | None = None
+
+    # -- the policy's optional pull monitor ----------------------------------------------------
+    def set_monitor(self, score: Monitor | None, cp_max: float) -> None:
+        """Monitor every pull with `score(obs, pull, hold)`; above `cp_max` it stops."""
+        self.monitor, self.cp_max = score, float(cp_max)
+        if self.episode is not None:
+            self.episode.job["cp_max"] = self.cp_max
+
+    def _decider(self) -> Any:
+        return _Decider() if self.monitor is None else _Monitored(self, self.monitor)
+
+    def _as_dict(self, obs: Observation) -> dict[str, Any]:
+        ep = self.episode
+        if obs is ep.obs and self._obs is not None:
+            return self._obs  # the observation the decision read: the very same object
+        return observation_dict(obs, ep.target, ep.blocked)
+
+    # -- gymnasium -------------------------------------------------------------------------------
+    def job(self, index: int) -> dict[str, Any]:
+        """The episode's job, as trials.ch6.ch6_jobs makes one (no planner of the registry:
+        the decisions come from `step`)."""
+        src = self.source
+        return {
+            "condition": self.name,
+            "planner": self.name,
+            "rule": None,
+            "stream": src.name,
+            "stream_cfg": src.cfg,
+            "index": index,
+            "seed": src.seed,
+            "physics": src.physics,
+            "camera": src.camera,
+            "params": src.trials.ch6,
+            "collapse_free": src.trials.collapse_free,
+            "support": None,
+            "cp_max": self.cp_max,
+            "model_path": None,
+            "ch4_model_path": None,
+            "max_attempts": src.trials.max_attempts,
+            "record_images": self.record_images,
+            "executor": "kinematic",
+            "arm": src.trials.arm,
+        }
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Episode `seed` (an int >= 0; None: the next one) of the stream; options may name
+        another stream (`stream`, or `family` / `n_objects` / `catalogue`)."""
+        from clutterbench.trials.ch6 import Extraction
+
+        super().reset(seed=seed)
+        options = dict(options or {})
+        keys = ("stream", "family", "n_objects", "catalogue")
+        unknown = set(options) - set(keys)
+        if unknown:
+            raise ClutterbenchError(
+                f"reset options: unknown {', '.join(sorted(unknown))} (known: {', '.join(keys)})"
+            )
+        if options:
+            self.source = stream_source(*(options.get(k) for k in keys), scale=self.source.scale)
+        if seed is None:
+            index = self._next_episode
+        elif isinstance(seed, int | np.integer) and seed >= 0:
+            index = int(seed)
+        else:
+            raise ClutterbenchError(f"reset(seed={seed!r}): an episode index, an int >= 0")
+        self.episode_index, self._next_episode = index, index + 1
+        spec = self.source.spec(index)
+        self.episode = Extraction(spec, self.job(index))
+        self._obs = self._observation()
+        return self._obs, {"action_mask": self.action_mask(), "episode_index": index}
+
+    def _observation(self) -> dict[str, Any]:
+        ep = self.episode
+        return observation_dict(ep.obs, ep.target, ep.blocked)
+
+    def action_mask(self) -> tuple[np.ndarray, np.ndarray]:
+        """(pull, hold) masks for MultiDiscrete sampling: the visible boxes and the target
+        (pull; NO_BOX gives up, never sampled), the visible boxes and NO_BOX (hold)."""
+        ep = self.episode
+        visible = [k for k in ep.obs.visible_boxes(1) if k not in ep.state.removed]
+        pull = np.zeros(MAX_BOXES + 1, dtype=np.int8)
+        pull[sorted({*visible, ep.target})] = 1
+        hold = np.zeros(MAX_BOXES + 1, dtype=np.int8)
+        hold[visible] = 1
+        hold[NO_BOX] = 1
+        return pull, hold
+
+    def _check(self, action: Any) -> tuple[int, int | None]:
+        ep = self.episode
+        if isinstance(action, dict):
+            action = (action.get("pull"), action.get("hold", NO_BOX))
+        a = np.asarray(action, dtype=np.float64) if action is not None else np.array([])
+        if a.shape != (2,):
+            raise ActionError(f"action {action!r}: (box to pull, box to hold or {NO_BOX})")
+        if np.isnan(a).any():
+            raise ActionError("action holds NaN (a policy produced NaN; refused)")
+        if not np.array_equal(a, np.round(a)):
+            raise ActionError(f"action {action!r}: box indices are integers")
+        pull, hold = int(a[0]), int(a[1])
+        n = ep.spec.n
+        in_scene = [k for k in range(n) if k not in ep.state.removed]
+        if pull != NO_BOX and pull not in in_scene:
+            raise ActionError(
+                f"action: pull {pull}: not a box in the scene (boxes {in_scene}; {NO_BOX}: give up)"
+            )
+        if hold != NO_BOX and (hold not in in_scene or hold == pull):
+            raise ActionError(
+                f"action: hold {hold}: not a box in the scene other than the pulled one "
+                f"(boxes {in_scene}; {NO_BOX}: hold nothing)"
+            )
+        return pull, (None if hold == NO_BOX else hold)
+
+    def step(self, action: Any):
+        ep = self.episode
+        if ep is None or ep.done:
+            raise ClutterbenchError("ClutterShelfPlan: the episode has ended; call reset()")
+        pull, hold = self._check(action)
+        step: dict[str, Any] | None = None
+        decider = self._decider()
+        ep.before_decision(decider)
+        if pull == NO_BOX:
+            ep.give_up()
+        else:
+            step = ep.step(Decision(pull, hold, {"policy": self.name}), decider)
+        self._obs = self._observation()
+        info: dict[str, Any] = {"action_mask": self.action_mask(), "end": ep.end}
+        if step is not None:
+            from clutterbench.trials.ch6 import _rounded
+
+            record = _rounded(step)
+            info |= {k: record[k] for k in STEP_FIELDS} | {"step": record}
+        reward = 0.0
+        if ep.done:
+            info["episode"] = judge_episode(ep.steps, ep.end, ep.target)
+            reward = float(info["episode"]["success"])
+        truncated = ep.end == "max_steps"
+        terminated = ep.done and not truncated
+        return self._obs, reward, terminated, truncated, info
+
+    def episode_result(self) -> EpisodeResult:
+        """The ended episode's record (the trials' format) and its MCAP events."""
+        if self.episode is None or not self.episode.done:
+            raise ClutterbenchError("ClutterShelfPlan: no ended episode to record")
+        return self.episode.result(self._decider())
