@@ -82,8 +82,8 @@ class StreamSource:
     def episode(self, index: int) -> tuple[SceneSpec, int]:
         """Scene `index` of the stream and its target (the trials' target stream, drawn from
         the canonical start's observation)."""
+        from clutterbench.sim.pull import SceneState, world_at
         from clutterbench.sim.render import observe
-        from clutterbench.trials.protocol import SceneState, world_at
         from clutterbench.trials.scenes import draw_target
 
         spec = self.spec(index)  # the episode's canonical start, as trials.ch6.Extraction's
