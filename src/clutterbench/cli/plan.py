@@ -75,7 +75,8 @@ def plan(
         from clutterbench.sim.physics import BoxWorld
         from clutterbench.sim.render import observe
         from clutterbench.sim.spec import SceneSpec
-        from clutterbench.trials.ch6 import PLANNERS, ch6_jobs, run_extraction
+        from clutterbench.trials.ch6 import ch6_jobs, run_extraction
+        from clutterbench.trials.ch6_planners import PLANNERS
         from clutterbench.trials.config import ConditionConfig, TrialsConfig
         from clutterbench.trials.harness import load_predictor, write_mcap
         from clutterbench.trials.scenes import truth_moved_contact

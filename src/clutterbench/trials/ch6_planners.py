@@ -1,0 +1,223 @@
+"""The ch. 6 planners by name (`trials.conditions.<c>.planner`): the registry
+(`register_planner`, docs/extending.md), the built-in factories (the thesis' previous
+method, Algorithm 1 with predicted or truth maps, the oracles, physics from depth, random,
+pull-the-target) and the user planner modules loaded by name."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from clutterbench.errors import ClutterbenchError
+from clutterbench.observation import Observation
+from clutterbench.planning.extraction import (
+    CollapseGraphPlanner,
+    Decision,
+    RandomOrderPlanner,
+    TargetFirstPlanner,
+)
+from clutterbench.planning.support import SupportParams
+from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.ch6_oracle import SearchOracle
+from clutterbench.trials.config import Ch6TrialParams
+from clutterbench.trials.harness import load_predictor
+from clutterbench.trials.scenes import policy_rng
+from clutterbench.trials.truth_maps import TruthCollapseMaps
+
+
+class SupportWhilePullPlanner:
+    """The thesis' previous method as the single-step rows of Table 6.3 (their counts equal
+    the various-size cells of Table 4.1): pull the target at once while the second arm holds
+    the support of least risk r_c chosen by the chapter 4 network (eqs. 4.1, 4.2)."""
+
+    def __init__(self, predictor: Any, params: Ch6TrialParams):
+        self.predictor, self.params = predictor, params
+
+    def decide(self, obs: Observation, target: int, blocked: frozenset[int]) -> Decision:
+        from clutterbench.perception.masks import segment
+        from clutterbench.planning.risk_planner import plan_risk
+
+        seg = segment(obs, "instance", min_pixels=self.params.min_pixels)
+        if target not in seg.ids or len(seg.ids) < 2:
+            return Decision(target, None, {"policy": "single_step", "support": None})
+        choice, pairs, risks, _ = plan_risk(
+            self.predictor, obs, seg, seg.ids.index(target), self.params.ch4_pixel_threshold
+        )
+        hold = seg.ids[choice.support] if choice.support is not None else None
+        finite = np.isfinite(choice.risk)
+        state = {
+            "policy": "single_step",
+            "support": hold,
+            "risk": round(float(choice.risk), 4) if finite else None,
+        }
+        return Decision(target, hold, state)
+
+
+PLANNERS: dict[str, Callable[[dict[str, Any], SceneSpec], Any]] = {}
+"""ch. 6 planner name -> factory(job, spec): the registry the conditions' `planner` names."""
+
+
+def chosen_support(thresholds: Path, rule: str) -> SupportParams:
+    """The support rule's thresholds chosen on validation scenes by the support stage."""
+    from clutterbench.io import read_json
+
+    chosen = read_json(thresholds)
+    try:
+        return SupportParams(**chosen["chosen"][rule])
+    except (KeyError, TypeError) as exc:
+        raise ClutterbenchError(
+            f"{thresholds}: no usable thresholds for rule '{rule}' ({exc}); rerun the support stage"
+        ) from None
+
+
+def register_planner(name: str):
+    """Register a ch. 6 planner factory under `name` (usable as a condition's planner)."""
+
+    def wrap(factory):
+        PLANNERS[name] = factory
+        return factory
+
+    return wrap
+
+
+@register_planner("pull_target")
+def _pull_target(job: dict[str, Any], spec: SceneSpec):
+    return TargetFirstPlanner()
+
+
+@register_planner("single_step")
+def _single_step(job: dict[str, Any], spec: SceneSpec):
+    return SupportWhilePullPlanner(
+        load_predictor(job["ch4_model_path"], job["camera"].image_size), job["params"]
+    )
+
+
+@register_planner("random")
+def _random(job: dict[str, Any], spec: SceneSpec):
+    rng = policy_rng(job["seed"], job["stream"], job["index"], job["planner"])
+    return RandomOrderPlanner(rng, job["params"].min_pixels)
+
+
+@register_planner("oracle")
+def _oracle(job: dict[str, Any], spec: SceneSpec):
+    return SearchOracle(
+        spec, job["physics"], job["camera"], job["params"], False, job["collapse_free"]
+    )
+
+
+@register_planner("oracle_hold")
+def _oracle_hold(job: dict[str, Any], spec: SceneSpec):
+    return SearchOracle(
+        spec, job["physics"], job["camera"], job["params"], True, job["collapse_free"]
+    )
+
+
+def _cpg_planner(job: dict[str, Any], bimanual: bool, spec: SceneSpec | None = None):
+    """Algorithm 1 with the collapse predictor, or (`spec` given) with physics-truth maps of
+    that scene through the same interface: the same planner, rule and thresholds."""
+    params: Ch6TrialParams = job["params"]
+    if spec is None:
+        predictor = load_predictor(job["model_path"], job["camera"].image_size)
+    else:
+        predictor = TruthCollapseMaps(spec, job["physics"], params.moved_threshold_m)
+    return CollapseGraphPlanner(
+        predictor, job["support"], job["cp_max"], params.min_pixels, bimanual=bimanual
+    )
+
+
+@register_planner("multi_step")
+def _multi_step(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=False)
+
+
+@register_planner("bimanual")
+def _bimanual(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=True)
+
+
+@register_planner("multi_step_truth")
+def _multi_step_truth(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=False, spec=spec)
+
+
+@register_planner("bimanual_truth")
+def _bimanual_truth(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=True, spec=spec)
+
+
+def _physics_from_depth(job: dict[str, Any], spec: SceneSpec, holding: bool):
+    """The physics-from-depth planner (planning/physics_depth.py): boxes fitted to each
+    observation, searched in SAPIEN by the oracle's code on that estimate. Of the episode's
+    spec it gets the shelf only (fixed, a robot knows it); of its stream the catalogue."""
+    from clutterbench.planning.physics_depth import PhysicsFromDepthPlanner
+    from clutterbench.trials.physics_model import EstimatedWorldModel, make_estimator
+
+    params: Ch6TrialParams = job["params"]
+    model = EstimatedWorldModel(
+        spec.shelf,
+        job["camera"],
+        job["physics"],
+        params,
+        holding,
+        job["collapse_free"],
+        SearchOracle,
+    )
+    estimate = make_estimator(job["stream_cfg"].catalogue, params.min_pixels)
+    return PhysicsFromDepthPlanner(estimate, model, holding)
+
+
+@register_planner("physics_from_depth")
+def _pfd(job: dict[str, Any], spec: SceneSpec):
+    return _physics_from_depth(job, spec, holding=False)
+
+
+@register_planner("physics_from_depth_hold")
+def _pfd_hold(job: dict[str, Any], spec: SceneSpec):
+    return _physics_from_depth(job, spec, holding=True)
+
+
+CP_PLANNERS = ("multi_step", "bimanual", "multi_step_truth", "bimanual_truth")
+"""The planners of Algorithm 1 (a support rule, cp_max); `*_truth` read physics-truth maps."""
+
+
+def reads_truth_maps(name: str) -> bool:
+    return name.endswith("_truth") and name in CP_PLANNERS
+
+
+def truth_maps_of(planner: Any) -> TruthCollapseMaps | None:
+    """The physics-truth maps a planner reads instead of the collapse predictor, if any."""
+    maps = getattr(planner, "predict", None)
+    return maps if isinstance(maps, TruthCollapseMaps) else None
+
+
+def load_planners(modules: Sequence[str], names: Sequence[str]) -> None:
+    """Import the modules that register extra planners, then check that every planner a
+    condition names is registered (one line naming the first that is not)."""
+    import importlib
+
+    for module in modules:
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise ClutterbenchError(
+                f"trials.planner_modules: cannot import {module} ({exc})"
+            ) from None
+    for name in names:
+        if name not in PLANNERS:
+            raise ClutterbenchError(
+                f"planner '{name}': not registered (known: {', '.join(PLANNERS)}; a module "
+                "registering more goes in trials.planner_modules)"
+            )
+
+
+def make_planner(job: dict[str, Any], spec: SceneSpec):
+    try:
+        factory = PLANNERS[job["planner"]]
+    except KeyError:
+        raise ClutterbenchError(
+            f"planner '{job['planner']}': not registered (known: {', '.join(PLANNERS)})"
+        ) from None
+    return factory(job, spec)
