@@ -19,7 +19,7 @@ TORCH_PIP_ARGS := $(if $(TORCH_INDEX_URL),--index-url $(TORCH_INDEX_URL))
 TORCH_CHOICE := $(if $(filter-out torch==2.13.0,$(TORCH_SPEC))$(TORCH_INDEX_URL),echo '$(TORCH_SPEC) $(TORCH_INDEX_URL)';)
 STAMP := $(VENV)/.installed-$(shell ($(TORCH_CHOICE) cat requirements.lock pyproject.toml) 2>/dev/null | sha1sum | cut -c1-12)
 
-.PHONY: setup system venv repro test lint bench learning-curve dev-ch4-piles clean-venv shell
+.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles clean-venv shell
 
 setup: system venv .dvc/config
 
@@ -69,6 +69,11 @@ crosscheck: setup
 # training time): reports/learning_curve/cp_focal.{md,csv,png}
 learning-curve: setup
 	python -m clutterbench.collapse.learning_curve cp_focal --fractions 0.25 0.5
+
+# Collapse network designs at equal training time (params designs:; ~50 min at default
+# scale on 2 free cores; needs split@ch6) -> reports/learning_curve/designs.{csv,md,png}
+designs: setup
+	python -m clutterbench.collapse.designs
 
 # The ch. 4 training piles rechecked on dev streams (params dev.ch4_piles; ~30 min at default
 # scale on 2 free cores): a network per pile range, the risk planner on each dev stream ->

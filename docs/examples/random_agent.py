@@ -1,6 +1,6 @@
 """A random agent for ClutterShelfPlan-v1: pull a random visible box (or the target), hold none.
 
-    clutterbench evaluate-agent docs/examples/random_agent.py:make_agent --episodes 20
+clutterbench evaluate-agent docs/examples/random_agent.py:make_agent --episodes 20
 """
 
 import numpy as np

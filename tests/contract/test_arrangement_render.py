@@ -14,6 +14,7 @@ from clutterbench.sim.families.shelved import STANDING
 from clutterbench.sim.geometry import quat_from_axis_angle, quat_mul, quat_to_matrix
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import observe
+from clutterbench.sim.shelf import Shelf
 from clutterbench.sim.spec import SceneSpec
 
 BOOK = np.array([0.10, 0.12, 0.03])  # local (D, W, H): standing, W vertical, H along y
@@ -75,3 +76,19 @@ def test_mirrored_scene_renders_mirrored(views):
     right, left = views[-1][1], views[1][1]
     a, b = right.instance > 0, np.fliplr(left.instance > 0)
     assert (a & b).sum() / (a | b).sum() > 0.95
+
+
+@pytest.mark.parametrize(("side", "expected"), [(-1, "C^r"), (1, "C^l")])
+def test_a_lone_book_leaning_on_a_wall_is_c_r_or_c_l(physics, camera, side, expected):
+    """Thesis Fig. 5.9: a single object leaning against the side wall is C^r / C^l by its
+    lean, not C^v (the class of a single upright object, thesis 5.2.1), after settling."""
+    from clutterbench.sim.families.replenish import lean_against
+
+    world = BoxWorld(Shelf(), physics)
+    wall = side * (world.shelf.width_m / 2)
+    lean_against(world, BOOK, wall, side, 22.0, 0.14)
+    assert world.settle().at_rest
+    spec = SceneSpec(sizes_m=np.array([BOOK]), poses=world.poses())
+    obs = observe(BoxWorld.from_spec(spec, physics, render=True), camera)
+    _, classes, _ = scene_clusters(spec.sizes_m, spec.poses, [[0]], [], obs.instance)
+    assert [CLASSES[c] for c in classes] == [expected]

@@ -330,3 +330,28 @@ def test_folding_batchnorm_keeps_the_function(arch):
             want = forward_logits(model, d, target, False, False, so)
             got = forward_logits(folded, d, target, False, False, so)
             torch.testing.assert_close(got, want, rtol=1e-4, atol=1e-4)
+
+
+@pytest.mark.parametrize("stride", [2, 4])
+def test_a_coarser_decoder_drops_its_largest_convs_and_still_maps_full_size(stride):
+    """output_stride 2 / 4: the decoder stops one / two upsamplings early (its largest,
+    per-target convs gone) and the logits are upsampled to the input size; grouped and
+    per-pair forwards still agree."""
+    torch.manual_seed(0)
+    full = build_model("collapse_map", tiny_config("collapse_map"))
+    model = build_model("collapse_map", tiny_config("collapse_map", output_stride=stride)).eval()
+    assert len(model.decoder) == len(full.decoder) - {2: 1, 4: 2}[stride]
+    g = torch.Generator().manual_seed(1)
+    depth = 0.4 + 0.5 * torch.rand(2, 1, SIZE, SIZE, generator=g)
+    masks = (torch.rand(5, 1, SIZE, SIZE, generator=g) > 0.8).float()
+    scene_of = torch.tensor([0, 1, 1, 0, 1])
+    with torch.no_grad():
+        grouped = model(depth, masks, scene_of)
+        per_pair = model(depth[scene_of], masks)
+    assert grouped.shape == (5, 1, SIZE, SIZE)
+    torch.testing.assert_close(grouped, per_pair, rtol=1e-4, atol=1e-5)
+    sizes = []
+    model.head.register_forward_hook(lambda m, i, out: sizes.append(out.shape[-1]))
+    with torch.no_grad():
+        model(depth, masks, scene_of)
+    assert sizes == [SIZE // stride]  # the head predicts at 1/stride, then it is upsampled

@@ -285,3 +285,55 @@ def test_the_new_box_is_carried_in_from_the_front_and_pushes_what_is_in_its_way(
     )
     assert out.record["placed"] and not out.record["others_still"], out.record
     assert out.record["n_disturbed"] >= 1
+
+
+def test_without_prediction_skips_only_the_collapse_tests(scene):
+    """Table 5.2's "without collapse prediction" is the same planner with the prediction
+    removed and nothing else (thesis 5.3.2): a collapse map that flags every cluster makes
+    the R_s test (eq. 5.5) refuse every blocker with prediction, while without it the map is
+    never asked and a blocker whose way is clear is carried aside."""
+    from clutterbench.planning.replenish import rect_mask
+
+    spec, _, obs, dets, _ = scene
+    calls = []
+
+    def everything_collapses(o, mask):
+        calls.append(mask.sum())
+        region = np.zeros(o.depth_m.shape, bool)
+        for d in dets:
+            region |= rect_mask(d.box, o.depth_m.shape)
+        return region.astype(float)
+
+    space = ch5.space_of(spec)
+    with_pred = ReplenishPlanner(ReplenishParams(finger_m=0.012), space, everything_collapses)
+    assert with_pred.plan(obs, dets, NEW_BOX).branch != "bimanual"
+    assert calls, "with prediction the blocker's collapse region is asked for"
+    calls.clear()
+    params = ReplenishParams(finger_m=0.012, use_collapse=False)
+    without = ReplenishPlanner(params, space, everything_collapses).plan(obs, dets, NEW_BOX)
+    assert without.branch == "bimanual" and without.move is not None
+    assert calls == [], "the variant without prediction asked for a collapse map"
+
+
+def test_shelved_starts_offer_no_free_place():
+    """Thesis Fig. 5.9: in a shelved trial the obstacle stands where the new box must go, so
+    no placement candidate is free at the start (seen through the ground-truth clusters, for
+    the episode's own box), and in most starts it leans (a lone leaning box: C^r / C^l)."""
+    stream = SceneStreamConfig(
+        families={"replenish_shelved": 1.0}, n_objects=(4, 6), catalogue="various"
+    )
+    cond = Ch5ConditionConfig(planner="oracle", stream="ch5_shelved", perception="clusters")
+    cfg = TrialsConfig().ch5
+    jobs = ch5.ch5_jobs(
+        "shelved", cond, cfg, stream, 0, PhysicsConfig(), CAM, 40, False, 0.5, "shelved"
+    )
+    leaning = 0
+    for job in jobs[:12]:
+        spec, size_m = ch5.draw_start(job)
+        assert spec.family == "replenish_shelved"
+        assert ch5.free_places(spec, job, size_m) == [], (job["index"], spec.meta)
+        state = SceneState.start(spec)
+        obs = observe(world_at(spec, state, job["physics"], render=True), CAM)
+        classes = [d.cls for d in ch5_perception.true_clusters(spec, state, job["physics"], obs)]
+        leaning += any(c in ("C^r", "C^l") for c in classes)
+    assert leaning >= 4, leaning

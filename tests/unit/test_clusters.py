@@ -39,7 +39,12 @@ def test_lean_sign_left_and_right():
     assert classify_cluster(two, np.stack([leaning(-20.0), leaning(-25.0)])) == "C^l"
     assert classify_cluster(two, np.stack([leaning(3.0), leaning(-4.0)])) == "C^v"
     assert classify_cluster(two, np.stack([FLAT, FLAT])) == "C^h"
-    assert classify_cluster(BOOK[None], leaning(30.0)[None]) == "C^v"  # thesis: single -> C^v
+    # thesis 5.2.1: a single object is C^v, unless it leans (Fig. 5.9: C^r / C^l by its lean)
+    assert classify_cluster(BOOK[None], leaning(0.0)[None]) == "C^v"
+    assert classify_cluster(BOOK[None], leaning(8.0)[None]) == "C^v"
+    assert classify_cluster(BOOK[None], FLAT[None]) == "C^v"
+    assert classify_cluster(BOOK[None], leaning(30.0)[None]) == "C^r"
+    assert classify_cluster(BOOK[None], leaning(-30.0)[None]) == "C^l"
 
 
 def test_membership_every_box_once():

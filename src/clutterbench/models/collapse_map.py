@@ -5,7 +5,10 @@ classes.
 Depth -> VGG-16 encoder; each input mask -> its own 5 conv layers (16-32-32-32-64, BN +
 ReLU, each halving the size); all meet at 1/32 of the input and a decoder of five conv
 layers (each after a 2x upsampling, fed the VGG feature map of that size: the skip
-connections) and one 1x1 conv gives per-pixel logits.
+connections) and one 1x1 conv gives per-pixel logits. With `output_stride` 2 (or 4) the
+decoder stops one (two) upsampling(s) early and its logits are resized (bilinear) to the
+input size: the per-target convs at the largest sizes, most of a target's cost, are gone
+(reports/learning_curve/designs.md compares the designs at equal training time).
 
 n_masks = 1, n_classes = 1: target mask -> collapse logit (sigmoid), thesis ch. 5 / 6.
 n_masks = 2, n_classes = 4: extraction + support masks -> B / E / S / C logits (softmax),
@@ -15,6 +18,7 @@ thesis ch. 4 (classes in clutterbench.data.labels.PULL_CLASSES; collapse is the 
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 import torch
 import torch.nn.functional as F
@@ -49,9 +53,18 @@ class CollapseMapConfig:
     """Decoder conv widths, from 1/16 up to full size."""
     depth_range_m: tuple[float, float] = (0.3, 1.0)
     """Depth mapped to [-1, 1] over this range (camera 0.5 m before a 0.28 m deep shelf)."""
+    output_stride: Literal[1, 2, 4] = 1
+    """1: the decoder runs up to the input size (thesis Fig. 5.4 / 6.3); 2 or 4: it stops at
+    1/2 or 1/4 of it (its last one or two decoder_channels unused) and the logits are
+    upsampled (bilinear)."""
 
     def __post_init__(self) -> None:
         check_size_and_depth_range(self.input_size, self.depth_range_m)
+
+    @property
+    def decoder_blocks(self) -> int:
+        """Decoder convs run: 5 up to the input size, one fewer per halving of the output."""
+        return 5 - {1: 0, 2: 1, 4: 2}[self.output_stride]
 
 
 class CollapseMapNet(nn.Module):
@@ -73,7 +86,8 @@ class CollapseMapNet(nn.Module):
         c = skips[-1] + m * cfg.mask_channels[-1]
         self.decoder = nn.ModuleList()
         # Upsample to strides 16, 8, 4, 2 (concatenating that VGG map), then to full size.
-        for c_out, c_skip in zip(cfg.decoder_channels, [*skips[3::-1], 0]):
+        blocks = zip(cfg.decoder_channels, [*skips[3::-1], 0])
+        for c_out, c_skip in list(blocks)[: cfg.decoder_blocks]:
             self.decoder.append(conv_bn_relu(c + c_skip, c_out))
             c = c_out
         self.head = nn.Conv2d(c, cfg.n_classes, 1)
@@ -119,7 +133,7 @@ class CollapseMapNet(nn.Module):
             else:  # the last layer, at full size, has no skip
                 y = conv(pair_in[0])
             x, scene_parts = rest(y), []
-        return self.head(x)
+        return self._full_size(self.head(x), masks)
 
     def _decode_pairs(self, feats: list[torch.Tensor], masks: torch.Tensor) -> torch.Tensor:
         """The concatenated decoder, one depth image per target (thesis Fig. 5.4, 6.3)."""
@@ -128,7 +142,13 @@ class CollapseMapNet(nn.Module):
             skip = feats[3 - i] if i < 4 else masks
             x = upsample_to(x, skip.shape[-2:])
             x = conv(torch.cat([x, skip], dim=1) if i < 4 else x)
-        return self.head(x)
+        return self._full_size(self.head(x), masks)
+
+    def _full_size(self, logits: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
+        """Logits at the input size (upsampled where output_stride > 1)."""
+        if logits.shape[-2:] == masks.shape[-2:]:
+            return logits
+        return upsample_to(logits, masks)
 
     def forward(
         self,

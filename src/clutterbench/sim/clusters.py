@@ -38,13 +38,19 @@ def box_tilt(size_m: np.ndarray, quat: np.ndarray) -> tuple[bool, float]:
 def classify_cluster(sizes_m: np.ndarray, quats: np.ndarray) -> str:
     """Thesis 5.2.1 class of a cluster from its boxes' settled poses.
 
-    A single box is C^v (thesis: "in the case of a single object, it will be classified as
-    C^v"). Otherwise: mostly flat boxes -> C^h; standing boxes whose mean lean is beyond
-    LEAN_DEG -> C^l (top toward the image's left) or C^r; else C^v.
+    Mostly flat boxes -> C^h; standing boxes whose mean lean is beyond LEAN_DEG -> C^l (top
+    toward the image's left) or C^r; else C^v. A single box is C^v (thesis 5.2.1: "in the
+    case of a single object, it will be classified as C^v") unless it stands tilted beyond
+    LEAN_DEG: then it is C^r / C^l by its lean, as the leaning object of thesis Fig. 5.9
+    ("the diagonal direction of the bounding box" gives its inclination, 5.3.2), an obstacle
+    to set upright rather than a row to place beside. A single flat box stays C^v.
     """
-    if len(sizes_m) == 1:
-        return "C^v"
     tilts = [box_tilt(s, q) for s, q in zip(sizes_m, quats)]
+    if len(tilts) == 1:
+        flat, lean = tilts[0]
+        if flat or abs(lean) <= LEAN_DEG:
+            return "C^v"
+        return "C^l" if lean > 0 else "C^r"
     flat = [f for f, _ in tilts]
     if sum(flat) * 2 > len(flat):
         return "C^h"

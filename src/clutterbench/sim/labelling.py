@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import zlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Literal
 
 import numpy as np
@@ -153,11 +153,14 @@ def draw_settled_spec(
     shelf: Shelf,
     meta: Mapping[str, object] | None = None,
     keep_groups: bool = False,
+    accept: Callable[[SceneSpec], str | None] | None = None,
 ) -> SceneSpec:
     """Scene `index` of the seed stream `key`, placed and settled (no labels): the canonical
     start of a trial, or a single scene for the CLI; its meta records the attempt and the
     rejections before it, and with `keep_groups` the groups the family arranged (meta
-    "groups", the seeds of the ground-truth arrangement clusters, sim/clusters.py)."""
+    "groups", the seeds of the ground-truth arrangement clusters, sim/clusters.py).
+    `accept`: the caller's own test of a settled start (None: accepted, else the reason it
+    is rejected and the next attempt drawn), e.g. chapter 5's "no free place at the start"."""
     family, n = draw_scene_setup(seed, key, index, families, n_objects)
     rejected: dict[str, int] = {}
     for attempt in range(max_attempts):
@@ -168,7 +171,7 @@ def draw_settled_spec(
             continue
         sizes = np.array(world.sizes_m)
         kept = {"groups": [[int(i) for i in g] for g in groups]} if keep_groups else {}
-        return SceneSpec(
+        spec = SceneSpec(
             sizes_m=sizes,
             poses=world.poses(),
             shelf=shelf,
@@ -185,6 +188,11 @@ def draw_settled_spec(
             },
             type_ids=catalogue_type_ids(sizes, catalogue),
         )
+        reason = accept(spec) if accept is not None else None
+        if reason is not None:
+            rejected[reason] = rejected.get(reason, 0) + 1
+            continue
+        return spec
     raise ClutterbenchError(
         f"{key} scene {index}: rejected {max_attempts} times ({rejected}); "
         f"the {family} family cannot fit {n} boxes"

@@ -40,6 +40,8 @@ from clutterbench.planning.replenish import (
     ReplenishParams,
     ReplenishPlanner,
     WorkingSpace,
+    candidates,
+    place_clusters,
     rect_mask,
 )
 from clutterbench.sim.catalog import box_extents_m
@@ -50,7 +52,7 @@ from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials import criteria
 from clutterbench.trials.ch5_execution import execute
 from clutterbench.trials.ch5_oracle import action_set, oracle_choice
-from clutterbench.trials.ch5_perception import collapse_map_fn, perceive
+from clutterbench.trials.ch5_perception import collapse_map_fn, perceive, true_clusters
 from clutterbench.trials.config import Ch5ConditionConfig, Ch5TrialParams, SceneStreamConfig
 from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
@@ -77,9 +79,25 @@ def new_box_size(seed: int, stream: str, index: int, catalogue: str) -> np.ndarr
 # -- the episode ---------------------------------------------------------------------------
 def run_ch5_episode(job: dict[str, Any]) -> EpisodeResult:
     """One replenishment trial on scene `job["index"]` of its stream."""
+    spec, size_m = draw_start(job)
+    return replenish(spec, job, size_m)
+
+
+def draw_start(job: dict[str, Any]) -> tuple[SceneSpec, np.ndarray]:
+    """The episode's canonical start and new box (local extents): scene `job["index"]` of
+    its stream, redrawn while a family of NO_FREE_PLACE offers a free candidate for it."""
     cond: Ch5ConditionConfig = job["cond"]
     physics: PhysicsConfig = job["physics"]
     camera: CameraConfig = job["camera"]
+    params: Ch5TrialParams = job["params"]
+    size_m = new_box_size(job["seed"], cond.stream, job["index"], params.new_boxes)
+
+    def no_free_place(spec: SceneSpec) -> str | None:
+        """Thesis Fig. 5.9: a shelved start has no free placement candidate for this box."""
+        if spec.family in NO_FREE_PLACE and free_places(spec, job, size_m):
+            return "free_place"
+        return None
+
     spec = draw_trial_spec(
         cond.stream,
         job["stream_cfg"],
@@ -89,8 +107,31 @@ def run_ch5_episode(job: dict[str, Any]) -> EpisodeResult:
         camera,
         job["max_attempts"],
         keep_groups=True,
+        accept=no_free_place,
     )
-    return replenish(spec, job)
+    return spec, size_m
+
+
+NO_FREE_PLACE = ("replenish_shelved",)
+"""Families whose trial starts are redrawn while a placement candidate is free (thesis Fig.
+5.9: the obstacle stands where the new box must go; the family builds them so, this makes
+sure: README, chapter 5)."""
+
+
+def free_places(
+    spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray, obs: Observation | None = None
+) -> list[str]:
+    """The placement candidates free at the canonical start of `spec` for a box of `size_m`,
+    as "cluster:side", seen through the generator's ground-truth clusters (what the scene
+    offers, whatever a detector would make of it)."""
+    state = SceneState.start(spec)
+    if obs is None:
+        obs = observe(world_at(spec, state, job["physics"], render=True), job["camera"])
+    space = space_of(spec)
+    dets = true_clusters(spec, state, job["physics"], obs)
+    clusters = place_clusters(obs, dets, space)
+    cands = candidates(obs, clusters, np.asarray(size_m, float), planner_params(job), space)
+    return [f"{c.cluster}:{c.side}" for c in cands if c.free]
 
 
 def planner_params(job: dict[str, Any]) -> ReplenishParams:
@@ -122,6 +163,7 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
     state = SceneState.start(spec)
     world = world_at(spec, state, physics, render=True)
     obs = observe(world, camera)
+    free_at_start = free_places(spec, job, size_m, obs)
     log = EpisodeLog(record_images=job["record_images"])
     log.scene(0.0, spec.sizes_m, spec.shelf.boards(), obs.camera, obs.depth_m.shape)
     steps: list[dict[str, Any]] = []
@@ -141,11 +183,11 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
             if plan.move is not None and planner.collapse_map is not None and rp.use_collapse:
                 heat = planner.collapse_map(obs, _cluster_mask(obs, plan, space))
                 log.heatmap(t, "/planner/collapse_map", heat)
-        elif cond.planner == "random":
+        elif cond.planner == "random":  # uniform over the action set, then as drawn
             options = action_set(obs, dets, size_m, rp, space)
-            simple = [p[0] for p in options if p[0].branch == "simple"]
-            rng = policy_rng(job["seed"], cond.stream, job["index"], "ch5_random")
-            plan = simple[int(rng.integers(len(simple)))] if simple else Plan("none", None, None)
+            rng = policy_rng(job["seed"], cond.stream, job["index"], f"ch5_random/{len(steps)}")
+            seq = options[int(rng.integers(len(options)))] if options else []
+            plan, queued = (seq[0], seq[1:]) if seq else (Plan("none", None, None), [])
         else:
             views = [dets]
             if job.get("oracle_detector"):  # the detector's actions too: no planner beats it
@@ -204,6 +246,7 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
         "n_disturbed": int(sum(s["n_disturbed"] for s in steps)),
         "disturbance_m": round(float(sum(s["disturbance_m"] for s in steps)), 6),
         "rejected_starts": dict(spec.meta.get("rejected", {})),
+        "free_at_start": free_at_start,
     }
     if end == "gave_up":  # why no candidate had a plan (planning/replenish.py why_not)
         record["gave_up_why"] = gave_up_why

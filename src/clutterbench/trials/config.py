@@ -218,9 +218,10 @@ class Ch4TrialParams:
 
 CH5_PLANNERS = ("replenish", "no_collapse", "random", "oracle")
 """ch. 5 trial policies: the thesis' replenishment planner (Fig. 5.2) with collapse
-prediction; the same without it (every blocker movable, the thesis' comparison); a uniformly
-random placement candidate (floor); every candidate action simulated from the current state,
-the first that succeeds kept (ceiling)."""
+prediction; the same without it (no R_s test and no collapse check of a rearrangement, the
+way check kept: the thesis' comparison); an action drawn uniformly from the oracle's action set
+at every step (floor); every candidate action simulated from the current state, the first that
+succeeds kept (ceiling)."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -8,6 +8,7 @@ stream, so every condition on one stream sees the same scenes and the same targe
 from __future__ import annotations
 
 import zlib
+from collections.abc import Callable
 
 import numpy as np
 
@@ -33,9 +34,11 @@ def draw_trial_spec(
     max_attempts: int,
     shelf: Shelf | None = None,
     keep_groups: bool = False,
+    accept: Callable[[SceneSpec], str | None] | None = None,
 ) -> SceneSpec:
     """Scene `index` of a trials stream, settled (the canonical start of its episode); with
-    `keep_groups` its meta holds the family's groups (ground-truth clusters)."""
+    `keep_groups` its meta holds the family's groups (ground-truth clusters); `accept`: a
+    further test of the start (sim.labelling.draw_settled_spec)."""
     return draw_settled_spec(
         seed=seed,
         key=stream_key(stream),
@@ -48,6 +51,7 @@ def draw_trial_spec(
         max_attempts=max_attempts,
         shelf=shelf or Shelf(),
         keep_groups=keep_groups,
+        accept=accept,
     )
 
 

@@ -6,9 +6,10 @@ on the obstacle, so that moving the obstacle blindly drops it.
   obstacle on B^top, overhanging one side); with probability `dependent_prob` a book stands
   beside the stack leaning on the obstacle's overhang. Lifting the obstacle drops the book.
 - `replenish_shelved` (Fig. 5.9 a, b): a row of standing books (C^v) against one side wall,
-  a book standing or leaning in the row's open side (the obstacle on B^left / B^right); with
-  probability `dependent_prob` the obstacle stands and a further book leans on it from
-  outside. Moving the obstacle aside pushes that book over.
+  a book leaning on the row in its open side (the obstacle on B^left / B^right; a lone
+  leaning box is C^r / C^l), or, in part of the scenes, standing there with a further book
+  leaning on it from outside. No candidate is free at the start; moving the upright obstacle
+  aside pushes that book over.
 - `replenish_random` (Fig. 5.10): either layout, mirrored, with one more box dropped in a
   random pose (thesis 5.2.2's disorganized boxes).
 
@@ -128,25 +129,32 @@ class ReplenishStacked(SceneFamily):
 
 
 class ReplenishShelved(SceneFamily):
+    """Thesis Fig. 5.9 (a, b): a row of standing books against one side wall and one obstacle
+    in the row's open side, where the new box would stand, so that no placement candidate is
+    free at the start. In most scenes (`lean_prob`) the obstacle leans on the row: a lone
+    leaning box is C^r / C^l (sim/clusters.py) and offers no place, and its foot fills the
+    row's open side. Otherwise it stands upright `obstacle_gap_m` from the row (narrower than
+    any new box plus the fingers' 2g) and a shorter book leans on it from outside, filling its
+    outer side (else that side would be a free place: the shelf is wider than the scene) and
+    falling when the obstacle is moved blindly. What the row has no room for lies on it."""
+
     name = "replenish_shelved"
-    dependent_prob = 0.5
-    lean_prob = 0.5
-    """Without a dependent book: probability that the obstacle leans on the row."""
+    lean_prob = 0.6
+    """Probability that the obstacle leans on the row (else it stands with a book on it)."""
     lean_deg = (15.0, 28.0)
+    """Tilt of a leaning box: beyond sim.clusters.LEAN_DEG, so it is classed C^r / C^l."""
     obstacle_gap_m = (0.004, 0.012)
 
     def place(self, world: BoxWorld, sizes_m: np.ndarray, rng: np.random.Generator) -> Placement:
         n = len(sizes_m)
         side = int(rng.choice([-1, 1]))  # the row's wall
-        dep = n >= 4 and rng.random() < self.dependent_prob
         idx = list(rng.permutation(n))
         obstacle = idx.pop()
-        book = None
-        if dep:  # the dependent book is shorter than the obstacle it leans on
-            shorter = [i for i in idx if sizes_m[i, 1] < sizes_m[obstacle, 1]]
-            if shorter:
-                book = shorter[0]
-                idx.remove(book)
+        shorter = [i for i in idx if sizes_m[i, 1] < sizes_m[obstacle, 1]]
+        upright = n >= 3 and bool(shorter) and rng.random() >= self.lean_prob
+        book = shorter[0] if upright else None
+        if book is not None:
+            idx.remove(book)
         row, extra = idx[:3], idx[3:]
         x = rng.uniform(0.4, 0.6) * world.shelf.depth_m
         placed, face = row_from_wall(world, sizes_m[row], side, x, rng)
@@ -155,17 +163,15 @@ class ReplenishShelved(SceneFamily):
             k = drop_on_top(world, sizes_m[i], FLAT, np.array([x, face + side * 0.06]))
             if k is not None:
                 groups[0].append(k)
-        if book is None and rng.random() < self.lean_prob:
+        if book is None:
             lean = rng.uniform(*self.lean_deg)
             groups.append([lean_against(world, sizes_m[obstacle], face, side, lean, x)])
             return Placement(groups)
         t = float(sizes_m[obstacle, 2])
         y_o = face - side * (rng.uniform(*self.obstacle_gap_m) + t / 2)
-        k = stand(world, sizes_m[obstacle], y_o, x)
-        groups.append([k])
-        if book is not None:
-            lean = rng.uniform(*self.lean_deg)
-            groups.append([lean_against(world, sizes_m[book], y_o - side * t / 2, side, lean, x)])
+        groups.append([stand(world, sizes_m[obstacle], y_o, x)])
+        lean = rng.uniform(*self.lean_deg)
+        groups.append([lean_against(world, sizes_m[book], y_o - side * t / 2, side, lean, x)])
         return Placement(groups)
 
 
