@@ -70,7 +70,7 @@ crosscheck: setup
 learning-curve: setup
 	python -m clutterbench.collapse.learning_curve cp_focal --fractions 0.25 0.5
 
-# Collapse network designs at equal training time (params designs:; ~50 min at default
+# Collapse network designs at equal training time (params designs:; ~45 min at default
 # scale on 2 free cores; needs split@ch6) -> reports/learning_curve/designs.{csv,md,png}
 designs: setup
 	python -m clutterbench.collapse.designs

@@ -36,7 +36,7 @@ def test_each_design_gets_the_same_minutes_and_the_best_val_iou_is_chosen(tmp_pa
     assert rows[-1]["parameters"] < rows[0]["parameters"]  # the half-size decoder is smaller
     best = best_rows(rows)
     assert [r["design"] for r in best] == ["full", "half"]
-    chosen = max(best, key=lambda r: r["val_iou"])["design"]
+    chosen = max(best, key=lambda r: r["val_iou_best"])["design"]
     md = (tmp_path / "out/designs.md").read_text()
     assert f"| {chosen} **(chosen)** |" in md and md.count("(chosen)") == 1
     frame = pd.read_csv(tmp_path / "out/designs.csv")

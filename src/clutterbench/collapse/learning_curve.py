@@ -39,6 +39,7 @@ COLUMNS = (
     "best_epoch",
     "val_loss",
     "val_iou",
+    "val_iou_best",
     "val_precision",
     "val_recall",
     "seconds",
@@ -67,6 +68,7 @@ def _row(fraction: float, scenes: int, summary: dict[str, Any], seconds: float |
         "best_epoch": best["epoch"],
         "val_loss": best["val_loss"],
         "val_iou": best["val_iou"],
+        "val_iou_best": best.get("val_iou_best", float("nan")),
         "val_precision": best["val_precision"],
         "val_recall": best["val_recall"],
         "seconds": seconds,
@@ -130,15 +132,15 @@ def write_curve(model: str, rows: list[dict[str, Any]], scale: str, out_dir: Pat
         f"# Learning curve: {model} ({scale} scale)",
         "",
         "| training scenes | training pairs | best epoch / run | val loss | val IoU "
-        "| val precision | val recall | train s |",
-        "|---|---|---|---|---|---|---|---|",
+        "| val IoU, best threshold | val precision | val recall | train s |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         secs = "" if r["seconds"] is None else f"{r['seconds']:.0f}"
         lines.append(
             f"| {r['train_scenes']} ({r['fraction']:.0%}) | {r['train_pairs']} | "
             f"{r['best_epoch']} / {r['epochs_run']} | {r['val_loss']:.5f} | {r['val_iou']:.3f} | "
-            f"{r['val_precision']:.3f} | {r['val_recall']:.3f} | {secs} |"
+            f"{r['val_iou_best']:.3f} | {r['val_precision']:.3f} | {r['val_recall']:.3f} | {secs} |"
         )
     lines += [
         "",
@@ -157,7 +159,8 @@ def _plot(model: str, frame: Any, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(5, 3.5))
-    ax.plot(frame["train_scenes"], frame["val_iou"], "o-", label="val IoU")
+    ax.plot(frame["train_scenes"], frame["val_iou"], "o-", label="val IoU at 0.5")
+    ax.plot(frame["train_scenes"], frame["val_iou_best"], "^-", label="val IoU, best threshold")
     ax.plot(frame["train_scenes"], frame["val_recall"], "s--", label="val recall")
     ax.set_xscale("log")
     ax.set_xlabel("training scenes")

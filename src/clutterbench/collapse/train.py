@@ -24,7 +24,7 @@ from torch import nn
 
 from clutterbench.collapse.config import TrainConfig, TrainModelConfig
 from clutterbench.collapse.losses import bce_loss, ce_loss, focal_loss
-from clutterbench.collapse.metrics import PixelCounts
+from clutterbench.collapse.metrics import PixelCounts, best_iou_row
 from clutterbench.collapse.predict import collapse_probs, forward_logits, forward_probs
 from clutterbench.config import as_dict
 from clutterbench.data.dataset import GroupedLoader, PairDataset, open_pairs
@@ -50,7 +50,12 @@ LOG_COLUMNS = (
     "val_iou",
     "val_precision",
     "val_recall",
+    "val_iou_best",
+    "val_best_threshold",
 )
+"""val_iou / precision / recall at train.val_threshold; val_iou_best: the best IoU over the
+evaluate sweep's thresholds (at val_best_threshold), steadier from epoch to epoch where a
+focal loss keeps probabilities low."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -123,7 +128,9 @@ def evaluate_loss(
             total += float(loss(logits, batch)) * len(logits)
             n += len(logits)
             counts.update(collapse_probs(logits).cpu(), batch["collapse"].cpu())
-    return total / max(n, 1), counts.summary()
+    best = best_iou_row(counts.sweep())
+    scores = counts.summary() | {"iou_best": best["iou"], "best_threshold": best["threshold"]}
+    return total / max(n, 1), scores
 
 
 def train_model(
