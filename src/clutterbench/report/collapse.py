@@ -47,6 +47,9 @@ SETTING_TEXT: dict[str, Callable[[Any, Any], str]] = {
     "batch_size": lambda o, t: f"batch {o} (thesis {t})",
     "loss": lambda o, t: f"{o} loss (thesis {t})",
     "objects_per_scene": lambda o, t: f"trained on scenes of {o} boxes (thesis {t})",
+    "decoder_output_stride": lambda o, t: (
+        f"decoder to 1/{o} of the input, logits upsampled (thesis {'full size' if t == 1 else t})"
+    ),
 }
 TABLE_SETTINGS = ("test_images",)
 """Settings of the whole table (its test set), said in the notes rather than per row."""
@@ -87,6 +90,8 @@ def model_settings(model_dir: Path, train_dir: Path, model: str) -> dict[str, An
             "image_size": ckpt.meta["image_size"],
             "encoder_width": ckpt.net.encoder.width,
             "imagenet_pretrained": ckpt.net.encoder.pretrained is not None,
+            # networks without the option (fcn8s) predict at full size
+            "decoder_output_stride": getattr(ckpt.net, "output_stride", 1),
             **{k: train[k] for k in ("lr", "epochs", "lr_schedule", "batch_size", "loss")},
             "epochs_run": summary["epochs_run"],
         }
