@@ -25,7 +25,8 @@ from clutterbench.sim.config import REJECT_REASONS, SimConfig
 from clutterbench.sim.labelling import LabelledScene, generate_labelled_scene
 from clutterbench.sim.render import ensure_renderer
 
-FORMAT_VERSION = 2  # 2: canonical-start labels, clusters, contacts, float64 labels
+FORMAT_VERSION = 3  # 2: canonical-start labels, clusters, contacts, float64 labels; 3: a lone
+# leaning box is C^r / C^l, replenish_shelved as thesis Fig. 5.9 (old shards are not reused)
 
 
 def config_hash(dataset: str, ds: DatasetConfig, sim: SimConfig, seed: int) -> str:
