@@ -30,9 +30,11 @@ def test_each_design_gets_the_same_minutes_and_the_best_val_iou_is_chosen(tmp_pa
     designs = {"full": {}, "half": {"output_stride": 2}}
     rows = compare_designs(params(designs), data, tmp_path / "out")
     assert {r["design"] for r in rows} == set(designs)
-    for r in rows:  # epochs sized by the design's own speed: ~minutes x pairs/s of pairs
-        pairs = r["minutes"] / r["epoch"] * 60 * r["pairs_per_s"]
-        assert r["epochs"] == max(1, round(0.02 * 60 * r["pairs_per_s"] / pairs))
+    for r in rows:  # epochs sized by the design's own speed: minutes x pairs/s of pairs
+        assert r["epochs"] == max(1, round(0.02 * 60 * r["pairs_per_s"] / r["train_pairs"]))
+        assert r["minutes"] == pytest.approx(
+            r["epoch"] * r["train_pairs"] / r["pairs_per_s"] / 60, abs=1e-3
+        )
     assert rows[-1]["parameters"] < rows[0]["parameters"]  # the half-size decoder is smaller
     best = best_rows(rows)
     assert [r["design"] for r in best] == ["full", "half"]
