@@ -12,6 +12,7 @@ from clutterbench.io import write_json, write_text
 from clutterbench.stage import run_stage
 from clutterbench.trials.ch3 import ch3_jobs, run_ch3_game, slide_rows
 from clutterbench.trials.ch3_config import Ch3Config
+from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import run_episodes, write_mcap
 from clutterbench.trials.records import write_records
 from clutterbench.trials.stats import aggregate_games
@@ -36,7 +37,8 @@ def trials_ch3(params: dict, base: BaseConfig) -> None:
                 f"{cfg.scan.crop_px}; rerun train_slide"
             )
         model = str(MODEL)
-    jobs = ch3_jobs(cfg, lambda g: pile_seed(base.seed, "ch3_games", g), model)
+    collapse_free = load_section(CollapseFreeConfig, "trials.collapse_free", params)
+    jobs = ch3_jobs(cfg, lambda g: pile_seed(base.seed, "ch3_games", g), model, collapse_free)
     results = run_episodes("trials_ch3", run_ch3_game, jobs, cfg.games.workers)
     records = [r.record for r in results]
     write_records(OUT / "records.jsonl", records)

@@ -9,6 +9,7 @@ from clutterbench.data.slides import pile_seed
 from clutterbench.parallel import worker_init
 from clutterbench.trials.ch3 import ch3_jobs, run_ch3_game
 from clutterbench.trials.ch3_config import Ch3Config
+from clutterbench.trials.criteria import CollapseFreeConfig
 
 
 @pytest.fixture(scope="module")
@@ -48,3 +49,32 @@ def test_variants_play_the_same_piles(games):
     for g in games:
         seeds.setdefault(g["game"], set()).add((g["seed"], g["n_pieces"]))
     assert all(len(s) == 1 for s in seeds.values())
+
+
+def test_every_slide_carries_the_named_fields_and_per_piece_motion(games, cfg, tmp_path):
+    """Every slide record has the named outcome every chapter carries and, for every other
+    piece on the board, its motion; re-judged from those alone at the game's threshold,
+    each game's outcome is the record's."""
+    from clutterbench.trials import rejudge
+    from clutterbench.trials.criteria import MOTION_FIELDS
+    from clutterbench.trials.protocol import STEP_FIELDS
+    from clutterbench.trials.records import read_records, write_records
+
+    named = set(STEP_FIELDS) - {"others_still_held", "success_held"}
+    slides = [s for g in games for s in g["steps"]]
+    assert slides
+    for s in slides:
+        assert named <= set(s)
+        assert s["executed"] and s["judged"] and not s["aborted_before_motion"]
+        assert s["extracted"] == s["target_out"]
+        assert s["success"] == s["strict_success"] == (s["target_out"] and s["others_still"])
+        assert s["piece"] not in {e["box"] for e in s["box_motion"]}
+        assert all(set(e) == set(MOTION_FIELDS) for e in s["box_motion"])
+        thr = cfg.slide.moved_threshold_m
+        moved = {e["box"] for e in s["box_motion"] if e["displacement_m"] > thr or e["left_shelf"]}
+        assert s["others_still"] == (not moved)
+    path = tmp_path / "records.jsonl"
+    write_records(path, games)
+    for g in read_records(path):
+        (row,) = rejudge.rejudge([g], g["moved_threshold_m"], CollapseFreeConfig())
+        assert row["success"] == row["strict_success"] == g["success"]

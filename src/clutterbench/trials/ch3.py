@@ -19,6 +19,7 @@ One record per game (its slides in `steps`); the stage writes one row per slide 
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +36,8 @@ from clutterbench.planning.yamakuzushi import (
     random_targets,
 )
 from clutterbench.shogi_piece import PIECE_SIZE_M
+from clutterbench.trials import criteria
+from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import EpisodeLog, EpisodeResult
 
 STEP_S = 1.0
@@ -174,7 +177,7 @@ def _targets(variant: str, job: dict[str, Any], top: Observation, rng) -> list[T
 
 def run_ch3_game(job: dict[str, Any]) -> EpisodeResult:
     """One game of one variant on the pile of `job["seed"]`."""
-    from clutterbench.sim.pile import PileWorld, generate_pile, slide, top_observation
+    from clutterbench.sim.pile import PileWorld, generate_pile, on_board, slide, top_observation
 
     cfg, variant = job["cfg"], job["variant"]
     spec = generate_pile(cfg.pile, job["seed"])
@@ -243,15 +246,19 @@ def run_ch3_game(job: dict[str, Any]) -> EpisodeResult:
         t += STEP_S
         after = np.array(result.poses_after, dtype=np.float64)
         after[chosen.piece] = np.nan
+        others = [k for k in range(len(poses)) if k != chosen.piece and np.isfinite(poses[k, 0])]
+        motion = criteria.box_motion(
+            poses, result.poses_after, on_board(result.poses_after, cfg.pile.board_size_m), others
+        )
         steps.append(
             {
                 "step": step,
                 "piece": chosen.piece,
                 "direction": chosen.direction,
                 "probability": chosen.probability,
-                "success": bool(result.success),
-                "target_out": bool(result.target_out),
-                "others_still": bool(result.others_still),
+                **slide_outcome(bool(result.target_out), bool(result.others_still)),
+                "collapse_free": criteria.collapse_free(motion, job["collapse_free"]),
+                "box_motion": motion,
                 "moved": list(result.moved),
                 "max_displacement_m": float(np.nanmax(result.displacement_m, initial=0.0)),
                 "observations": int(facts.get("observations", 0)),
@@ -270,21 +277,52 @@ def run_ch3_game(job: dict[str, Any]) -> EpisodeResult:
         "condition": variant,
         "game": job["game"],
         "seed": job["seed"],
+        "moved_threshold_m": cfg.slide.moved_threshold_m,
+        "collapse_free_params": dataclasses.asdict(job["collapse_free"]),
         "n_pieces": int(len(spec.poses)),
         "pieces_removed": int(removed),
         "slides": len(steps),
         "end": end,
         "success": removed > 0,
+        "strict_success": removed > 0,
         "steps": steps,
         "stop": stop,
     }
     return EpisodeResult(record=record, log=log)
 
 
-def ch3_jobs(cfg, seed_of, model: str | None) -> list[dict[str, Any]]:
+def slide_outcome(target_out: bool, others_still: bool) -> dict[str, Any]:
+    """A slide's named outcome, with the fields every chapter's step records carry
+    (trials/protocol.STEP_FIELDS). A slide always runs to its end: executed, judged, never
+    aborted. Chapter 3 has one criterion, the game's (thesis 3.5: the piece off the board,
+    no other piece moved beyond yamakuzushi.slide.moved_threshold_m or off the board), so
+    `success` and `strict_success` are the same; `collapse_free` (trials.collapse_free's
+    drop / tilt, the board as the shelf) is recorded beside it for re-judging."""
+    success = target_out and others_still
+    return {
+        "executed": True,
+        "aborted_before_motion": False,
+        "aborted_after_motion": False,
+        "extracted": target_out,
+        "target_out": target_out,
+        "others_still": others_still,
+        "judged": True,
+        "strict_judged": True,
+        "success": success,
+        "strict_success": success,
+    }
+
+
+DEFAULT_COLLAPSE_FREE = CollapseFreeConfig()
+
+
+def ch3_jobs(
+    cfg, seed_of, model: str | None, collapse_free: CollapseFreeConfig = DEFAULT_COLLAPSE_FREE
+) -> list[dict[str, Any]]:
     """Every (variant, game) job; game g of every variant plays the pile of seed_of(g)."""
     return [
         {
+            "collapse_free": collapse_free,
             "variant": v,
             "game": g,
             "seed": seed_of(g),

@@ -10,8 +10,11 @@ the output equals the records (and so the tables; tested). An episode ends at it
 collapse-free failure, so under *more lenient* thresholds than the run's, an episode that
 ended in a collapse may have gone on: its outcome is unknown (`null`) and is counted apart.
 
-Record kinds: chapter 4 trials (one pull per record, no `steps`), chapter 5 replenishment
-(`steps` with `placed`) and chapter 6 extraction (`steps` with `box`).
+Record kinds: chapter 3 games (`steps` with `piece`; one criterion, the game's: a game
+succeeds when its first slide takes the piece off the board and no other piece moves beyond
+the threshold or off it; the drop / tilt thresholds do not apply), chapter 4 trials (one
+pull per record, no `steps`), chapter 5 replenishment (`steps` with `placed`) and chapter 6
+extraction (`steps` with `box`).
 """
 
 from __future__ import annotations
@@ -45,11 +48,22 @@ def step_failed(step: Mapping[str, Any], key: str, moved_m: float, cf: CollapseF
     return not clean
 
 
+def slide_failed(step: Mapping[str, Any], moved_m: float) -> bool:
+    """Whether a chapter 3 slide fails under the game's rule, its one criterion (both keys):
+    its piece did not leave the board, or another piece moved beyond `moved_m` or off it."""
+    motion = step["box_motion"]
+    clean = not any(e["left_shelf"] or e["displacement_m"] > moved_m for e in motion)
+    return not (step["target_out"] and clean)
+
+
 def episode_outcome(
     record: Mapping[str, Any], key: str, moved_m: float, cf: CollapseFreeConfig
 ) -> bool | None:
     """An episode's success under `key` at these thresholds (None: undecidable, the recorded
     episode stopped at a failure that these thresholds forgive)."""
+    if "game" in record:  # chapter 3: a Yamakuzushi game
+        steps = record["steps"]
+        return bool(steps) and not slide_failed(steps[0], moved_m)
     if "steps" not in record:  # chapter 4: one pull
         ok = (
             record["executed"]
@@ -75,7 +89,7 @@ def rejudge(
 ) -> list[dict[str, Any]]:
     """Per episode: condition, episode and its outcome under each criterion."""
     return [
-        {"condition": r["condition"], "episode": r["episode"]}
+        {"condition": r["condition"], "episode": r.get("episode", r.get("game"))}
         | {key: episode_outcome(r, key, moved_m, cf) for key in CRITERIA}
         for r in records
     ]
