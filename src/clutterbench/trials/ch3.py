@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from clutterbench.data.slide_crops import ScanConfig
+from clutterbench.denormals import flush_denormals
 from clutterbench.observation import Observation
 from clutterbench.planning import pomdp
 from clutterbench.planning.yamakuzushi import (
@@ -169,7 +170,8 @@ def _targets(variant: str, job: dict[str, Any], top: Observation, rng) -> list[T
     cfg = job["cfg"]
     scan: ScanConfig = cfg.scan
     if variant in ("convnet", "convnet_no_pomdp"):
-        return convnet_targets(_convnet(job["model"]), top, scan, cfg.select)
+        with flush_denormals():  # as in training (clutterbench.denormals)
+            return convnet_targets(_convnet(job["model"]), top, scan, cfg.select)
     if variant == "no_convnet":
         return least_occluded_targets(top, scan, cfg.select)
     return random_targets(top, scan, cfg.select, rng)
