@@ -45,12 +45,18 @@ def yamakuzushi(
         from clutterbench.parallel import worker_init
         from clutterbench.trials.ch3 import run_ch3_game
         from clutterbench.trials.ch3_config import VARIANTS, Ch3Config
+        from clutterbench.trials.criteria import CollapseFreeConfig
         from clutterbench.trials.harness import write_mcap
 
         if variant not in VARIANTS:
             raise ClutterbenchError(f"--variant {variant!r}: not one of {', '.join(VARIANTS)}")
         params = project_params()
         cfg = load_section(Ch3Config, "yamakuzushi", params) if params else Ch3Config()
+        collapse_free = (
+            load_section(CollapseFreeConfig, "trials.collapse_free", params)
+            if params
+            else CollapseFreeConfig()
+        )
         path = None
         if variant in ("convnet", "convnet_no_pomdp"):
             path = require_file(
@@ -68,6 +74,7 @@ def yamakuzushi(
             "cfg": cfg,
             "model": None if path is None else str(path),
             "mcap_images": mcap is not None,
+            "collapse_free": collapse_free,
         }
         result = run_ch3_game(job)
         for step in result.record["steps"]:
