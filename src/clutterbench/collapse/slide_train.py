@@ -99,6 +99,7 @@ def classification_metrics(probs: np.ndarray, labels: np.ndarray) -> dict[str, A
     }
 
 
+@flush_denormals()
 def train_slide_convnet(
     samples: dict[str, np.ndarray],
     cfg: SlideTrainConfig,
@@ -109,21 +110,11 @@ def train_slide_convnet(
     """Train on the samples with val == 0, select and report on val == 1; writes
     model_dir/best.pt, report_dir/{log.csv, metrics.json}; returns the metrics.
 
-    Denormals are flushed throughout (clutterbench.denormals): weight decay drives this
-    network's weights and Adam moments below float32's normal range, where arithmetic is many
-    times slower on some CPUs. Torch's worker threads take the setting only when they are
-    started inside the block, so a stage calls this before any other parallel torch work."""
-    with flush_denormals():
-        return _train(samples, cfg, seed, model_dir, report_dir)
-
-
-def _train(
-    samples: dict[str, np.ndarray],
-    cfg: SlideTrainConfig,
-    seed: int,
-    model_dir: Path,
-    report_dir: Path,
-) -> dict[str, Any]:
+    Denormals are flushed throughout (the decorator, clutterbench.denormals): weight decay
+    drives this network's weights and Adam moments below float32's normal range, where
+    arithmetic is many times slower on some CPUs. Torch's worker threads take the setting only
+    when they are started inside the block, so a stage calls this before any other parallel
+    torch work."""
     crops = np.asarray(samples["crops"], dtype=np.float32)
     if crops.shape[1:] != (cfg.net.input_size, cfg.net.input_size):
         raise ClutterbenchError(
