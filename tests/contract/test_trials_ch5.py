@@ -3,6 +3,8 @@ release-then-judge order, one record per trial and its MCAP."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -115,6 +117,36 @@ def test_episode_record_and_mcap(tmp_path):
     topics = read_episode(tmp_path / "e.mcap")["topics"]
     for topic in ("/perception/detections", "/planner/decision", "/camera/depth", "/trial/result"):
         assert topics.get(topic, 0) >= 1, topic
+
+
+@pytest.mark.parametrize("rule", ["candidate", "eq_5_6"])
+def test_the_planner_and_the_oracle_carry_a_blocker_by_the_params_rule(scene, monkeypatch, rule):
+    """Both move a blocker by the rule of trials.ch5.blocker_goal: by the candidate it fills
+    (planning.replenish.move_goal given the candidate's rectangle) or by eq. (5.6)'s fixed
+    distance (no candidate given)."""
+    import clutterbench.planning.replenish as replenish
+    import clutterbench.trials.ch5_oracle as ch5_oracle
+
+    spec, _, obs, dets, _ = scene
+    given = []
+    goal = replenish.move_goal
+
+    def spy(s, side, w_new, h_new, g, cand=None):
+        given.append(cand is not None)
+        return goal(s, side, w_new, h_new, g, cand)
+
+    monkeypatch.setattr(replenish, "move_goal", spy)
+    monkeypatch.setattr(ch5_oracle, "move_goal", spy)
+    job = {"params": TrialsConfig().ch5, "prob_threshold": 0.5}
+    job["params"] = dataclasses.replace(job["params"], blocker_goal=rule, min_points=3)
+    job["cond"] = Ch5ConditionConfig(planner="replenish", stream="s")
+    rp, space = ch5.planner_params(job), ch5.space_of(spec)
+    plan = ReplenishPlanner(rp, space).plan(obs, dets, NEW_BOX)
+    assert plan.branch == "bimanual" and given
+    assert set(given) == {rule == "candidate"}
+    given.clear()
+    assert ch5_oracle.action_set(obs, dets, NEW_BOX, rp, space)
+    assert given and set(given) == {rule == "candidate"}
 
 
 FLAT = [1.0, 0.0, 0.0, 0.0]

@@ -48,6 +48,36 @@ def test_move_goal_clears_the_candidate_side():
     assert up[0] == pytest.approx(0.1) and up[1] == pytest.approx(-0.05 - 0.03 - 2 * G)
 
 
+def test_move_goal_given_the_candidate_is_eq_5_6_for_a_blocker_centred_on_it():
+    right = candidate_rect(B, "right", 0.03, 0.08, G)
+    s = np.array([right[0], -0.04, 0.05, 0.08])
+    assert move_goal(s, "right", 0.03, 0.08, G, right) == pytest.approx(
+        move_goal(s, "right", 0.03, 0.08, G)
+    )
+
+
+@pytest.mark.parametrize("side", ["right", "left"])
+@pytest.mark.parametrize("width", [0.02, 0.16])
+def test_move_goal_puts_the_blockers_near_edge_at_the_candidates_far_edge(side, width):
+    """A blocker flush against the cluster, thin or wide (off the candidate's centre): eq.
+    (5.6) as printed would leave a thin one in the candidate and carry a wide one farther
+    than needed; given the candidate it goes exactly as far as clears it."""
+    cand = candidate_rect(B, side, 0.09, 0.08, G)
+    sign = 1.0 if side == "right" else -1.0
+    edge = B[0] + sign * B[2] / 2  # the cluster's side the candidate touches
+    s = np.array([edge + sign * width / 2, -0.04, width, 0.08])
+    goal = move_goal(s, side, 0.09, 0.08, G, cand)
+    near_edge = goal[0] - sign * width / 2
+    far_edge = cand[0] + sign * cand[2] / 2
+    assert near_edge == pytest.approx(far_edge)
+
+
+def test_move_goal_leaves_a_blocker_already_clear_of_the_candidate_where_it_is():
+    cand = candidate_rect(B, "right", 0.03, 0.08, G)
+    s = np.array([cand[0] + cand[2] / 2 + 0.05, -0.04, 0.04, 0.08])
+    assert move_goal(s, "right", 0.03, 0.08, G, cand)[0] == pytest.approx(s[0])
+
+
 def test_a_lifted_blocker_clears_the_top_candidate():
     """B_s lying on a stack is lifted clear of B^top (which starts g above the stack, eq.
     5.2) with g to spare: the new box is never let go into the held blocker."""

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from typing import Literal
 
 from clutterbench.config import bounded
 from clutterbench.errors import ClutterbenchError
@@ -42,6 +43,28 @@ class Ch4PilesConfig:
 
 
 @dataclasses.dataclass(frozen=True)
+class Ch5GoalConfig:
+    """The ch. 5 blocker-goal recheck (`python -m clutterbench.dev.ch5_goal`)."""
+
+    streams: tuple[str, ...] = ()
+    """Dev streams of the ch. 5 trial families (keys of dev.streams; params.yaml names them)."""
+    goals: tuple[Literal["candidate", "eq_5_6"], ...] = ("eq_5_6", "candidate")
+    """The trials.ch5.blocker_goal rules compared."""
+    perceptions: tuple[Literal["detector", "clusters"], ...] = ("detector", "clusters")
+    """The planner's clusters: the trained detector's, the generator's ground truth, or both."""
+    episodes: int = bounded(100, ge=1)
+    """Trials per rule, arm and stream."""
+    oracle: bool = True
+    """Also each rule's oracle on the same scenes."""
+
+    def __post_init__(self) -> None:
+        if len(set(self.goals)) < 2:
+            raise ValueError("ch5_goal.goals: need two different rules to compare")
+        if not self.perceptions:
+            raise ValueError("ch5_goal.perceptions: no perception to run the planner with")
+
+
+@dataclasses.dataclass(frozen=True)
 class DevConfig:
     """Dev streams and the rechecks run on them; no stage reads this section."""
 
@@ -49,17 +72,23 @@ class DevConfig:
     """Dev stream name (dev_*) -> the scenes it draws, seeded from base.seed and its name."""
     ch4_piles: Ch4PilesConfig = Ch4PilesConfig()
     """The ch. 4 training-pile recheck."""
+    ch5_goal: Ch5GoalConfig = Ch5GoalConfig()
+    """The ch. 5 blocker-goal recheck."""
 
     def __post_init__(self) -> None:
         for name in self.streams:
             if not name.startswith(DEV_PREFIX):
                 raise ValueError(f"streams.{name}: a dev stream's name starts with '{DEV_PREFIX}'")
-        for name in self.ch4_piles.streams:
-            if name not in self.streams:
-                raise ValueError(
-                    f"ch4_piles.streams: unknown dev stream '{name}' "
-                    f"(known: {', '.join(self.streams) or 'none'})"
-                )
+        for check, names in (
+            ("ch4_piles", self.ch4_piles.streams),
+            ("ch5_goal", self.ch5_goal.streams),
+        ):
+            for name in names:
+                if name not in self.streams:
+                    raise ValueError(
+                        f"{check}.streams: unknown dev stream '{name}' "
+                        f"(known: {', '.join(self.streams) or 'none'})"
+                    )
 
 
 def check_dev_streams(dev: DevConfig, trials: TrialsConfig) -> None:

@@ -29,6 +29,7 @@ from clutterbench.observation import Observation
 from clutterbench.perception.boxes import Detection
 
 Side = Literal["top", "left", "right"]
+BlockerGoal = Literal["candidate", "eq_5_6"]
 SIDES_OF_CLASS: dict[str, tuple[Side, ...]] = {"C^h": ("top",), "C^v": ("left", "right")}
 """Thesis 5.2.3: B^top on a stacked cluster, B^left / B^right beside a shelved one; leaning
 clusters (C^r, C^l) offer no place, they are obstacles to move (and set upright)."""
@@ -73,6 +74,14 @@ class ReplenishParams:
     """False: the thesis' "without collapse prediction" variant (every blocker is movable)."""
     min_points: int = 3
     """A candidate is occupied when at least this many depth points of boxes fall in it."""
+    blocker_goal: BlockerGoal = "candidate"
+    """Where a blocker is carried (`move_goal`): "candidate", aside until its near edge
+    reaches the candidate's far edge; "eq_5_6", aside by eq. (5.6)'s w'/2 + w_s/2 + g
+    wherever it stands (the same when it stands centred on the candidate)."""
+
+    @property
+    def goal_from_candidate(self) -> bool:
+        return self.blocker_goal == "candidate"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -162,12 +171,27 @@ def candidate_rect(b: np.ndarray, side: Side, w_new: float, h_new: float, g: flo
     raise ValueError(f"unknown side {side!r}")
 
 
-def move_goal(s: np.ndarray, side: Side, w_new: float, h_new: float, g: float) -> np.ndarray:
-    """p^goal of blocker B_s on candidate `side`, thesis eq. (5.6): aside by the new box's
-    width on left / right. On top the thesis lifts by h'/2 + h_s/2 + g; we lift by h' + 2g so
-    that the new box fits under whatever B_s's height: B^top starts g above the stack (eq.
-    5.2) and ends h' higher, and B_s keeps g above that."""
+def move_goal(
+    s: np.ndarray,
+    side: Side,
+    w_new: float,
+    h_new: float,
+    g: float,
+    cand: np.ndarray | None = None,
+) -> np.ndarray:
+    """p^goal of blocker B_s on candidate `side`, thesis eq. (5.6): aside by w'/2 + w_s/2 + g
+    on left / right, which puts B_s's near edge at the candidate's far edge when B_s stands
+    centred on the candidate. Given the candidate's rectangle `cand` (eqs. 5.3-5.4), B_s goes
+    aside by exactly what puts its near edge there from wherever it stands (a blocker off the
+    candidate's centre: no farther than needed, nor short of it). On top the thesis lifts by
+    h'/2 + h_s/2 + g; we lift by h' + 2g so that the new box fits under whatever B_s's height:
+    B^top starts g above the stack (eq. 5.2) and ends h' higher, and B_s keeps g above that."""
     x, y, w, _ = (float(v) for v in s)
+    if side in ("left", "right") and cand is not None:
+        cx, cw = float(cand[0]), float(cand[2])
+        if side == "right":
+            return np.array([max(x, cx + cw / 2 + w / 2), y])
+        return np.array([min(x, cx - cw / 2 - w / 2), y])
     if side == "right":
         return np.array([x + w_new / 2 + w / 2 + g, y])
     if side == "left":
@@ -513,7 +537,8 @@ class ReplenishPlanner:
                 why_not[n] = "filled by its own cluster"  # nothing to move aside
                 continue
             w_new, h_new = new_box_extent_m(np.asarray(size_m, float), cand.side)
-            goal = move_goal(s.rect_m, cand.side, w_new, h_new, g)
+            by = cand.rect_m if self.params.goal_from_candidate else None
+            goal = move_goal(s.rect_m, cand.side, w_new, h_new, g, by)
             moved = np.array([goal[0], goal[1], s.rect_m[2], s.rect_m[3]])
             if not in_working_space(moved, self.space):
                 why_not[n] = "blocker's goal outside the shelf"

@@ -142,6 +142,7 @@ def planner_params(job: dict[str, Any]) -> ReplenishParams:
         iou_threshold=p.iou_threshold,
         use_collapse=job["cond"].planner == "replenish",
         min_points=p.min_points,
+        blocker_goal=p.blocker_goal,
     )
 
 

@@ -51,7 +51,9 @@ def action_set(
             continue
         s = clusters[c.occupants[0]]
         w_new, h_new = new_box_extent_m(size_m, c.side)
-        goal = move_goal(s.rect_m, c.side, w_new, h_new, g)
+        goal = move_goal(
+            s.rect_m, c.side, w_new, h_new, g, c.rect_m if params.goal_from_candidate else None
+        )
         if not in_working_space(np.array([*goal, *s.rect_m[2:]]), space):
             continue
         move_s = Move(s.index, s.box_px, s.rect_m[:2].copy(), goal, s.cls in ("C^r", "C^l"))

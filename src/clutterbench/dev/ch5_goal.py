@@ -1,0 +1,250 @@
+"""Recheck on dev streams: where the ch. 5 planner carries a blocker.
+
+    python -m clutterbench.dev.ch5_goal        # make dev-ch5-goal (~3 min at default scale)
+
+Thesis eq. (5.6) carries a blocker B_s aside by w'/2 + w_s/2 + g, which clears the candidate
+it fills when B_s stands centred on it; off the centre it carries it too far (a goal outside
+the shelf) or not far enough. `trials.ch5.blocker_goal` chooses between eq. (5.6) as printed
+("eq_5_6") and carrying B_s until its near edge reaches the candidate's far edge
+("candidate"). This recheck runs the planner with collapse prediction under each rule on the
+dev streams of dev.ch5_goal.streams (own seeds, never a table's scenes), through the
+detector and through the generator's ground-truth clusters, and the oracle (whose action set
+uses the same rule) on the same scenes; the rules meet the same scenes, so they are compared
+episode by episode (McNemar's exact test).
+
+Reads the pipeline's models/detector, models/<trials.ch5.model> and the threshold evaluate@
+<model>_ch5 chose (dvc repro trials_ch5's upstream first). Writes reports/dev/ch5_goal.
+{json,md}; not a dvc stage.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from clutterbench.config import BaseConfig, as_dict, load_section
+from clutterbench.dev.ch4_piles import ALPHA, CRITERIA, _plain, _rate, paired
+from clutterbench.dev.config import DevConfig, check_dev_streams
+from clutterbench.errors import ClutterbenchError
+from clutterbench.io import write_json, write_text
+
+OUT = Path("reports/dev")
+
+
+def condition_label(goal: str, planner: str, perception: str) -> str:
+    return f"{goal}:{planner}:{perception}"
+
+
+def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """Every (stream, rule, arm) episode's job, condition "<rule>:<planner>:<perception>/
+    <stream>": the planner with collapse prediction through each perception, the oracle
+    through the ground-truth clusters (and the detector's actions, as in trials_ch5)."""
+    from clutterbench.sim.config import SimConfig
+    from clutterbench.trials.ch5 import ch5_jobs, check_models, collapse_threshold
+    from clutterbench.trials.config import Ch5ConditionConfig, TrialsConfig
+
+    base = load_section(BaseConfig, "base", params)
+    trials = load_section(TrialsConfig, "trials", params)
+    sim = load_section(SimConfig, "sim", params)
+    cfg = dev.ch5_goal
+    arms = [("replenish", p) for p in cfg.perceptions] + [("oracle", "clusters")] * cfg.oracle
+    conds = {
+        f"{condition_label(goal, planner, perception)}/{stream}": (
+            goal,
+            Ch5ConditionConfig(planner, stream, cfg.episodes, perception),
+        )
+        for stream in cfg.streams
+        for goal in cfg.goals
+        for planner, perception in arms
+    }
+    check_models({k: c for k, (_, c) in conds.items()}, trials.ch5)
+    prob = collapse_threshold(trials.ch5)
+    jobs = []
+    for name, (goal, cond) in conds.items():
+        jobs += ch5_jobs(
+            name,
+            cond,
+            dataclasses.replace(trials.ch5, blocker_goal=goal),
+            dev.streams[cond.stream],
+            base.seed,
+            sim.physics,
+            sim.camera,
+            trials.max_attempts,
+            False,
+            prob,
+            cond.stream.removeprefix("dev_ch5_"),
+            "detector" in cfg.perceptions,
+            collapse_free=trials.collapse_free,
+        )
+    return jobs
+
+
+def summary_rows(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """One row per condition: success and strict success (Wilson 95%), how the episodes
+    ended, and the points below the oracle of the same rule and stream."""
+    from clutterbench.trials.stats import aggregate
+
+    rows = []
+    for r in aggregate(records).to_dict("records"):
+        label, stream = r["condition"].split("/")
+        goal, planner, perception = label.split(":")
+        mine = [x for x in records if x["condition"] == r["condition"]]
+        row = {"condition": r["condition"], "stream": stream, "goal": goal}
+        row |= {"planner": planner, "perception": perception}
+        for key in CRITERIA:
+            row |= {f"{key}_{f}": _plain(r[f"{key}_{f}"]) for f in ("k", "n", "rate", "lo", "hi")}
+        row["gave_up"] = sum(x["end"] == "gave_up" for x in mine)
+        rows.append(row)
+    oracle = {(r["stream"], r["goal"]): r for r in rows if r["planner"] == "oracle"}
+    for row in rows:
+        top = oracle.get((row["stream"], row["goal"]))
+        for key in CRITERIA:
+            gap = 100 * (top[f"{key}_rate"] - row[f"{key}_rate"]) if top else None
+            row[f"{key}_below_oracle_points"] = None if row["planner"] == "oracle" else gap
+    return rows
+
+
+def comparisons(
+    records: Sequence[Mapping[str, Any]], goals: Sequence[str], streams: Sequence[str]
+) -> list[dict[str, Any]]:
+    """Each rule against the first of `goals`, per stream, arm and criterion, paired."""
+    arms = dict.fromkeys(r["condition"].split("/")[0].split(":", 1)[1] for r in records)
+    out = []
+    for stream in streams:
+        for arm in arms:
+            for goal in goals[1:]:
+                for key in CRITERIA:
+                    a, b = f"{goal}:{arm}", f"{goals[0]}:{arm}"
+                    out.append(paired(records, a, b, stream, key) | {"arm": arm})
+    return out
+
+
+def what_it_shows(comps: Sequence[Mapping[str, Any]]) -> str:
+    """Per rule, the paired differences beyond chance (Bonferroni) and which way they go."""
+    level = ALPHA / max(len(comps), 1)
+    sig = [c for c in comps if c["p"] < level]
+    total = {}
+    for c in comps:
+        total.setdefault((c["piles"].split(":")[0], c["criterion"]), []).append(c)
+    pooled = "; ".join(
+        f"{goal} against {cs[0]['against'].split(':')[0]}, {CRITERIA[key]}: "
+        f"{sum(c['only_piles'] for c in cs)} episodes won only by it, "
+        f"{sum(c['only_against'] for c in cs)} lost only by it"
+        for (goal, key), cs in total.items()
+    )
+    if not sig:
+        return (
+            f"No paired difference beyond chance (McNemar, Bonferroni level {level:.3g} over "
+            f"{len(comps)}). Summed over streams and arms: {pooled}."
+        )
+    cells = "; ".join(
+        f"{c['difference_points']:+.1f} points {CRITERIA[c['criterion']]}, {c['arm']} on "
+        f"{c['stream']} (p = {c['p']:.2g})"
+        for c in sig
+    )
+    return f"Beyond chance (McNemar, Bonferroni level {level:.3g}): {cells}. Summed: {pooled}."
+
+
+def markdown(result: Mapping[str, Any]) -> str:
+    c = result["config"]
+    lines = [
+        f"# Dev recheck: where the ch. 5 planner carries a blocker ({result['scale']} scale)",
+        "",
+        f"The planner with collapse prediction under each `trials.ch5.blocker_goal` rule, "
+        f"through the detector and the ground-truth clusters, and the oracle under the same "
+        f"rule, on dev streams (own seeds, never a table's scenes), {c['episodes']} episodes "
+        f"each; the params' rule is `{result['current']}`.",
+        "",
+        "| stream | rule | planner | perception | success | strict success | gave up "
+        "| below its oracle: success / strict (points) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in result["rows"]:
+        gap = (
+            "—"
+            if r["success_below_oracle_points"] is None
+            else f"{r['success_below_oracle_points']:.0f} / "
+            f"{r['strict_success_below_oracle_points']:.0f}"
+        )
+        lines.append(
+            f"| {r['stream']} | {r['goal']} | {r['planner']} | {r['perception']} | "
+            f"{_rate(r, 'success')} | {_rate(r, 'strict_success')} | {r['gave_up']} | {gap} |"
+        )
+    lines += [
+        "",
+        "## Paired, episode by episode",
+        "",
+        "| stream | arm | criterion | rule | won only by it | won only by the other "
+        "| difference (points) | McNemar p |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for p in result["comparisons"]:
+        lines.append(
+            f"| {p['stream']} | {p['arm']} | {CRITERIA[p['criterion']]} | "
+            f"{p['piles'].split(':')[0]} vs {p['against'].split(':')[0]} | {p['only_piles']} | "
+            f"{p['only_against']} | {p['difference_points']:+.1f} | {p['p']:.3f} |"
+        )
+    lines += [
+        "",
+        f"**What it shows.** {result['shows']}",
+        "",
+        "- success: collapse-free (the thesis' trial notion, trials/criteria.py); strict: also "
+        "no other box moved beyond trials.ch5.moved_threshold_m. Each rule's oracle simulates "
+        "the action set built with that rule.",
+        f"- {result['n_trials']} trials in {result['seconds'] / 60:.1f} min.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def ch5_goal(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
+    """Run the recheck of dev.ch5_goal; writes out_dir/ch5_goal.{json,md}."""
+    from clutterbench.trials.ch5 import run_ch5_episode
+    from clutterbench.trials.config import TrialsConfig
+    from clutterbench.trials.harness import run_episodes
+
+    started = time.perf_counter()
+    base = load_section(BaseConfig, "base", params)
+    dev = load_section(DevConfig, "dev", params)
+    trials = load_section(TrialsConfig, "trials", params)
+    check_dev_streams(dev, trials)
+    cfg = dev.ch5_goal
+    if not cfg.streams:
+        raise ClutterbenchError("dev.ch5_goal.streams: no dev stream to run on")
+    jobs = trial_jobs(dev, params)
+    results = run_episodes("dev ch5 goal", run_ch5_episode, jobs, trials.workers)
+    records = [r.record for r in results]
+    goals = [trials.ch5.blocker_goal] + [g for g in cfg.goals if g != trials.ch5.blocker_goal]
+    comps = comparisons(records, goals[::-1], cfg.streams)
+    result = {
+        "scale": base.scale,
+        "seed": base.seed,
+        "config": as_dict(cfg),
+        "streams": {s: as_dict(dev.streams[s]) for s in cfg.streams},
+        "current": trials.ch5.blocker_goal,
+        "rows": summary_rows(records),
+        "comparisons": comps,
+        "shows": what_it_shows(comps),
+        "n_trials": len(records),
+    }
+    result["seconds"] = time.perf_counter() - started
+    write_json(out_dir / "ch5_goal.json", result)
+    write_text(out_dir / "ch5_goal.md", markdown(result))
+    return result
+
+
+def main() -> None:
+    from clutterbench.stage import run_stage
+
+    def run(params: dict[str, Any], base: BaseConfig) -> None:
+        result = ch5_goal(params)
+        print(result["shows"])
+        print(f"-> {OUT / 'ch5_goal.md'} ({result['seconds'] / 60:.1f} min)")
+
+    run_stage(run)  # params.yaml, seeding and torch threads as every stage; errors: one line
+
+
+if __name__ == "__main__":
+    main()
