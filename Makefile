@@ -19,7 +19,7 @@ TORCH_PIP_ARGS := $(if $(TORCH_INDEX_URL),--index-url $(TORCH_INDEX_URL))
 TORCH_CHOICE := $(if $(filter-out torch==2.13.0,$(TORCH_SPEC))$(TORCH_INDEX_URL),echo '$(TORCH_SPEC) $(TORCH_INDEX_URL)';)
 STAMP := $(VENV)/.installed-$(shell ($(TORCH_CHOICE) cat requirements.lock pyproject.toml) 2>/dev/null | sha1sum | cut -c1-12)
 
-.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-goal clean-venv shell
+.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner clean-venv shell
 
 setup: system venv .dvc/config
 
@@ -81,12 +81,12 @@ designs: setup
 dev-ch4-piles: setup
 	python -m clutterbench.dev.ch4_piles
 
-# Where the ch. 5 planner carries a blocker, rechecked on dev streams (params dev.ch5_goal; ~3
-# min at default scale on 2 free cores, after dvc repro of trials_ch5's upstream): each
-# trials.ch5.blocker_goal rule with the detector's and the true clusters, and its oracle ->
-# reports/dev/ch5_goal.{json,md}
-dev-ch5-goal: setup
-	python -m clutterbench.dev.ch5_goal
+# How the ch. 5 planner carries a blocker, rechecked on dev streams (params dev.ch5_planner;
+# ~5 min at default scale on 2 free cores, after dvc repro of trials_ch5's upstream): each
+# variant of trials.ch5's blocker_goal / upright_footprint with the detector's and the true
+# clusters, and its oracle -> reports/dev/ch5_planner.{json,md}
+dev-ch5-planner: setup
+	python -m clutterbench.dev.ch5_planner
 
 clean-venv:
 	rm -rf $(VENV)

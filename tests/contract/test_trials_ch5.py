@@ -265,6 +265,58 @@ def test_a_leaning_box_is_carried_upright(lean_deg):
     assert abs(box_tilt(SIZE, world.poses()[0, 3:])[1]) < 0.5
 
 
+@pytest.mark.parametrize("lean_deg", [20.0, -25.0])
+def test_a_leaning_box_is_planned_with_its_upright_footprint(lean_deg):
+    """A lone leaning box (C^r / C^l) is carried set upright, so the planner plans its goal
+    and its way with its thickness across and its length up, from its front face alone."""
+    from clutterbench.planning.replenish import box_points, carried, place_clusters
+    from clutterbench.sim.geometry import quat_from_axis_angle, quat_mul
+
+    quat = quat_mul(quat_from_axis_angle([1, 0, 0], np.deg2rad(-lean_deg)), STANDING)
+    spec = SceneSpec(sizes_m=SIZE[None], poses=np.array([[0.1, 0.0, 0.08, *quat]]), camera=CAM)
+    state = SceneState.start(spec)
+    obs = observe(world_at(spec, state, PhysicsConfig(), render=True), CAM)
+    dets = ch5_perception.true_clusters(spec, state, PhysicsConfig(), obs)
+    assert [d.cls for d in dets] == ["C^l" if lean_deg > 0 else "C^r"]
+    space = ch5.space_of(spec)
+    points = box_points(obs, space)
+    (seen,) = place_clusters(obs, dets, space, points)
+    up = carried(seen, points, min_points=3)
+    thickness, length = SIZE[2], SIZE[1]
+    assert seen.rect_m[2] > thickness + 0.03  # leaning: wide as seen
+    assert up.rect_m[2] == pytest.approx(thickness, abs=0.006)
+    assert up.rect_m[3] == pytest.approx(length, abs=0.008)
+    assert up.rect_m[:2] == pytest.approx(seen.rect_m[:2], abs=0.01)
+    upright = dataclasses.replace(seen, cls="C^v")
+    assert carried(upright, points, min_points=3) is upright
+
+
+@pytest.mark.parametrize("upright", [True, False])
+def test_the_planner_and_the_oracle_plan_moves_with_the_upright_footprint_when_asked(
+    scene, monkeypatch, upright
+):
+    import clutterbench.planning.replenish as replenish
+    import clutterbench.trials.ch5_oracle as ch5_oracle
+
+    spec, _, obs, dets, _ = scene
+    calls = []
+    real = replenish.carried
+
+    def spy(cluster, points, min_points):
+        calls.append(cluster.index)
+        return real(cluster, points, min_points)
+
+    monkeypatch.setattr(replenish, "carried", spy)
+    monkeypatch.setattr(ch5_oracle, "carried", spy)
+    rp = ReplenishParams(finger_m=0.012, upright_footprint=upright)
+    space = ch5.space_of(spec)
+    ReplenishPlanner(rp, space).plan(obs, dets, NEW_BOX)
+    assert bool(calls) == upright
+    calls.clear()
+    ch5_oracle.action_set(obs, dets, NEW_BOX, rp, space)
+    assert bool(calls) == upright
+
+
 @pytest.mark.parametrize("tilt_deg", [0.0, 20.0])
 def test_a_tilted_box_on_a_stack_offers_no_place_on_top(tilt_deg):
     """A box lying tilted on a stack shows only a strip of top surface: a box let go there

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from typing import Literal
+from typing import Any, Literal
 
-from clutterbench.config import bounded
+from clutterbench.config import bounded, parse
 from clutterbench.errors import ClutterbenchError
 from clutterbench.trials.config import SceneStreamConfig, TrialsConfig
 
@@ -42,26 +42,45 @@ class Ch4PilesConfig:
             raise ValueError("ch4_piles.streams: no dev stream to run on")
 
 
+VARIED = ("blocker_goal", "upright_footprint")
+"""The trials.ch5 fields a ch. 5 planner variant may set."""
+
+
 @dataclasses.dataclass(frozen=True)
-class Ch5GoalConfig:
-    """The ch. 5 blocker-goal recheck (`python -m clutterbench.dev.ch5_goal`)."""
+class Ch5PlannerConfig:
+    """The ch. 5 planner recheck (`python -m clutterbench.dev.ch5_planner`)."""
 
     streams: tuple[str, ...] = ()
     """Dev streams of the ch. 5 trial families (keys of dev.streams; params.yaml names them)."""
-    goals: tuple[Literal["candidate", "eq_5_6"], ...] = ("eq_5_6", "candidate")
-    """The trials.ch5.blocker_goal rules compared."""
+    variants: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
+    """Name -> trials.ch5 fields it sets (VARIED); every variant is compared with the first."""
     perceptions: tuple[Literal["detector", "clusters"], ...] = ("detector", "clusters")
     """The planner's clusters: the trained detector's, the generator's ground truth, or both."""
     episodes: int = bounded(100, ge=1)
-    """Trials per rule, arm and stream."""
+    """Trials per variant, arm and stream."""
     oracle: bool = True
-    """Also each rule's oracle on the same scenes."""
+    """Also each variant's oracle on the same scenes."""
 
     def __post_init__(self) -> None:
-        if len(set(self.goals)) < 2:
-            raise ValueError("ch5_goal.goals: need two different rules to compare")
+        from clutterbench.trials.config import Ch5TrialParams
+
+        if self.variants and len(self.variants) < 2:
+            raise ValueError("ch5_planner.variants: need two or more variants to compare")
+        for name, over in self.variants.items():
+            if not isinstance(over, Mapping):
+                raise ValueError(f"ch5_planner.variants.{name}: a mapping of trials.ch5 fields")
+            for key in over:
+                if key not in VARIED:
+                    raise ValueError(
+                        f"ch5_planner.variants.{name}.{key}: a variant sets only "
+                        f"{', '.join(VARIED)}"
+                    )
+            try:
+                parse(Ch5TrialParams, dict(over), f"variants.{name}")
+            except ClutterbenchError as exc:
+                raise ValueError(str(exc)) from None
         if not self.perceptions:
-            raise ValueError("ch5_goal.perceptions: no perception to run the planner with")
+            raise ValueError("ch5_planner.perceptions: no perception to run the planner with")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,8 +91,8 @@ class DevConfig:
     """Dev stream name (dev_*) -> the scenes it draws, seeded from base.seed and its name."""
     ch4_piles: Ch4PilesConfig = Ch4PilesConfig()
     """The ch. 4 training-pile recheck."""
-    ch5_goal: Ch5GoalConfig = Ch5GoalConfig()
-    """The ch. 5 blocker-goal recheck."""
+    ch5_planner: Ch5PlannerConfig = Ch5PlannerConfig()
+    """The ch. 5 planner recheck (how a blocker is carried)."""
 
     def __post_init__(self) -> None:
         for name in self.streams:
@@ -81,7 +100,7 @@ class DevConfig:
                 raise ValueError(f"streams.{name}: a dev stream's name starts with '{DEV_PREFIX}'")
         for check, names in (
             ("ch4_piles", self.ch4_piles.streams),
-            ("ch5_goal", self.ch5_goal.streams),
+            ("ch5_planner", self.ch5_planner.streams),
         ):
             for name in names:
                 if name not in self.streams:

@@ -45,6 +45,11 @@ TOP_BAND_M = 0.005
 """A cluster's top surface: its points within this of its highest one."""
 SUPPORT_BAND_M = 0.015
 """A candidate off the floor rests on the box points within this under its bottom."""
+FRONT_BAND_M = 0.003
+"""A cluster's front face: its points within this of its nearest ones (5th percentile)."""
+RECT_FILL = 0.9
+"""A front face whose convex hull fills this share of its least rotated rectangle is that
+rectangle (one box, or boxes flush as one)."""
 
 CollapseMap = Callable[[Observation, np.ndarray], np.ndarray]
 """(observation, (H, W) bool target mask) -> (H, W) float collapse probability."""
@@ -74,6 +79,9 @@ class ReplenishParams:
     """False: the thesis' "without collapse prediction" variant (every blocker is movable)."""
     min_points: int = 3
     """A candidate is occupied when at least this many depth points of boxes fall in it."""
+    upright_footprint: bool = True
+    """A leaning cluster (C^r / C^l) is carried as it will stand once set upright (its front
+    face's upright rectangle, `carried`); False: as its leaning box is seen."""
     blocker_goal: BlockerGoal = "candidate"
     """Where a blocker is carried (`move_goal`): "candidate", aside until its near edge
     reaches the candidate's far edge; "eq_5_6", aside by eq. (5.6)'s w'/2 + w_s/2 + g
@@ -366,6 +374,35 @@ def path_blockers(
     return owners_by_count(owner[hit], len(clusters), min_points)
 
 
+def carried(cluster: Cluster, points: tuple[np.ndarray, np.ndarray], min_points: int) -> Cluster:
+    """`cluster` with the rectangle it will have when carried: a leaning one (C^r / C^l) is
+    set upright as it moves (thesis 5.2.3), about its centre, so its image-aligned rectangle
+    turns from the leaning box's (wide, low) to the upright one's (its thickness across, its
+    length up). Boxes lean about the camera's axis, so the front face stays a rectangle
+    facing the camera: the rectangle of least area around the face's depth points
+    (cv2.minAreaRect, points within FRONT_BAND_M of its nearest) gives the box's length and
+    thickness. A face seen as no clean rectangle (under 4 x min_points points, or its hull
+    filling under RECT_FILL of the rectangle: occluded, or a row of leaning boxes) keeps the
+    rectangle as seen, the conservative one. Other classes: unchanged."""
+    import cv2
+
+    if cluster.cls not in ("C^r", "C^l"):
+        return cluster
+    pts, on_box = points
+    p = pts[cluster.mask & on_box]
+    if len(p) < 4 * min_points:
+        return cluster
+    p = p[p[:, 0] <= np.percentile(p[:, 0], 5) + FRONT_BAND_M]
+    if len(p) < 4 * min_points:
+        return cluster
+    mm = (np.stack([-p[:, 1], -p[:, 2]], axis=1) * 1000.0).astype(np.float32)
+    (cx, cy), (a, b), _ = cv2.minAreaRect(mm)
+    if a * b <= 0 or cv2.contourArea(cv2.convexHull(mm)) < RECT_FILL * a * b:
+        return cluster
+    upright = np.array([cx, cy, min(a, b), max(a, b)]) / 1000.0
+    return dataclasses.replace(cluster, rect_m=upright)
+
+
 def candidates(
     obs: Observation,
     clusters: Sequence[Cluster],
@@ -456,6 +493,11 @@ class ReplenishPlanner:
     ):
         self.params, self.space, self.collapse_map = params, space, collapse_map
 
+    def _carried(self, cluster: Cluster, points: tuple[np.ndarray, np.ndarray]) -> Cluster:
+        if not self.params.upright_footprint:
+            return cluster
+        return carried(cluster, points, self.params.min_points)
+
     def _region(self, obs: Observation, cluster: Cluster) -> np.ndarray | None:
         if self.collapse_map is None or not self.params.use_collapse:
             return None
@@ -490,6 +532,7 @@ class ReplenishPlanner:
             regions[k.index] = self._region(obs, k)
         if not self._safe(regions[k.index], clusters, set(skip) | {s.index, k.index}):
             return None
+        k = self._carried(k, seen[0])
         goal_k = rearrange_goal(k.rect_m, s.rect_m, self.params.finger_m, s_goal)
         moved_k = np.array([goal_k[0], goal_k[1], k.rect_m[2], k.rect_m[3]])
         if not in_working_space(moved_k, self.space):
@@ -532,7 +575,7 @@ class ReplenishPlanner:
             if cand.occupants[0] < 0:
                 why_not[n] = "filled by no detected cluster"  # nothing to grasp
                 continue
-            s = clusters[cand.occupants[0]]  # B_s: the cluster filling it most
+            s = self._carried(clusters[cand.occupants[0]], points)  # B_s: filling it most
             if s.index == cand.cluster:
                 why_not[n] = "filled by its own cluster"  # nothing to move aside
                 continue

@@ -143,6 +143,7 @@ def planner_params(job: dict[str, Any]) -> ReplenishParams:
         use_collapse=job["cond"].planner == "replenish",
         min_points=p.min_points,
         blocker_goal=p.blocker_goal,
+        upright_footprint=p.upright_footprint,
     )
 
 

@@ -15,7 +15,9 @@ from clutterbench.planning.replenish import (
     Plan,
     ReplenishParams,
     WorkingSpace,
+    box_points,
     candidates,
+    carried,
     in_working_space,
     move_goal,
     new_box_extent_m,
@@ -39,17 +41,23 @@ def action_set(
     space: WorkingSpace,
 ) -> list[list[Plan]]:
     """Every action the planner could take from this observation, as step sequences: a
-    placement at every candidate; a blocker carried aside per eq. (5.6) and held while placing;
-    an obstacle of the blocker moved per eq. (5.9) first, then the same."""
-    clusters = place_clusters(obs, dets, space)
-    cands = candidates(obs, clusters, size_m, params, space)
+    placement at every candidate; a blocker carried aside as the planner would carry it
+    (move_goal and carried under params' blocker_goal / upright_footprint) and held while
+    placing; an obstacle of the blocker moved per eq. (5.9) first, then the same."""
+    points = box_points(obs, space)
+    clusters = place_clusters(obs, dets, space, points)
+    cands = candidates(obs, clusters, size_m, params, space, points)
+    if params.upright_footprint:  # as the planner carries them (planning.replenish.carried)
+        moved = [carried(c, points, params.min_points) for c in clusters]
+    else:
+        moved = clusters
     simple = [[Plan("simple", c, None)] for c in cands]
     held, first = [], []
     g = params.finger_m
     for c in cands:
         if not c.occupants or c.occupants[0] < 0 or c.occupants[0] == c.cluster:
             continue
-        s = clusters[c.occupants[0]]
+        s = moved[c.occupants[0]]
         w_new, h_new = new_box_extent_m(size_m, c.side)
         goal = move_goal(
             s.rect_m, c.side, w_new, h_new, g, c.rect_m if params.goal_from_candidate else None
@@ -58,7 +66,7 @@ def action_set(
             continue
         move_s = Move(s.index, s.box_px, s.rect_m[:2].copy(), goal, s.cls in ("C^r", "C^l"))
         held.append([Plan("bimanual", c, move_s)])
-        for k in clusters:
+        for k in moved:
             if k.index in (s.index, c.cluster):
                 continue
             goal_k = rearrange_goal(k.rect_m, s.rect_m, g, goal)

@@ -264,6 +264,9 @@ class Ch5TrialParams:
     """The oracle simulates at most this many candidate actions per decision."""
     min_points: int = bounded(3, ge=1)
     """A candidate is occupied when this many depth points of boxes fall inside it."""
+    upright_footprint: bool = True
+    """A leaning blocker or obstacle is planned with the footprint it has once set upright
+    (planning.replenish.carried); false: as its leaning box is seen."""
     blocker_goal: Literal["candidate", "eq_5_6"] = "candidate"
     """Where the planner carries a blocker (planning.replenish.move_goal): aside until it
     clears the candidate it fills, or by eq. (5.6)'s fixed distance."""

@@ -1,19 +1,24 @@
-"""Recheck on dev streams: where the ch. 5 planner carries a blocker.
+"""Recheck on dev streams: how the ch. 5 planner carries a blocker.
 
-    python -m clutterbench.dev.ch5_goal        # make dev-ch5-goal (~3 min at default scale)
+    python -m clutterbench.dev.ch5_planner     # make dev-ch5-planner (~5 min at default scale)
 
-Thesis eq. (5.6) carries a blocker B_s aside by w'/2 + w_s/2 + g, which clears the candidate
-it fills when B_s stands centred on it; off the centre it carries it too far (a goal outside
-the shelf) or not far enough. `trials.ch5.blocker_goal` chooses between eq. (5.6) as printed
-("eq_5_6") and carrying B_s until its near edge reaches the candidate's far edge
-("candidate"). This recheck runs the planner with collapse prediction under each rule on the
-dev streams of dev.ch5_goal.streams (own seeds, never a table's scenes), through the
-detector and through the generator's ground-truth clusters, and the oracle (whose action set
-uses the same rule) on the same scenes; the rules meet the same scenes, so they are compared
-episode by episode (McNemar's exact test).
+Two choices of `trials.ch5` decide where a blocker B_s goes when it is carried aside:
+- `blocker_goal`: thesis eq. (5.6) carries B_s by w'/2 + w_s/2 + g, which clears the candidate
+  it fills when B_s stands centred on it; off the centre it carries it too far (a goal outside
+  the shelf) or not far enough. "candidate" carries B_s until its near edge reaches the
+  candidate's far edge; "eq_5_6" is eq. (5.6) as printed.
+- `upright_footprint`: a leaning B_s (C^r / C^l) is set upright as it moves; true plans its goal
+  and its way with the footprint it will have upright (planning.replenish.carried), false with
+  the leaning box as seen.
+Each variant of dev.ch5_planner.variants sets some of them. This recheck runs the planner with
+collapse prediction under each variant on the dev streams of dev.ch5_planner.streams (own
+seeds, never a table's scenes), through the detector and through the generator's
+ground-truth clusters, and the oracle (whose action set is built the same way) on the same
+scenes; the variants meet the same scenes, so each is compared with the first episode by
+episode (McNemar's exact test).
 
 Reads the pipeline's models/detector, models/<trials.ch5.model> and the threshold evaluate@
-<model>_ch5 chose (dvc repro trials_ch5's upstream first). Writes reports/dev/ch5_goal.
+<model>_ch5 chose (dvc repro trials_ch5's upstream first). Writes reports/dev/ch5_planner.
 {json,md}; not a dvc stage.
 """
 
@@ -34,14 +39,15 @@ from clutterbench.io import write_json, write_text
 OUT = Path("reports/dev")
 
 
-def condition_label(goal: str, planner: str, perception: str) -> str:
-    return f"{goal}:{planner}:{perception}"
+def condition_label(variant: str, planner: str, perception: str) -> str:
+    return f"{variant}:{planner}:{perception}"
 
 
 def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]]:
-    """Every (stream, rule, arm) episode's job, condition "<rule>:<planner>:<perception>/
-    <stream>": the planner with collapse prediction through each perception, the oracle
-    through the ground-truth clusters (and the detector's actions, as in trials_ch5)."""
+    """Every (stream, variant, arm) episode's job, condition "<variant>:<planner>:
+    <perception>/<stream>": the planner with collapse prediction through each perception, the
+    oracle through the ground-truth clusters (and the detector's actions, as in trials_ch5),
+    each with trials.ch5 as params set it but for the variant's overrides."""
     from clutterbench.sim.config import SimConfig
     from clutterbench.trials.ch5 import ch5_jobs, check_models, collapse_threshold
     from clutterbench.trials.config import Ch5ConditionConfig, TrialsConfig
@@ -49,25 +55,25 @@ def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]
     base = load_section(BaseConfig, "base", params)
     trials = load_section(TrialsConfig, "trials", params)
     sim = load_section(SimConfig, "sim", params)
-    cfg = dev.ch5_goal
+    cfg = dev.ch5_planner
     arms = [("replenish", p) for p in cfg.perceptions] + [("oracle", "clusters")] * cfg.oracle
     conds = {
-        f"{condition_label(goal, planner, perception)}/{stream}": (
-            goal,
+        f"{condition_label(variant, planner, perception)}/{stream}": (
+            variant,
             Ch5ConditionConfig(planner, stream, cfg.episodes, perception),
         )
         for stream in cfg.streams
-        for goal in cfg.goals
+        for variant in cfg.variants
         for planner, perception in arms
     }
     check_models({k: c for k, (_, c) in conds.items()}, trials.ch5)
     prob = collapse_threshold(trials.ch5)
     jobs = []
-    for name, (goal, cond) in conds.items():
+    for name, (variant, cond) in conds.items():
         jobs += ch5_jobs(
             name,
             cond,
-            dataclasses.replace(trials.ch5, blocker_goal=goal),
+            dataclasses.replace(trials.ch5, **cfg.variants[variant]),
             dev.streams[cond.stream],
             base.seed,
             sim.physics,
@@ -84,23 +90,23 @@ def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]
 
 def summary_rows(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     """One row per condition: success and strict success (Wilson 95%), how the episodes
-    ended, and the points below the oracle of the same rule and stream."""
+    ended, and the points below the oracle of the same variant and stream."""
     from clutterbench.trials.stats import aggregate
 
     rows = []
     for r in aggregate(records).to_dict("records"):
         label, stream = r["condition"].split("/")
-        goal, planner, perception = label.split(":")
+        variant, planner, perception = label.split(":")
         mine = [x for x in records if x["condition"] == r["condition"]]
-        row = {"condition": r["condition"], "stream": stream, "goal": goal}
+        row = {"condition": r["condition"], "stream": stream, "variant": variant}
         row |= {"planner": planner, "perception": perception}
         for key in CRITERIA:
             row |= {f"{key}_{f}": _plain(r[f"{key}_{f}"]) for f in ("k", "n", "rate", "lo", "hi")}
         row["gave_up"] = sum(x["end"] == "gave_up" for x in mine)
         rows.append(row)
-    oracle = {(r["stream"], r["goal"]): r for r in rows if r["planner"] == "oracle"}
+    oracle = {(r["stream"], r["variant"]): r for r in rows if r["planner"] == "oracle"}
     for row in rows:
-        top = oracle.get((row["stream"], row["goal"]))
+        top = oracle.get((row["stream"], row["variant"]))
         for key in CRITERIA:
             gap = 100 * (top[f"{key}_rate"] - row[f"{key}_rate"]) if top else None
             row[f"{key}_below_oracle_points"] = None if row["planner"] == "oracle" else gap
@@ -108,32 +114,33 @@ def summary_rows(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
 
 
 def comparisons(
-    records: Sequence[Mapping[str, Any]], goals: Sequence[str], streams: Sequence[str]
+    records: Sequence[Mapping[str, Any]], variants: Sequence[str], streams: Sequence[str]
 ) -> list[dict[str, Any]]:
-    """Each rule against the first of `goals`, per stream, arm and criterion, paired."""
+    """Each variant against the first of `variants`, per stream, arm and criterion, paired."""
     arms = dict.fromkeys(r["condition"].split("/")[0].split(":", 1)[1] for r in records)
     out = []
     for stream in streams:
         for arm in arms:
-            for goal in goals[1:]:
+            for variant in variants[1:]:
                 for key in CRITERIA:
-                    a, b = f"{goal}:{arm}", f"{goals[0]}:{arm}"
+                    a, b = f"{variant}:{arm}", f"{variants[0]}:{arm}"
                     out.append(paired(records, a, b, stream, key) | {"arm": arm})
     return out
 
 
 def what_it_shows(comps: Sequence[Mapping[str, Any]]) -> str:
-    """Per rule, the paired differences beyond chance (Bonferroni) and which way they go."""
+    """The paired differences beyond chance (Bonferroni), and per variant the episodes it wins
+    and loses against the first, summed over streams and arms."""
     level = ALPHA / max(len(comps), 1)
     sig = [c for c in comps if c["p"] < level]
     total = {}
     for c in comps:
         total.setdefault((c["piles"].split(":")[0], c["criterion"]), []).append(c)
     pooled = "; ".join(
-        f"{goal} against {cs[0]['against'].split(':')[0]}, {CRITERIA[key]}: "
+        f"{variant} against {cs[0]['against'].split(':')[0]}, {CRITERIA[key]}: "
         f"{sum(c['only_piles'] for c in cs)} episodes won only by it, "
         f"{sum(c['only_against'] for c in cs)} lost only by it"
-        for (goal, key), cs in total.items()
+        for (variant, key), cs in total.items()
     )
     if not sig:
         return (
@@ -141,8 +148,8 @@ def what_it_shows(comps: Sequence[Mapping[str, Any]]) -> str:
             f"{len(comps)}). Summed over streams and arms: {pooled}."
         )
     cells = "; ".join(
-        f"{c['difference_points']:+.1f} points {CRITERIA[c['criterion']]}, {c['arm']} on "
-        f"{c['stream']} (p = {c['p']:.2g})"
+        f"{c['piles'].split(':')[0]} {c['difference_points']:+.1f} points "
+        f"{CRITERIA[c['criterion']]}, {c['arm']} on {c['stream']} (p = {c['p']:.2g})"
         for c in sig
     )
     return f"Beyond chance (McNemar, Bonferroni level {level:.3g}): {cells}. Summed: {pooled}."
@@ -151,14 +158,15 @@ def what_it_shows(comps: Sequence[Mapping[str, Any]]) -> str:
 def markdown(result: Mapping[str, Any]) -> str:
     c = result["config"]
     lines = [
-        f"# Dev recheck: where the ch. 5 planner carries a blocker ({result['scale']} scale)",
+        f"# Dev recheck: how the ch. 5 planner carries a blocker ({result['scale']} scale)",
         "",
-        f"The planner with collapse prediction under each `trials.ch5.blocker_goal` rule, "
-        f"through the detector and the ground-truth clusters, and the oracle under the same "
-        f"rule, on dev streams (own seeds, never a table's scenes), {c['episodes']} episodes "
-        f"each; the params' rule is `{result['current']}`.",
+        f"The planner with collapse prediction under each variant of `trials.ch5` "
+        f"({_variants(c['variants'])}), through the detector and the ground-truth clusters, "
+        f"and the oracle under the same variant, on dev streams (own seeds, never a table's "
+        f"scenes), {c['episodes']} episodes each; the params' own: "
+        f"{result['current'] or 'none of them'}.",
         "",
-        "| stream | rule | planner | perception | success | strict success | gave up "
+        "| stream | variant | planner | perception | success | strict success | gave up "
         "| below its oracle: success / strict (points) |",
         "|---|---|---|---|---|---|---|---|",
     ]
@@ -170,14 +178,14 @@ def markdown(result: Mapping[str, Any]) -> str:
             f"{r['strict_success_below_oracle_points']:.0f}"
         )
         lines.append(
-            f"| {r['stream']} | {r['goal']} | {r['planner']} | {r['perception']} | "
+            f"| {r['stream']} | {r['variant']} | {r['planner']} | {r['perception']} | "
             f"{_rate(r, 'success')} | {_rate(r, 'strict_success')} | {r['gave_up']} | {gap} |"
         )
     lines += [
         "",
         "## Paired, episode by episode",
         "",
-        "| stream | arm | criterion | rule | won only by it | won only by the other "
+        "| stream | arm | criterion | variant | won only by it | won only by the other "
         "| difference (points) | McNemar p |",
         "|---|---|---|---|---|---|---|---|",
     ]
@@ -192,15 +200,30 @@ def markdown(result: Mapping[str, Any]) -> str:
         f"**What it shows.** {result['shows']}",
         "",
         "- success: collapse-free (the thesis' trial notion, trials/criteria.py); strict: also "
-        "no other box moved beyond trials.ch5.moved_threshold_m. Each rule's oracle simulates "
-        "the action set built with that rule.",
+        "no other box moved beyond trials.ch5.moved_threshold_m. Each variant's oracle "
+        "simulates the action set built the same way.",
         f"- {result['n_trials']} trials in {result['seconds'] / 60:.1f} min.",
     ]
     return "\n".join(lines) + "\n"
 
 
-def ch5_goal(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
-    """Run the recheck of dev.ch5_goal; writes out_dir/ch5_goal.{json,md}."""
+def _variants(variants: Mapping[str, Mapping[str, Any]]) -> str:
+    return "; ".join(
+        f"`{name}`: " + ", ".join(f"{k} {v}" for k, v in over.items())
+        for name, over in variants.items()
+    )
+
+
+def current_variant(variants: Mapping[str, Mapping[str, Any]], ch5: Any) -> str | None:
+    """The variant whose every override is what params already set (None: none is)."""
+    return next(
+        (n for n, over in variants.items() if all(getattr(ch5, k) == v for k, v in over.items())),
+        None,
+    )
+
+
+def ch5_planner(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
+    """Run the recheck of dev.ch5_planner; writes out_dir/ch5_planner.{json,md}."""
     from clutterbench.trials.ch5 import run_ch5_episode
     from clutterbench.trials.config import TrialsConfig
     from clutterbench.trials.harness import run_episodes
@@ -210,28 +233,27 @@ def ch5_goal(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
     dev = load_section(DevConfig, "dev", params)
     trials = load_section(TrialsConfig, "trials", params)
     check_dev_streams(dev, trials)
-    cfg = dev.ch5_goal
+    cfg = dev.ch5_planner
     if not cfg.streams:
-        raise ClutterbenchError("dev.ch5_goal.streams: no dev stream to run on")
+        raise ClutterbenchError("dev.ch5_planner.streams: no dev stream to run on")
     jobs = trial_jobs(dev, params)
-    results = run_episodes("dev ch5 goal", run_ch5_episode, jobs, trials.workers)
+    results = run_episodes("dev ch5 planner", run_ch5_episode, jobs, trials.workers)
     records = [r.record for r in results]
-    goals = [trials.ch5.blocker_goal] + [g for g in cfg.goals if g != trials.ch5.blocker_goal]
-    comps = comparisons(records, goals[::-1], cfg.streams)
+    comps = comparisons(records, list(cfg.variants), cfg.streams)
     result = {
         "scale": base.scale,
         "seed": base.seed,
         "config": as_dict(cfg),
         "streams": {s: as_dict(dev.streams[s]) for s in cfg.streams},
-        "current": trials.ch5.blocker_goal,
+        "current": current_variant(cfg.variants, trials.ch5),
         "rows": summary_rows(records),
         "comparisons": comps,
         "shows": what_it_shows(comps),
         "n_trials": len(records),
     }
     result["seconds"] = time.perf_counter() - started
-    write_json(out_dir / "ch5_goal.json", result)
-    write_text(out_dir / "ch5_goal.md", markdown(result))
+    write_json(out_dir / "ch5_planner.json", result)
+    write_text(out_dir / "ch5_planner.md", markdown(result))
     return result
 
 
@@ -239,9 +261,9 @@ def main() -> None:
     from clutterbench.stage import run_stage
 
     def run(params: dict[str, Any], base: BaseConfig) -> None:
-        result = ch5_goal(params)
+        result = ch5_planner(params)
         print(result["shows"])
-        print(f"-> {OUT / 'ch5_goal.md'} ({result['seconds'] / 60:.1f} min)")
+        print(f"-> {OUT / 'ch5_planner.md'} ({result['seconds'] / 60:.1f} min)")
 
     run_stage(run)  # params.yaml, seeding and torch threads as every stage; errors: one line
 
