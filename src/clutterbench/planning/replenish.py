@@ -383,7 +383,9 @@ def carried(cluster: Cluster, points: tuple[np.ndarray, np.ndarray], min_points:
     (cv2.minAreaRect, points within FRONT_BAND_M of its nearest) gives the box's length and
     thickness. A face seen as no clean rectangle (under 4 x min_points points, or its hull
     filling under RECT_FILL of the rectangle: occluded, or a row of leaning boxes) keeps the
-    rectangle as seen, the conservative one. Other classes: unchanged."""
+    rectangle as seen, the conservative one. Upright, a box is taller than it leant: where
+    it would dip below the floor it is raised onto it (the executor lifts it so). Other
+    classes: unchanged."""
     import cv2
 
     if cluster.cls not in ("C^r", "C^l"):
@@ -399,8 +401,9 @@ def carried(cluster: Cluster, points: tuple[np.ndarray, np.ndarray], min_points:
     (cx, cy), (a, b), _ = cv2.minAreaRect(mm)
     if a * b <= 0 or cv2.contourArea(cv2.convexHull(mm)) < RECT_FILL * a * b:
         return cluster
-    upright = np.array([cx, cy, min(a, b), max(a, b)]) / 1000.0
-    return dataclasses.replace(cluster, rect_m=upright)
+    across, up = min(a, b), max(a, b)
+    cy = min(cy, -up / 2)  # image-aligned y is down, the floor at 0: its bottom on the floor
+    return dataclasses.replace(cluster, rect_m=np.array([cx, cy, across, up]) / 1000.0)
 
 
 def candidates(
