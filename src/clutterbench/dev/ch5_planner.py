@@ -1,6 +1,6 @@
 """Recheck on dev streams: how the ch. 5 planner carries a blocker.
 
-    python -m clutterbench.dev.ch5_planner     # make dev-ch5-planner (~5 min at default scale)
+    python -m clutterbench.dev.ch5_planner     # make dev-ch5-planner (~8 min at default scale)
 
 Two choices of `trials.ch5` decide where a blocker B_s goes when it is carried aside:
 - `blocker_goal`: thesis eq. (5.6) carries B_s by w'/2 + w_s/2 + g, which clears the candidate
