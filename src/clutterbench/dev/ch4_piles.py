@@ -29,12 +29,12 @@ from pathlib import Path
 from typing import Any
 
 from clutterbench.config import BaseConfig, as_dict, load_section
+from clutterbench.dev.command import OUT, run_command, save
 from clutterbench.dev.config import Ch4PilesConfig, DevConfig, check_dev_streams
 from clutterbench.errors import ClutterbenchError
-from clutterbench.io import load_npz, read_json, write_json, write_text
+from clutterbench.io import load_npz, read_json, write_json
 
 SCRATCH = Path("data/dev/ch4_piles")
-OUT = Path("reports/dev")
 CRITERIA = {"success": "success", "strict_success": "strict success"}
 """Record key -> its name in the report: collapse-free (the thesis' notion), strict."""
 ALPHA = 0.05
@@ -461,21 +461,11 @@ def ch4_piles(
         "cpu": cpu_description(),
     }
     result["shows"] = what_it_shows(comparisons, rows, against)
-    result["seconds"] = time.perf_counter() - started
-    write_json(out_dir / "ch4_piles.json", result)
-    write_text(out_dir / "ch4_piles.md", markdown(result))
-    return result
+    return save(result, started, out_dir, "ch4_piles", markdown)
 
 
 def main() -> None:
-    from clutterbench.stage import run_stage
-
-    def run(params: dict[str, Any], base: BaseConfig) -> None:
-        result = ch4_piles(params)
-        print(result["shows"])
-        print(f"-> {OUT / 'ch4_piles.md'} ({result['seconds'] / 60:.1f} min)")
-
-    run_stage(run)  # params.yaml, seeding and torch threads as every stage; errors: one line
+    run_command(ch4_piles, "ch4_piles")
 
 
 if __name__ == "__main__":

@@ -32,11 +32,9 @@ from typing import Any
 
 from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.dev.ch4_piles import ALPHA, CRITERIA, _plain, _rate, paired
+from clutterbench.dev.command import OUT, run_command, save
 from clutterbench.dev.config import DevConfig, check_dev_streams
 from clutterbench.errors import ClutterbenchError
-from clutterbench.io import write_json, write_text
-
-OUT = Path("reports/dev")
 
 
 def condition_label(variant: str, planner: str, perception: str) -> str:
@@ -251,21 +249,11 @@ def ch5_planner(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any
         "shows": what_it_shows(comps),
         "n_trials": len(records),
     }
-    result["seconds"] = time.perf_counter() - started
-    write_json(out_dir / "ch5_planner.json", result)
-    write_text(out_dir / "ch5_planner.md", markdown(result))
-    return result
+    return save(result, started, out_dir, "ch5_planner", markdown)
 
 
 def main() -> None:
-    from clutterbench.stage import run_stage
-
-    def run(params: dict[str, Any], base: BaseConfig) -> None:
-        result = ch5_planner(params)
-        print(result["shows"])
-        print(f"-> {OUT / 'ch5_planner.md'} ({result['seconds'] / 60:.1f} min)")
-
-    run_stage(run)  # params.yaml, seeding and torch threads as every stage; errors: one line
+    run_command(ch5_planner, "ch5_planner")
 
 
 if __name__ == "__main__":
