@@ -82,9 +82,10 @@ dev-ch4-piles: setup
 	python -m clutterbench.dev.ch4_piles
 
 # How the ch. 5 planner carries a blocker, rechecked on dev streams (params dev.ch5_planner;
-# ~8 min at default scale on 2 cores, after dvc repro of trials_ch5's upstream): each
-# variant of trials.ch5's blocker_goal / upright_footprint with the detector's and the true
-# clusters, and its oracle -> reports/dev/ch5_planner.{json,md}
+# ~7 min at default scale on 2 cores, after dvc repro of trials_ch5's upstream): each
+# variant of trials.ch5's blocker_goal / upright_footprint, the thesis' planner and the one
+# that may push (contact), with the detector's and the true clusters, and its oracle
+# -> reports/dev/ch5_planner.{json,md}
 dev-ch5-planner: setup
 	python -m clutterbench.dev.ch5_planner
 

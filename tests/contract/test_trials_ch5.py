@@ -426,3 +426,112 @@ def test_shelved_starts_offer_no_free_place():
         classes = [d.cls for d in ch5_perception.true_clusters(spec, state, job["physics"], obs)]
         leaning += any(c in ("C^r", "C^l") for c in classes)
     assert leaning >= 4, leaning
+
+
+def walled_row() -> SceneSpec:
+    """crowded_row with one more box flush with each wall: a side box's only goal (beside
+    the candidate it fills) is where the wall box stands, so every carry pushes a box, and the
+    wall box cannot be rearranged beside that goal (it would leave the shelf)."""
+    ys = [-0.06, 0.0, 0.06, 0.102, -0.102, 0.15, -0.15]
+    poses = np.array([[0.1, y, 0.06, *STANDING] for y in ys])
+    return SceneSpec(
+        sizes_m=np.tile(SIZE, (7, 1)),
+        poses=poses,
+        camera=CAM,
+        meta={"groups": [[0, 1, 2], [3], [4], [5], [6]]},
+    )
+
+
+@pytest.mark.parametrize("planner", ["replenish", "contact", "no_collapse"])
+def test_a_planner_may_push_only_as_the_contact_rows_and_only_a_movable_blocker(planner):
+    """Beyond the thesis, Table 5.2's contact rows: where the thesis' planner gives up
+    because every blocker's way is blocked, `contact` carries the first blocker anyway (what
+    stands in its way is pushed) if its collapse region passes eq. (5.5), never one it
+    predicts unsafe; the thesis' rows (with and without prediction) keep the no-contact rule.
+    The oracle's action set holds the same carry, so it stays the ceiling."""
+    from clutterbench.planning.replenish import rect_mask
+    from clutterbench.trials.ch5_oracle import action_set
+
+    spec = walled_row()
+    physics = PhysicsConfig()
+    state = SceneState.start(spec)
+    obs = observe(world_at(spec, state, physics, render=True), CAM)
+    dets = ch5_perception.true_clusters(spec, state, physics, obs)
+    job = {"params": TrialsConfig().ch5, "prob_threshold": 0.5}
+    job["cond"] = Ch5ConditionConfig(planner=planner, stream="s")
+    rp, space = ch5.planner_params(job), ch5.space_of(spec)
+    assert rp.contact == (planner == "contact")
+    assert rp.use_collapse == (planner != "no_collapse")
+
+    def nothing_collapses(o, mask):
+        return np.zeros(o.depth_m.shape)
+
+    def everything_collapses(o, mask):
+        region = np.zeros(o.depth_m.shape, bool)
+        for d in dets:
+            region |= rect_mask(d.box, o.depth_m.shape)
+        return region.astype(float)
+
+    plan = ReplenishPlanner(rp, space, nothing_collapses).plan(obs, dets, NEW_BOX)
+    why = [w for w in plan.info["why_not"] if w]
+    if planner != "contact":
+        assert plan.branch == "none" and any("way blocked" in w for w in why), why
+        return
+    assert plan.branch == "contact" and plan.move is not None and plan.candidate is not None
+    assert plan.candidate.occupants[0] == plan.move.cluster != plan.candidate.cluster
+    ceiling = [
+        seq[0].move.goal_m
+        for seq in action_set(obs, dets, NEW_BOX, rp, space)
+        if len(seq) == 1 and seq[0].move is not None and seq[0].move.cluster == plan.move.cluster
+    ]
+    assert any(np.allclose(g, plan.move.goal_m) for g in ceiling)
+    unsafe = ReplenishPlanner(rp, space, everything_collapses).plan(obs, dets, NEW_BOX)
+    assert unsafe.branch == "none", "a blocker predicted to drop others was pushed"
+
+
+def test_the_no_contact_oracle_keeps_exactly_the_moves_the_thesis_planner_may_take(scene):
+    """oracle_no_contact simulates only actions that move no box into another: on the walled
+    row (every blocker's way blocked) no carry and no placement at an occupied candidate is
+    left, while the full action set has them; on the crowded row the thesis' planner's carry
+    is in it."""
+    from clutterbench.trials.ch5_oracle import action_set
+
+    rp = ReplenishParams(finger_m=0.012)
+    spec = walled_row()
+    physics = PhysicsConfig()
+    state = SceneState.start(spec)
+    obs = observe(world_at(spec, state, physics, render=True), CAM)
+    dets = ch5_perception.true_clusters(spec, state, physics, obs)
+    space = ch5.space_of(spec)
+    every = action_set(obs, dets, NEW_BOX, rp, space)
+    kept = action_set(obs, dets, NEW_BOX, rp, space, contact=False)
+    assert any(seq[0].branch == "bimanual" for seq in every)
+    assert any(seq[0].branch == "simple" for seq in every)
+    assert not [seq for seq in kept if seq[0].branch in ("simple", "bimanual")], kept
+    spec, _, obs, dets, _ = scene
+    plan = ReplenishPlanner(rp, ch5.space_of(spec)).plan(obs, dets, NEW_BOX)
+    assert plan.branch == "bimanual"
+    kept = action_set(obs, dets, NEW_BOX, rp, ch5.space_of(spec), contact=False)
+    assert all(seq[0].candidate is None or seq[0].candidate.free or seq[0].move for seq in kept)
+    assert any(
+        seq[0].move is not None
+        and seq[0].move.cluster == plan.move.cluster
+        and np.allclose(seq[0].move.goal_m, plan.move.goal_m)
+        for seq in kept
+    )
+
+
+@pytest.mark.parametrize("planner", ["oracle", "oracle_no_contact"])
+def test_each_oracle_searches_its_own_action_set(scene, monkeypatch, planner):
+    import clutterbench.trials.ch5_oracle as ch5_oracle
+
+    spec, state, obs, dets, physics = scene
+    asked = []
+    monkeypatch.setattr(ch5_oracle, "action_set", lambda *args: asked.append(args[-1]) or [])
+    job = {"params": TrialsConfig().ch5, "physics": physics}
+    job["cond"] = Ch5ConditionConfig(planner=planner, stream="s")
+    rp = ReplenishParams(finger_m=0.012)
+    seq, tried = ch5_oracle.oracle_choice(
+        spec, state, obs, [dets], NEW_BOX, rp, ch5.space_of(spec), job
+    )
+    assert asked == [planner == "oracle"] and seq[0].branch == "none" and tried == 0

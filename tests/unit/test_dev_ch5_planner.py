@@ -41,6 +41,8 @@ def _dev(**planner):
         (_dev(variants=V | {"c": {"blocker_goal": "far"}}), r"variants\.c\.blocker_goal: .far."),
         (_dev(variants=V | {"c": {"finger_m": 0.02}}), r"variants\.c\.finger_m: a variant sets"),
         (_dev(variants=V, perceptions=[]), "no perception"),
+        (_dev(variants=V, planners=[]), "no planner"),
+        (_dev(variants=V, planners=["replenish", "oracle"]), r"planners.*oracle"),
     ],
 )
 def test_bad_ch5_planner_params_are_one_line(data, message):
@@ -58,7 +60,8 @@ def test_jobs_run_each_variant_on_dev_streams_only(root, monkeypatch):
     cfg = dev.ch5_planner
     assert len(cfg.variants) >= 2
     jobs = trial_jobs(dev, params)
-    arms = len(cfg.perceptions) + cfg.oracle
+    assert "contact" in cfg.planners
+    arms = len(cfg.planners) * len(cfg.perceptions) + cfg.oracle
     assert len(jobs) == len(cfg.streams) * len(cfg.variants) * arms * cfg.episodes
     seen = set()
     for job in jobs:
@@ -72,7 +75,7 @@ def test_jobs_run_each_variant_on_dev_streams_only(root, monkeypatch):
             assert getattr(job["params"], key) == value and getattr(rp, key) == value
         assert (job["cond"].planner, job["cond"].perception) == (planner, perception)
     assert {v for _, v, _ in seen} == set(cfg.variants)
-    assert {p for _, _, p in seen} == {"replenish", "oracle"}
+    assert {p for _, _, p in seen} == set(cfg.planners) | {"oracle"}
     assert current_variant(cfg.variants, load_section(TrialsConfig, "trials", params).ch5)
 
 
@@ -95,6 +98,8 @@ def test_rows_comparisons_and_report_from_records():
         "mine:replenish:clusters": [True, True, True, False],
         "thesis:oracle:clusters": [True] * 4,
         "mine:oracle:clusters": [True] * 3 + [False],
+        "thesis:contact:clusters": [True, True, False, False],
+        "mine:contact:clusters": [True, True, True, False],
     }
     records = [r for label, w in wins.items() for r in _records(label, "dev_a", w)]
     rows = summary_rows(records)
@@ -102,13 +107,22 @@ def test_rows_comparisons_and_report_from_records():
     assert below[("thesis", "replenish")] == 75.0  # against its own variant's oracle
     assert below[("mine", "replenish")] == 0.0
     assert below[("thesis", "oracle")] is None
-    assert [r["gave_up"] for r in rows] == [3, 1, 0, 1]
-    comps = comparisons(records, ["thesis", "mine"], ["dev_a"])
+    assert [r["gave_up"] for r in rows] == [3, 1, 0, 1, 2, 1]
+    comps = comparisons(records, ["thesis", "mine"], ["dev_a"], ["replenish", "contact"])
     planner = [c for c in comps if c["arm"] == "replenish:clusters" and c["criterion"] == "success"]
     assert planner[0]["only_piles"] == 2 and planner[0]["only_against"] == 0
     assert planner[0]["difference_points"] == 50.0
+    push = {
+        c["name"]: c
+        for c in comps
+        if c["criterion"] == "success" and c["other"].endswith(":replenish")
+    }
+    assert set(push) == {"thesis:contact", "mine:contact"}
+    assert (push["thesis:contact"]["only_piles"], push["thesis:contact"]["only_against"]) == (1, 0)
+    assert push["mine:contact"]["only_piles"] == push["mine:contact"]["only_against"] == 0
     shows = what_it_shows(comps)
-    assert "mine against thesis, success: 2 episodes won only by it, 1 lost" in shows
+    assert "mine against thesis, success: 3 episodes won only by it, 1 lost" in shows
+    assert "thesis:contact against thesis:replenish, success: 1 episodes won only by it" in shows
     result = {
         "scale": "tiny",
         "config": {"episodes": 4, "variants": {"thesis": {"blocker_goal": "eq_5_6"}}},
@@ -122,4 +136,6 @@ def test_rows_comparisons_and_report_from_records():
     text = markdown(result)
     assert "| dev_a | mine | replenish | clusters | 3/4" in text
     assert "| dev_a | replenish:clusters | success | mine vs thesis | 2 | 0 | +50.0 |" in text
+    row = "| dev_a | clusters | success | thesis:contact vs thesis:replenish | 1 | 0 | +25.0 |"
+    assert row in text
     assert "`thesis`: blocker_goal eq_5_6" in text

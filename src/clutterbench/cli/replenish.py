@@ -38,7 +38,7 @@ def replenish(
         str,
         typer.Option(
             "--planner",
-            help="replenish (with collapse prediction) | no_collapse | random | oracle",
+            help="replenish (with collapse prediction) | no_collapse | contact | random | oracle",
         ),
     ] = "replenish",
     perception: Annotated[
@@ -98,7 +98,7 @@ def replenish(
             load_section(TrialsConfig, "trials", params) if "trials" in params else TrialsConfig()
         )
         model_path = default_path(model, f"models/{trials.ch5.model}/best.pt")
-        if planner == "replenish":
+        if planner in ch5.COLLAPSE_PLANNERS:
             require_file(model_path, "--model", f"`dvc repro train@{trials.ch5.model}` makes it")
         detector = default_path(None, "models/detector/best.pt")
         if perception == "detector":
@@ -131,8 +131,8 @@ def replenish(
         obs = observe(BoxWorld.from_spec(spec, physics, render=True), spec.camera)
         dets = ch5_perception.perceive(job, spec, state, obs)
         out: dict[str, Any] = {"box_mm": [w * 1000, d * 1000, h * 1000], "planner": planner}
-        if planner in ("replenish", "no_collapse"):
-            cmap = ch5_perception.collapse_map_fn(job) if planner == "replenish" else None
+        if planner in ch5.PLANNERS:
+            cmap = ch5_perception.collapse_map_fn(job) if planner in ch5.COLLAPSE_PLANNERS else None
             plan = ReplenishPlanner(ch5.planner_params(job), ch5.space_of(spec), cmap).plan(
                 obs, dets, size_m
             )

@@ -1,6 +1,6 @@
-"""Recheck on dev streams: how the ch. 5 planner carries a blocker.
+"""Recheck on dev streams: how the ch. 5 planner carries a blocker, and whether it may push.
 
-    python -m clutterbench.dev.ch5_planner     # make dev-ch5-planner (~8 min at default scale)
+    python -m clutterbench.dev.ch5_planner     # make dev-ch5-planner (~7 min at default scale)
 
 Two choices of `trials.ch5` decide where a blocker B_s goes when it is carried aside:
 - `blocker_goal`: thesis eq. (5.6) carries B_s by w'/2 + w_s/2 + g, which clears the candidate
@@ -10,12 +10,14 @@ Two choices of `trials.ch5` decide where a blocker B_s goes when it is carried a
 - `upright_footprint`: a leaning B_s (C^r / C^l) is set upright as it moves; true plans its goal
   and its way with the footprint it will have upright (planning.replenish.carried), false with
   the leaning box as seen.
-Each variant of dev.ch5_planner.variants sets some of them. This recheck runs the planner with
-collapse prediction under each variant on the dev streams of dev.ch5_planner.streams (own
-seeds, never a table's scenes), through the detector and through the generator's
-ground-truth clusters, and the oracle (whose action set is built the same way) on the same
-scenes; the variants meet the same scenes, so each is compared with the first episode by
-episode (McNemar's exact test).
+Each variant of dev.ch5_planner.variants sets some of them. Beyond the thesis, the planner
+`contact` (trials_ch5's contact_* rows) carries a movable blocker although boxes stand in its
+way, where the thesis' planner has no plan (it gives up). This recheck runs each planner of
+dev.ch5_planner.planners under each variant on the dev streams of dev.ch5_planner.streams (own
+seeds, never a table's scenes), through the detector and through the generator's ground-truth
+clusters, and the oracle (whose action set is built the same way) on the same scenes; all
+meet the same scenes, so each variant is compared with the first, and under each variant each
+planner with the first, episode by episode (McNemar's exact test).
 
 Reads the pipeline's models/detector, models/<trials.ch5.model> and the threshold evaluate@
 <model>_ch5 chose (dvc repro trials_ch5's upstream first). Writes reports/dev/ch5_planner.
@@ -43,9 +45,9 @@ def condition_label(variant: str, planner: str, perception: str) -> str:
 
 def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]]:
     """Every (stream, variant, arm) episode's job, condition "<variant>:<planner>:
-    <perception>/<stream>": the planner with collapse prediction through each perception, the
-    oracle through the ground-truth clusters (and the detector's actions, as in trials_ch5),
-    each with trials.ch5 as params set it but for the variant's overrides."""
+    <perception>/<stream>": each planner through each perception, the oracle through the
+    ground-truth clusters (and the detector's actions, as in trials_ch5), each with trials.ch5
+    as params set it but for the variant's overrides."""
     from clutterbench.sim.config import SimConfig
     from clutterbench.trials.ch5 import ch5_jobs, check_models, collapse_threshold
     from clutterbench.trials.config import Ch5ConditionConfig, TrialsConfig
@@ -54,7 +56,8 @@ def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]
     trials = load_section(TrialsConfig, "trials", params)
     sim = load_section(SimConfig, "sim", params)
     cfg = dev.ch5_planner
-    arms = [("replenish", p) for p in cfg.perceptions] + [("oracle", "clusters")] * cfg.oracle
+    arms = [(a, p) for a in cfg.planners for p in cfg.perceptions]
+    arms += [("oracle", "clusters")] * cfg.oracle
     conds = {
         f"{condition_label(variant, planner, perception)}/{stream}": (
             variant,
@@ -112,33 +115,49 @@ def summary_rows(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
 
 
 def comparisons(
-    records: Sequence[Mapping[str, Any]], variants: Sequence[str], streams: Sequence[str]
+    records: Sequence[Mapping[str, Any]],
+    variants: Sequence[str],
+    streams: Sequence[str],
+    planners: Sequence[str] = ("replenish",),
 ) -> list[dict[str, Any]]:
-    """Each variant against the first of `variants`, per stream, arm and criterion, paired."""
+    """Each variant against the first of `variants`, per stream, arm and criterion; then under
+    each variant, each planner against the first of `planners`, per perception; paired."""
     arms = dict.fromkeys(r["condition"].split("/")[0].split(":", 1)[1] for r in records)
-    out = []
-    for stream in streams:
-        for arm in arms:
-            for variant in variants[1:]:
-                for key in CRITERIA:
-                    a, b = f"{variant}:{arm}", f"{variants[0]}:{arm}"
-                    out.append(paired(records, a, b, stream, key) | {"arm": arm})
-    return out
+    perceptions = dict.fromkeys(a.split(":")[1] for a in arms if not a.startswith("oracle:"))
+    pairs = (
+        [  # (label a, label b, arm, a's name, b's name)
+            (f"{v}:{arm}", f"{variants[0]}:{arm}", arm, v, variants[0])
+            for arm in arms
+            for v in variants[1:]
+        ]
+        + [
+            (f"{v}:{p}:{seen}", f"{v}:{planners[0]}:{seen}", seen, f"{v}:{p}", f"{v}:{planners[0]}")
+            for v in variants
+            for p in planners[1:]
+            for seen in perceptions
+        ]
+    )
+    return [
+        paired(records, a, b, stream, key) | {"arm": arm, "name": name, "other": other}
+        for stream in streams
+        for a, b, arm, name, other in pairs
+        for key in CRITERIA
+    ]
 
 
 def what_it_shows(comps: Sequence[Mapping[str, Any]]) -> str:
-    """The paired differences beyond chance (Bonferroni), and per variant the episodes it wins
-    and loses against the first, summed over streams and arms."""
+    """The paired differences beyond chance (Bonferroni), and per variant (or planner under a
+    variant) the episodes it wins and loses against the first, summed over streams and arms."""
     level = ALPHA / max(len(comps), 1)
     sig = [c for c in comps if c["p"] < level]
     total = {}
     for c in comps:
-        total.setdefault((c["piles"].split(":")[0], c["criterion"]), []).append(c)
+        total.setdefault((c["name"], c["criterion"]), []).append(c)
     pooled = "; ".join(
-        f"{variant} against {cs[0]['against'].split(':')[0]}, {CRITERIA[key]}: "
+        f"{name} against {cs[0]['other']}, {CRITERIA[key]}: "
         f"{sum(c['only_piles'] for c in cs)} episodes won only by it, "
         f"{sum(c['only_against'] for c in cs)} lost only by it"
-        for (variant, key), cs in total.items()
+        for (name, key), cs in total.items()
     )
     if not sig:
         return (
@@ -146,7 +165,7 @@ def what_it_shows(comps: Sequence[Mapping[str, Any]]) -> str:
             f"{len(comps)}). Summed over streams and arms: {pooled}."
         )
     cells = "; ".join(
-        f"{c['piles'].split(':')[0]} {c['difference_points']:+.1f} points "
+        f"{c['name']} {c['difference_points']:+.1f} points "
         f"{CRITERIA[c['criterion']]}, {c['arm']} on {c['stream']} (p = {c['p']:.2g})"
         for c in sig
     )
@@ -158,7 +177,9 @@ def markdown(result: Mapping[str, Any]) -> str:
     lines = [
         f"# Dev recheck: how the ch. 5 planner carries a blocker ({result['scale']} scale)",
         "",
-        f"The planner with collapse prediction under each variant of `trials.ch5` "
+        f"The planners {', '.join(c.get('planners', ['replenish']))} (trials_ch5's: "
+        f"replenish with collapse prediction; contact also pushes what stands in a movable "
+        f"blocker's way where it has no plan) under each variant of `trials.ch5` "
         f"({_variants(c['variants'])}), through the detector and the ground-truth clusters, "
         f"and the oracle under the same variant, on dev streams (own seeds, never a table's "
         f"scenes), {c['episodes']} episodes each; the params' own: "
@@ -183,14 +204,14 @@ def markdown(result: Mapping[str, Any]) -> str:
         "",
         "## Paired, episode by episode",
         "",
-        "| stream | arm | criterion | variant | won only by it | won only by the other "
+        "| stream | arm | criterion | compared | won only by it | won only by the other "
         "| difference (points) | McNemar p |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for p in result["comparisons"]:
         lines.append(
             f"| {p['stream']} | {p['arm']} | {CRITERIA[p['criterion']]} | "
-            f"{p['piles'].split(':')[0]} vs {p['against'].split(':')[0]} | {p['only_piles']} | "
+            f"{p['name']} vs {p['other']} | {p['only_piles']} | "
             f"{p['only_against']} | {p['difference_points']:+.1f} | {p['p']:.3f} |"
         )
     lines += [
@@ -237,7 +258,7 @@ def ch5_planner(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any
     jobs = trial_jobs(dev, params)
     results = run_episodes("dev ch5 planner", run_ch5_episode, jobs, trials.workers)
     records = [r.record for r in results]
-    comps = comparisons(records, list(cfg.variants), cfg.streams)
+    comps = comparisons(records, list(cfg.variants), cfg.streams, cfg.planners)
     result = {
         "scale": base.scale,
         "seed": base.seed,

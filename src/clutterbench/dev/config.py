@@ -54,6 +54,10 @@ class Ch5PlannerConfig:
     """Dev streams of the ch. 5 trial families (keys of dev.streams; params.yaml names them)."""
     variants: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
     """Name -> trials.ch5 fields it sets (VARIED); every variant is compared with the first."""
+    planners: tuple[Literal["replenish", "contact"], ...] = ("replenish",)
+    """The planners run under every variant (trials.config.CH5_PLANNERS): the thesis' with
+    collapse prediction, and the one that may push what stands in a blocker's way; each is
+    compared with the first."""
     perceptions: tuple[Literal["detector", "clusters"], ...] = ("detector", "clusters")
     """The planner's clusters: the trained detector's, the generator's ground truth, or both."""
     episodes: int = bounded(100, ge=1)
@@ -79,6 +83,8 @@ class Ch5PlannerConfig:
                 parse(Ch5TrialParams, dict(over), f"variants.{name}")
             except ClutterbenchError as exc:
                 raise ValueError(str(exc)) from None
+        if not self.planners:
+            raise ValueError("ch5_planner.planners: no planner to run")
         if not self.perceptions:
             raise ValueError("ch5_planner.perceptions: no perception to run the planner with")
 

@@ -33,9 +33,11 @@ BlockerGoal = Literal["candidate", "eq_5_6"]
 SIDES_OF_CLASS: dict[str, tuple[Side, ...]] = {"C^h": ("top",), "C^v": ("left", "right")}
 """Thesis 5.2.3: B^top on a stacked cluster, B^left / B^right beside a shelved one; leaning
 clusters (C^r, C^l) offer no place, they are obstacles to move (and set upright)."""
-BRANCHES = ("simple", "bimanual", "rearrange", "none")
+BRANCHES = ("simple", "bimanual", "rearrange", "contact", "none")
 """Thesis Fig. 5.2: simple replenishment, bimanual replenishment, bimanual rearrangement (a
-move first, then a new plan), or no plan (the episode gives up)."""
+move first, then a new plan), or no plan (the episode gives up); beyond the thesis, with
+ReplenishParams.contact: a bimanual replenishment whose blocker pushes what stands in its way
+(`ReplenishPlanner`), in place of no plan."""
 SURFACE_MARGIN_M = 0.004
 """A depth point within this of the shelf's floor, back or side boards is the shelf, not a
 box."""
@@ -86,6 +88,11 @@ class ReplenishParams:
     """Where a blocker is carried (`move_goal`): "candidate", aside until its near edge
     reaches the candidate's far edge; "eq_5_6", aside by eq. (5.6)'s w'/2 + w_s/2 + g
     wherever it stands (the same when it stands centred on the candidate)."""
+
+    contact: bool = False
+    """Beyond the thesis: where it has no plan, carry the first blocker whose only fault is a
+    way blocked by other boxes (they are pushed), if it is movable (eq. 5.5, as any blocker);
+    False: the thesis' assumption that a moved object touches no other holds in every plan."""
 
     @property
     def goal_from_candidate(self) -> bool:
@@ -139,6 +146,13 @@ class Move:
     """(2,) p^goal."""
     upright: bool
     """Rotate the cluster upright as it moves (C^r / C^l, thesis 5.2.3)."""
+
+    @classmethod
+    def carrying(cls, cluster: Cluster, goal_m: np.ndarray) -> Move:
+        """`cluster` carried from where its rectangle stands to `goal_m`, set upright on the
+        way if it leans (C^r / C^l)."""
+        c = cluster
+        return cls(c.index, c.box_px, c.rect_m[:2].copy(), goal_m, c.cls in ("C^r", "C^l"))
 
     @property
     def translation_m(self) -> np.ndarray:
@@ -483,7 +497,9 @@ class ReplenishPlanner:
     """Thesis Fig. 5.2: simple replenishment if a candidate is free; else bimanual
     replenishment (move the one blocker B_s aside and hold it, if no other cluster's box
     overlaps its collapse region R_s by IoU th or more); else bimanual rearrangement (move the
-    cluster B_k that overlaps R_s most aside, if that is safe, then look again).
+    cluster B_k that overlaps R_s most aside, if that is safe, then look again); else, with
+    params.contact, a contact replenishment (a movable B_s carried although boxes stand in
+    its way, the first in candidate order); else no plan.
 
     `collapse_map` None or params.use_collapse False: the thesis' "without collapse
     prediction" variant, every blocker movable."""
@@ -542,7 +558,7 @@ class ReplenishPlanner:
             return None
         if path_blockers(*seen, clusters, k, goal_k, self.params.min_points):
             return None
-        move_k = Move(k.index, k.box_px, k.rect_m[:2].copy(), goal_k, k.cls in ("C^r", "C^l"))
+        move_k = Move.carrying(k, goal_k)
         return Plan("rearrange", None, move_k, {"obstacle": k.index})
 
     def plan(self, obs: Observation, detections: Sequence[Detection], size_m: np.ndarray) -> Plan:
@@ -571,6 +587,7 @@ class ReplenishPlanner:
                 return Plan("simple", cand, None, info | {"candidate": cands.index(cand)})
         regions: dict[int, np.ndarray | None] = {}
         rearrange: Plan | None = None
+        touching: list[tuple[int, Cluster, Move]] = []  # movable but for its way
         g = self.params.finger_m
         why_not = info["why_not"] = ["" for _ in cands]  # why no bimanual plan, per candidate
         seen = (points, owner)
@@ -593,6 +610,8 @@ class ReplenishPlanner:
             in_way = path_blockers(*seen, clusters, s, goal, self.params.min_points)
             if in_way:  # carrying B_s there would push another box: make way first
                 why_not[n] = f"blocker's way blocked by {in_way[0]}"
+                if self.params.contact:
+                    touching.append((n, s, Move.carrying(s, goal)))
                 if rearrange is None and in_way[0] >= 0 and in_way[0] not in skip:
                     k = clusters[in_way[0]]
                     rearrange = self._rearrange(obs, seen, clusters, k, s, goal, regions)
@@ -602,7 +621,7 @@ class ReplenishPlanner:
             if s.index not in regions:  # its collapse map: only once its way is clear
                 regions[s.index] = self._region(obs, s)
             region = regions[s.index]
-            move = Move(s.index, s.box_px, s.rect_m[:2].copy(), goal, s.cls in ("C^r", "C^l"))
+            move = Move.carrying(s, goal)
             if self._safe(region, clusters, skip):
                 return Plan("bimanual", cand, move, info | {"candidate": n, "blocker": s.index})
             why_not[n] = "blocker's collapse region overlaps another cluster"
@@ -617,6 +636,11 @@ class ReplenishPlanner:
                     rearrange.info.update(info | {"candidate": n, "blocker": s.index})
         if rearrange is not None:
             return rearrange
+        for n, s, move in touching:  # contact: the first movable blocker, its way pushed
+            if s.index not in regions:
+                regions[s.index] = self._region(obs, s)
+            if self._safe(regions[s.index], clusters, {s.index, cands[n].cluster}):
+                return Plan("contact", cands[n], move, info | {"candidate": n, "blocker": s.index})
         return Plan("none", None, None, info)
 
 

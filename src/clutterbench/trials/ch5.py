@@ -140,11 +140,18 @@ def planner_params(job: dict[str, Any]) -> ReplenishParams:
         finger_m=p.finger_m,
         prob_threshold=job["prob_threshold"],
         iou_threshold=p.iou_threshold,
-        use_collapse=job["cond"].planner == "replenish",
+        use_collapse=job["cond"].planner in COLLAPSE_PLANNERS,
         min_points=p.min_points,
         blocker_goal=p.blocker_goal,
         upright_footprint=p.upright_footprint,
+        contact=job["cond"].planner == "contact",
     )
+
+
+PLANNERS = ("replenish", "no_collapse", "contact")
+"""The conditions planned by planning.replenish (the others: ch5_oracle's action set)."""
+COLLAPSE_PLANNERS = ("replenish", "contact")
+"""Those that predict collapse (a collapse map network)."""
 
 
 def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = None):
@@ -159,8 +166,8 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
     space = space_of(spec)
     rp = planner_params(job)
     planner = None
-    if cond.planner in ("replenish", "no_collapse"):
-        cmap = collapse_map_fn(job) if cond.planner == "replenish" else None
+    if cond.planner in PLANNERS:
+        cmap = collapse_map_fn(job) if cond.planner in COLLAPSE_PLANNERS else None
         planner = ReplenishPlanner(rp, space, cmap)
     state = SceneState.start(spec)
     world = world_at(spec, state, physics, render=True)
@@ -252,7 +259,7 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
     }
     if end == "gave_up":  # why no candidate had a plan (planning/replenish.py why_not)
         record["gave_up_why"] = gave_up_why
-    if cond.planner == "oracle":
+    if cond.planner in ("oracle", "oracle_no_contact"):
         record["simulated"] = simulated
     return EpisodeResult(_rounded(record), log)
 
@@ -368,7 +375,7 @@ def collapse_threshold(params: Ch5TrialParams) -> float:
 
 
 def check_models(conds: dict[str, Ch5ConditionConfig], params: Ch5TrialParams) -> None:
-    if any(c.planner == "replenish" for c in conds.values()):
+    if any(c.planner in COLLAPSE_PLANNERS for c in conds.values()):
         if not Path(f"models/{params.model}/best.pt").exists():
             raise ClutterbenchError(
                 f"models/{params.model}/best.pt missing; run train@{params.model}"

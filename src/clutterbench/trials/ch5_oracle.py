@@ -21,6 +21,8 @@ from clutterbench.planning.replenish import (
     in_working_space,
     move_goal,
     new_box_extent_m,
+    owner_map,
+    path_blockers,
     place_clusters,
     rearrange_goal,
 )
@@ -39,19 +41,33 @@ def action_set(
     size_m: np.ndarray,
     params: ReplenishParams,
     space: WorkingSpace,
+    contact: bool = True,
 ) -> list[list[Plan]]:
     """Every action the planner could take from this observation, as step sequences: a
     placement at every candidate; a blocker carried aside as the planner would carry it
     (move_goal and carried under params' blocker_goal / upright_footprint) and held while
-    placing; an obstacle of the blocker moved per eq. (5.9) first, then the same."""
+    placing; an obstacle of the blocker moved per eq. (5.9) first, then the same.
+
+    `contact` False: only those that keep what they move off the other boxes (the thesis'
+    assumption, kept by the thesis' planners): no placement at an occupied candidate, no
+    carry whose way is blocked (planning.replenish.path_blockers; of a sequence, its first
+    move, the next is judged on a scene not yet seen)."""
     points = box_points(obs, space)
     clusters = place_clusters(obs, dets, space, points)
-    cands = candidates(obs, clusters, size_m, params, space, points)
+    owner = owner_map(obs, clusters)
+    cands = candidates(obs, clusters, size_m, params, space, points, owner)
     if params.upright_footprint:  # as the planner carries them (planning.replenish.carried)
         moved = [carried(c, points, params.min_points) for c in clusters]
     else:
         moved = clusters
-    simple = [[Plan("simple", c, None)] for c in cands]
+
+    def clear(m: Move) -> bool:
+        if contact:
+            return True
+        s = moved[m.cluster]
+        return not path_blockers(points, owner, clusters, s, m.goal_m, params.min_points)
+
+    simple = [[Plan("simple", c, None)] for c in cands if contact or c.free]
     held, first = [], []
     g = params.finger_m
     for c in cands:
@@ -64,16 +80,18 @@ def action_set(
         )
         if not in_working_space(np.array([*goal, *s.rect_m[2:]]), space):
             continue
-        move_s = Move(s.index, s.box_px, s.rect_m[:2].copy(), goal, s.cls in ("C^r", "C^l"))
-        held.append([Plan("bimanual", c, move_s)])
+        move_s = Move.carrying(s, goal)
+        if clear(move_s):
+            held.append([Plan("bimanual", c, move_s)])
         for k in moved:
             if k.index in (s.index, c.cluster):
                 continue
             goal_k = rearrange_goal(k.rect_m, s.rect_m, g, goal)
             if not in_working_space(np.array([*goal_k, *k.rect_m[2:]]), space):
                 continue
-            move_k = Move(k.index, k.box_px, k.rect_m[:2].copy(), goal_k, k.cls in ("C^r", "C^l"))
-            first.append([Plan("rearrange", None, move_k), Plan("bimanual", c, move_s)])
+            move_k = Move.carrying(k, goal_k)
+            if clear(move_k):
+                first.append([Plan("rearrange", None, move_k), Plan("bimanual", c, move_s)])
     return simple + held + first
 
 
@@ -92,7 +110,8 @@ def oracle_choice(
     state exactly as it would be executed, else the first that is collapse-free (a ceiling
     under each criterion: a strict success is collapse-free); none: the first one (it
     fails), or no plan."""
-    options = [seq for dets in views for seq in action_set(obs, dets, size_m, rp, space)]
+    contact = job["cond"].planner != "oracle_no_contact"
+    options = [seq for dets in views for seq in action_set(obs, dets, size_m, rp, space, contact)]
     params: Ch5TrialParams = job["params"]
     physics: PhysicsConfig = job["physics"]
     tried = 0

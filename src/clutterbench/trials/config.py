@@ -216,19 +216,22 @@ class Ch4TrialParams:
     """Episode drawn as thesis Fig. 4.8 by risk conditions in target mode."""
 
 
-CH5_PLANNERS = ("replenish", "no_collapse", "random", "oracle")
+CH5_PLANNERS = ("replenish", "no_collapse", "contact", "random", "oracle", "oracle_no_contact")
 """ch. 5 trial policies: the thesis' replenishment planner (Fig. 5.2) with collapse
 prediction; the same without it (no R_s test and no collapse check of a rearrangement, the
-way check kept: the thesis' comparison); an action drawn uniformly from the oracle's action set
-at every step (floor); every candidate action simulated from the current state, the first that
-succeeds kept (ceiling)."""
+way check kept: the thesis' comparison); beyond the thesis, the planner with collapse
+prediction that, where it has no plan, carries a movable blocker although boxes stand in its
+way (planning.replenish.ReplenishParams.contact); an action drawn uniformly from the oracle's
+action set at every step (floor); every candidate action simulated from the current state, the
+first that succeeds kept (ceiling); the same over the actions that move no box into another
+(the ceiling of the thesis' planners, which keep that rule)."""
 
 
 @dataclasses.dataclass(frozen=True)
 class Ch5ConditionConfig:
     """One chapter 5 replenishment condition (stage trials_ch5, thesis Table 5.2)."""
 
-    planner: Literal["replenish", "no_collapse", "random", "oracle"]
+    planner: Literal["replenish", "no_collapse", "contact", "random", "oracle", "oracle_no_contact"]
     """Policy (trials.config.CH5_PLANNERS)."""
     stream: str
     """Scene stream (a key of trials.streams)."""
