@@ -14,13 +14,12 @@ from clutterbench.dev.ch4_piles import (
     candidate_network,
     made_with,
     markdown,
-    mcnemar_p,
-    paired,
     summary_rows,
     trial_jobs,
     what_it_shows,
 )
 from clutterbench.dev.config import DevConfig, check_dev_streams
+from clutterbench.dev.stats import mcnemar_p, paired
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import save_npz, write_json
 from clutterbench.trials.config import TrialsConfig

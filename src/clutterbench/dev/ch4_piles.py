@@ -22,7 +22,6 @@ reports/dev/ch4_piles.{json,md}; not a dvc stage.
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -31,14 +30,11 @@ from typing import Any
 from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.dev.command import OUT, run_command, save
 from clutterbench.dev.config import Ch4PilesConfig, DevConfig, check_dev_streams
+from clutterbench.dev.stats import ALPHA, CRITERIA, paired, plain, rate_text
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import load_npz, read_json, write_json
 
 SCRATCH = Path("data/dev/ch4_piles")
-CRITERIA = {"success": "success", "strict_success": "strict success"}
-"""Record key -> its name in the report: collapse-free (the thesis' notion), strict."""
-ALPHA = 0.05
-"""Family-wise level of the paired tests (Bonferroni over every stream and criterion)."""
 
 
 def piles_label(piles: Sequence[int]) -> str:
@@ -174,41 +170,6 @@ def trial_jobs(
     return jobs
 
 
-def mcnemar_p(b: int, c: int) -> float:
-    """Two-sided exact McNemar p of paired binary outcomes: b pairs won by the first only, c
-    by the second only (a binomial test of b against (b + c) / 2)."""
-    n = b + c
-    if n == 0:
-        return 1.0
-    tail = sum(math.comb(n, i) for i in range(min(b, c) + 1)) / 2**n
-    return min(1.0, 2 * tail)
-
-
-def paired(records: Sequence[Mapping[str, Any]], a: str, b: str, stream: str, key: str) -> dict:
-    """Condition a against b on one stream under criterion `key`, episode by episode."""
-    outcome: dict[str, dict[int, bool]] = {a: {}, b: {}}
-    for r in records:
-        label, on = r["condition"].split("/")
-        if on == stream and label in outcome:
-            outcome[label][r["episode"]] = bool(r[key])
-    if outcome[a].keys() != outcome[b].keys():
-        raise ClutterbenchError(f"{stream}: piles {a} and {b} ran different episodes")
-    only_a = sum(outcome[a][e] and not outcome[b][e] for e in outcome[a])
-    only_b = sum(outcome[b][e] and not outcome[a][e] for e in outcome[a])
-    n = len(outcome[a])
-    return {
-        "stream": stream,
-        "criterion": key,
-        "piles": a,
-        "against": b,
-        "only_piles": only_a,
-        "only_against": only_b,
-        "episodes": n,
-        "difference_points": 100 * (only_a - only_b) / n if n else math.nan,
-        "p": mcnemar_p(only_a, only_b),
-    }
-
-
 def summary_rows(records: Sequence[Mapping[str, Any]], dev: DevConfig) -> list[dict[str, Any]]:
     """One row per condition: success and strict success with Wilson 95% intervals, the mean
     disturbed boxes, and the points below the oracle on the same stream."""
@@ -222,7 +183,7 @@ def summary_rows(records: Sequence[Mapping[str, Any]], dev: DevConfig) -> list[d
         s = dev.streams[stream]
         row |= {"n_objects": list(s.n_objects), "catalogue": s.catalogue}
         for key in CRITERIA:
-            row |= {f"{key}_{f}": _plain(r[f"{key}_{f}"]) for f in ("k", "n", "rate", "lo", "hi")}
+            row |= {f"{key}_{f}": plain(r[f"{key}_{f}"]) for f in ("k", "n", "rate", "lo", "hi")}
         row["mean_n_disturbed"] = float(r["mean_n_disturbed"])
         rows.append(row)
     oracle = {r["stream"]: r for r in rows if r["piles"] == "oracle"}
@@ -232,10 +193,6 @@ def summary_rows(records: Sequence[Mapping[str, Any]], dev: DevConfig) -> list[d
             gap = 100 * (top[f"{key}_rate"] - row[f"{key}_rate"]) if top else None
             row[f"{key}_below_oracle_points"] = None if row["piles"] == "oracle" else gap
     return rows
-
-
-def _plain(v: Any) -> Any:
-    return v.item() if hasattr(v, "item") else v
 
 
 def what_it_shows(
@@ -295,12 +252,6 @@ def what_it_shows(
 
 
 # -- the report ---------------------------------------------------------------------------------
-def _rate(row: Mapping[str, Any], key: str) -> str:
-    from clutterbench.trials.stats import Rate
-
-    return Rate(row[f"{key}_k"], row[f"{key}_n"]).text()
-
-
 def markdown(result: Mapping[str, Any]) -> str:
     from clutterbench.platform_info import instruction_set
 
@@ -347,7 +298,8 @@ def markdown(result: Mapping[str, Any]) -> str:
         lo, hi = r["n_objects"]
         lines.append(
             f"| {r['stream']} | {lo if lo == hi else f'{lo}-{hi}'} | {r['catalogue']} | "
-            f"{r['piles']} | {_rate(r, 'success')} | {_rate(r, 'strict_success')} | {gap} | "
+            f"{r['piles']} | {rate_text(r, 'success')} | {rate_text(r, 'strict_success')} | "
+            f"{gap} | "
             f"{r['mean_n_disturbed']:.2f} |"
         )
     lines += [

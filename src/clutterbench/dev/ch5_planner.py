@@ -33,9 +33,9 @@ from pathlib import Path
 from typing import Any
 
 from clutterbench.config import BaseConfig, as_dict, load_section
-from clutterbench.dev.ch4_piles import ALPHA, CRITERIA, _plain, _rate, paired
 from clutterbench.dev.command import OUT, run_command, save
 from clutterbench.dev.config import DevConfig, check_dev_streams
+from clutterbench.dev.stats import ALPHA, CRITERIA, paired, plain, rate_text
 from clutterbench.errors import ClutterbenchError
 
 
@@ -102,7 +102,7 @@ def summary_rows(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
         row = {"condition": r["condition"], "stream": stream, "variant": variant}
         row |= {"planner": planner, "perception": perception}
         for key in CRITERIA:
-            row |= {f"{key}_{f}": _plain(r[f"{key}_{f}"]) for f in ("k", "n", "rate", "lo", "hi")}
+            row |= {f"{key}_{f}": plain(r[f"{key}_{f}"]) for f in ("k", "n", "rate", "lo", "hi")}
         row["gave_up"] = sum(x["end"] == "gave_up" for x in mine)
         rows.append(row)
     oracle = {(r["stream"], r["variant"]): r for r in rows if r["planner"] == "oracle"}
@@ -198,7 +198,8 @@ def markdown(result: Mapping[str, Any]) -> str:
         )
         lines.append(
             f"| {r['stream']} | {r['variant']} | {r['planner']} | {r['perception']} | "
-            f"{_rate(r, 'success')} | {_rate(r, 'strict_success')} | {r['gave_up']} | {gap} |"
+            f"{rate_text(r, 'success')} | {rate_text(r, 'strict_success')} | "
+            f"{r['gave_up']} | {gap} |"
         )
     lines += [
         "",
