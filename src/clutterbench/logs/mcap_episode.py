@@ -35,6 +35,8 @@ from mcap.reader import make_reader
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
+from clutterbench.sim.geometry import matrix_to_quat
+
 DEPTH_TOPIC = "/camera/depth"
 INSTANCE_TOPIC = "/camera/instance"
 TF_TOPIC = "/tf"
@@ -129,29 +131,6 @@ def _add_cube(
     sx, sy, sz = np.asarray(size, dtype=np.float64).tolist()
     cube.size.x, cube.size.y, cube.size.z = sx, sy, sz
     cube.color.r, cube.color.g, cube.color.b, cube.color.a = (float(c) for c in rgba)
-
-
-def _quaternion_wxyz(R: np.ndarray) -> tuple[float, float, float, float]:
-    """Unit quaternion (w, x, y, z), w >= 0, of a rotation matrix (Shepperd's method)."""
-    m = np.asarray(R, dtype=np.float64)
-    trace = m[0, 0] + m[1, 1] + m[2, 2]
-    if trace > 0:
-        s = 2.0 * np.sqrt(1.0 + trace)
-        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
-    else:
-        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
-    quat = np.asarray(q) / np.linalg.norm(q)
-    if quat[0] < 0:
-        quat = -quat
-    w, x, y, z = (float(v) for v in quat)
-    return w, x, y, z
 
 
 class EpisodeWriter:
@@ -397,7 +376,7 @@ class EpisodeWriter:
         transform.child_frame_id = frame_id
         x, y, z = T[:3, 3].tolist()
         transform.translation.x, transform.translation.y, transform.translation.z = x, y, z
-        qw, qx, qy, qz = _quaternion_wxyz(T[:3, :3])
+        qw, qx, qy, qz = (float(v) for v in matrix_to_quat(T[:3, :3]))
         transform.rotation.x = qx
         transform.rotation.y = qy
         transform.rotation.z = qz
