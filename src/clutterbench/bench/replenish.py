@@ -4,9 +4,9 @@ Measured in one process (one core, the worker setting) on the first N_SCENES sce
 trial stream drawn from the bench's own seed (never the table's scenes): a scene's draw
 (drops, settling, redraws), a world built and observed, the detector's clusters, one collapse
 map (the ch. 5 network on one cluster), one plan (candidates, the blockers' ways and
-collapse maps), and whole episodes of the planner with collapse prediction and of the oracle
-(every candidate action simulated). Needs the detector, the ch. 5 collapse network and its
-validation threshold (the part is skipped, with a message, without them).
+collapse maps), and whole episodes of each of PLANNERS. Needs the detector, the ch. 5
+collapse network and its validation threshold (the part is skipped, with a message, without
+them).
 """
 
 from __future__ import annotations
@@ -22,6 +22,9 @@ from clutterbench.platform_info import cpu_description
 N_SCENES = 8
 SEED = 99
 TYPES = ("stacked", "shelved", "random")
+PLANNERS = ("replenish", "oracle", "contact", "oracle_no_contact")
+"""Whole episodes of: the planner with collapse prediction, the oracle, the planner that may
+push, the oracle over the actions that move no box into another (trials_ch5's rows)."""
 
 
 def _timed(fn, *args, **kwargs) -> tuple[object, float]:
@@ -61,7 +64,7 @@ def bench_ch5(out_dir: Path = Path("reports/bench")) -> dict:
     }
     episodes: dict[str, list[float]] = {}
     for scene_type in TYPES:
-        for planner in ("replenish", "oracle"):
+        for planner in PLANNERS:
             name = f"{planner}_{scene_type}"
             cond = trials.ch5_conditions[name]
             jobs = ch5.ch5_jobs(
