@@ -174,8 +174,9 @@ def table_5_2(
             "ceiling). It differs from the row with collapse prediction only in episodes that "
             "row gave up. The oracle over the actions that move no box into another simulates "
             "only those the thesis' planners may take (no placement at an occupied candidate, "
-            "no carry whose way is blocked): no planner that keeps the thesis' no-contact rule "
-            "can beat it, the contact rows can.",
+            "no carry whose way is blocked): a planner that keeps the thesis' no-contact rule "
+            "beats it only through the re-plan after a rearrangement, as it may the oracle "
+            "(below); the contact and random rows can.",
             free_start_note(cells),
             "arrangement clusters from: "
             + ", ".join(
