@@ -30,7 +30,15 @@ from typing import Any
 from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.dev.command import OUT, run_command, save
 from clutterbench.dev.config import Ch4PilesConfig, DevConfig, check_dev_streams
-from clutterbench.dev.stats import ALPHA, CRITERIA, paired, plain, rate_text
+from clutterbench.dev.stats import (
+    ALPHA,
+    CRITERIA,
+    below_oracle_text,
+    paired,
+    paired_cells,
+    plain,
+    rate_text,
+)
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import load_npz, read_json, write_json
 
@@ -289,12 +297,7 @@ def markdown(result: Mapping[str, Any]) -> str:
         "|---|---|---|---|---|---|---|---|",
     ]
     for r in result["rows"]:
-        gap = (
-            "—"
-            if r["success_below_oracle_points"] is None
-            else f"{r['success_below_oracle_points']:.0f} / "
-            f"{r['strict_success_below_oracle_points']:.0f}"
-        )
+        gap = below_oracle_text(r)
         lo, hi = r["n_objects"]
         lines.append(
             f"| {r['stream']} | {lo if lo == hi else f'{lo}-{hi}'} | {r['catalogue']} | "
@@ -312,8 +315,7 @@ def markdown(result: Mapping[str, Any]) -> str:
     ]
     for p in result["comparisons"]:
         lines.append(
-            f"| {p['stream']} | {CRITERIA[p['criterion']]} | {p['piles']} | {p['only_piles']} | "
-            f"{p['only_against']} | {p['difference_points']:+.1f} | {p['p']:.3f} |"
+            f"| {p['stream']} | {CRITERIA[p['criterion']]} | {p['piles']} | {paired_cells(p)}"
         )
     lines += [
         "",

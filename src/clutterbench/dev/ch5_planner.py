@@ -35,7 +35,15 @@ from typing import Any
 from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.dev.command import OUT, run_command, save
 from clutterbench.dev.config import DevConfig, check_dev_streams
-from clutterbench.dev.stats import ALPHA, CRITERIA, paired, plain, rate_text
+from clutterbench.dev.stats import (
+    ALPHA,
+    CRITERIA,
+    below_oracle_text,
+    paired,
+    paired_cells,
+    plain,
+    rate_text,
+)
 from clutterbench.errors import ClutterbenchError
 
 
@@ -190,12 +198,7 @@ def markdown(result: Mapping[str, Any]) -> str:
         "|---|---|---|---|---|---|---|---|",
     ]
     for r in result["rows"]:
-        gap = (
-            "—"
-            if r["success_below_oracle_points"] is None
-            else f"{r['success_below_oracle_points']:.0f} / "
-            f"{r['strict_success_below_oracle_points']:.0f}"
-        )
+        gap = below_oracle_text(r)
         lines.append(
             f"| {r['stream']} | {r['variant']} | {r['planner']} | {r['perception']} | "
             f"{rate_text(r, 'success')} | {rate_text(r, 'strict_success')} | "
@@ -212,8 +215,7 @@ def markdown(result: Mapping[str, Any]) -> str:
     for p in result["comparisons"]:
         lines.append(
             f"| {p['stream']} | {p['arm']} | {CRITERIA[p['criterion']]} | "
-            f"{p['name']} vs {p['other']} | {p['only_piles']} | "
-            f"{p['only_against']} | {p['difference_points']:+.1f} | {p['p']:.3f} |"
+            f"{p['name']} vs {p['other']} | {paired_cells(p)}"
         )
     lines += [
         "",

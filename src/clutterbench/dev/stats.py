@@ -58,3 +58,20 @@ def rate_text(row: Mapping[str, Any], key: str) -> str:
     from clutterbench.trials.stats import Rate
 
     return Rate(row[f"{key}_k"], row[f"{key}_n"]).text()
+
+
+def below_oracle_text(row: Mapping[str, Any]) -> str:
+    """A summary row's points below its oracle, "success / strict" ("—" for the oracle)."""
+    if row["success_below_oracle_points"] is None:
+        return "—"
+    return (
+        f"{row['success_below_oracle_points']:.0f} / "
+        f"{row['strict_success_below_oracle_points']:.0f}"
+    )
+
+
+def paired_cells(p: Mapping[str, Any]) -> str:
+    """A paired comparison's last table cells: won only by each side, the difference, p."""
+    return (
+        f"{p['only_piles']} | {p['only_against']} | {p['difference_points']:+.1f} | {p['p']:.3f} |"
+    )
