@@ -11,3 +11,9 @@ class ClutterbenchError(Exception):
 class ActionError(ClutterbenchError, ValueError):
     """An action an environment refuses (NaN, a box that is not there): one line naming it;
     a ValueError too, as gymnasium and ManiSkill expect of a bad action."""
+
+
+class PerceptionError(ClutterbenchError):
+    """What one observation could not give (say, a fit of the boxes that no scene can hold):
+    recorded in the episode or scene it belongs to and counted in its table, never the end of
+    a stage."""

@@ -6,10 +6,15 @@ spec may hold neither (sim/spec.py). So: every centre is moved inside the shelf 
 bounding box above the floor, inside the side and back walls), then the deepest overlapping
 pair is pushed apart along the axis that separates them fastest (the upper box lifted when
 that axis is mostly vertical, else both moved half-way), until no pair overlaps more than the
-spec allows; a box still overlapping after that is dropped (counted). The result passes
-`validate_spec`; then the scene settles briefly, and whether it came to rest is recorded: an
-estimated scene that does not stand still is itself information (a box balanced on a hidden
-support, a wrong size).
+spec allows; a box still overlapping after that is dropped (counted). A box whose centre is
+then still outside the shelf (in front of the opening: a fit too deep or pushed out; above the
+top board: a fit taller than the shelf), and a fit that is not a box (a size or pose that is
+not finite, a size that is not positive, a rotation that is no quaternion), is dropped too
+(counted as `outside` and `invalid`). So the repair is total:
+any fit gives a scene that passes `validate_spec` (tests/unit/test_estimated_repair.py feeds
+it adversarial fits). Then the scene settles briefly, and whether it came to rest is recorded:
+an estimated scene that does not stand still is itself information (a box balanced on a
+hidden support, a wrong size).
 """
 
 from __future__ import annotations
@@ -22,11 +27,30 @@ import numpy as np
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.geometry import box_aabb_half_extents, quat_to_matrix
 from clutterbench.sim.shelf import Shelf
-from clutterbench.sim.spec import MAX_PENETRATION_M, SceneSpec, deepest_overlap, validate_spec
+from clutterbench.sim.spec import (
+    MAX_PENETRATION_M,
+    QUAT_NORM_TOL,
+    SceneSpec,
+    deepest_overlap,
+    validate_spec,
+)
 
 GAP_M = 0.0005
 """Boxes pushed apart end this far apart (under the spec's 1 mm overlap)."""
 MAX_PUSHES = 60
+SHELF_TOL_M = 0.005
+"""How far a centre may lie outside the shelf's interior (Shelf.contains' default, which
+`validate_spec` applies)."""
+
+
+def is_box(size_m: np.ndarray, pose: np.ndarray) -> bool:
+    """Whether a fit can be a box of a spec: finite, positive sizes, a near-unit quaternion."""
+    size_m, pose = np.asarray(size_m, dtype=np.float64), np.asarray(pose, dtype=np.float64)
+    if size_m.shape != (3,) or pose.shape != (7,):
+        return False
+    if not (np.all(np.isfinite(size_m)) and np.all(np.isfinite(pose)) and np.all(size_m > 0)):
+        return False
+    return abs(float(np.linalg.norm(pose[3:])) - 1.0) <= QUAT_NORM_TOL
 
 
 @dataclasses.dataclass(frozen=True)
@@ -45,6 +69,10 @@ class EstimatedScene:
     """Overlapping pairs pushed apart."""
     off_shelf: int
     """Boxes whose centre left the shelf while settling."""
+    outside: int = 0
+    """Boxes dropped because the repair found them no place inside the shelf."""
+    invalid: int = 0
+    """Boxes dropped because the fit was no box (not finite, no positive size, no rotation)."""
 
     def info(self) -> dict[str, Any]:
         return {
@@ -52,6 +80,8 @@ class EstimatedScene:
             "settle_move_mm": round(1000 * self.settle_move_m, 2),
             "pushes": self.pushes,
             "dropped": int(self.spec.meta.get("given", 0)) - len(self.kept),
+            "outside": self.outside,
+            "invalid": self.invalid,
             "off_shelf": self.off_shelf,
         }
 
@@ -95,14 +125,26 @@ def resolve_overlaps(
     sizes_m: np.ndarray, poses: np.ndarray, shelf: Shelf
 ) -> tuple[np.ndarray, list[int], int]:
     """(poses, kept box indices, pairs pushed): overlapping boxes pushed apart, boxes that
-    still overlap after MAX_PUSHES dropped."""
+    still overlap after MAX_PUSHES dropped, then boxes whose centre is still outside the shelf
+    dropped. Every box must be a box (`is_box`; `repair` drops those that are not)."""
+    poses, kept, pushes, _ = _resolve(sizes_m, poses, shelf)
+    return poses, kept, pushes
+
+
+def _resolve(
+    sizes_m: np.ndarray, poses: np.ndarray, shelf: Shelf
+) -> tuple[np.ndarray, list[int], int, int]:
+    """resolve_overlaps, and how many boxes it dropped for having no place in the shelf."""
     poses = inside_shelf(sizes_m, poses, shelf)
     kept = list(range(len(poses)))
     pushes = 0
     while True:
         worst = deepest_overlap(sizes_m[kept], poses[kept])
         if worst is None:
-            return poses, kept, pushes
+            # dropping a box makes no new overlap, so the outside ones go last
+            inside = shelf.contains(poses[kept, :3], SHELF_TOL_M) if kept else []
+            placed = [k for k, ok in zip(kept, inside) if ok]
+            return poses, placed, pushes, len(kept) - len(placed)
         a, b, depth = kept[worst[0]], kept[worst[1]], worst[2]
         if pushes >= MAX_PUSHES:
             kept.remove(b)  # the later box of the worst pair
@@ -119,6 +161,32 @@ def resolve_overlaps(
         pushes += 1
 
 
+@dataclasses.dataclass(frozen=True)
+class Repair:
+    """What `repair` made of a fit: the poses (every box's, repaired where kept), the boxes
+    kept, and the counts of its changes."""
+
+    poses: np.ndarray
+    kept: list[int]
+    pushes: int
+    outside: int
+    """Boxes that are boxes, overlap nothing kept, and still found no place in the shelf."""
+    invalid: int
+
+
+def repair(sizes_m: np.ndarray, poses: np.ndarray, shelf: Shelf) -> Repair:
+    """Any fit (N boxes of any sizes and poses) -> poses and kept boxes a spec may hold: the
+    boxes that are no box dropped, quaternions normalized, then `resolve_overlaps`."""
+    sizes_m = np.asarray(sizes_m, dtype=np.float64).reshape(-1, 3)
+    poses = np.array(poses, dtype=np.float64).reshape(-1, 7)
+    boxes = [k for k in range(len(poses)) if is_box(sizes_m[k], poses[k])]
+    if not boxes:
+        return Repair(poses, [], 0, 0, len(poses))
+    fixed, kept, pushes, outside = _resolve(sizes_m[boxes], poses[boxes], shelf)
+    poses[boxes] = fixed
+    return Repair(poses, [boxes[k] for k in kept], pushes, outside, len(poses) - len(boxes))
+
+
 def estimated_scene(
     sizes_m: np.ndarray,
     poses: np.ndarray,
@@ -132,7 +200,8 @@ def estimated_scene(
     from clutterbench.sim.physics import BoxWorld
 
     sizes_m = np.asarray(sizes_m, dtype=np.float64).reshape(-1, 3)
-    fixed, kept, pushes = resolve_overlaps(sizes_m, np.asarray(poses, float), shelf)
+    fix = repair(sizes_m, poses, shelf)
+    fixed, kept, pushes = fix.poses, fix.kept, fix.pushes
     assert deepest_overlap(sizes_m[kept], fixed[kept]) is None
     spec = validate_spec(
         SceneSpec(
@@ -145,7 +214,7 @@ def estimated_scene(
         "estimated scene",
     )
     if spec.n == 0:
-        return EstimatedScene(spec, tuple(kept), True, 0.0, pushes, 0)
+        return EstimatedScene(spec, tuple(kept), True, 0.0, pushes, 0, fix.outside, fix.invalid)
     world = BoxWorld.from_spec(spec, physics)
     settled = world.settle(settle_s)
     moved = float(np.nanmax(world.displacements())) if spec.n else 0.0
@@ -153,4 +222,6 @@ def estimated_scene(
     off = int(np.sum(~shelf.contains(after[:, :3])))
     spec = dataclasses.replace(spec, poses=after)
     assert MAX_PENETRATION_M > GAP_M
-    return EstimatedScene(spec, tuple(kept), settled.at_rest, moved, pushes, off)
+    return EstimatedScene(
+        spec, tuple(kept), settled.at_rest, moved, pushes, off, fix.outside, fix.invalid
+    )
