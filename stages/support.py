@@ -86,7 +86,7 @@ def support(params: dict, base: BaseConfig) -> None:
         for sc in all_scenes(SCENES, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera):
             heat = predicted_heatmaps(sc, predictor)
             scene_rows, edges = evaluate_scene(sc, heat, chosen, p_edge, rng)
-            rows += scene_rows + [physics_depth.row(sc)]
+            rows += scene_rows + [physics_depth_row(physics_depth, sc, base.seed)]
             truth[str(sc.index)] = sorted(map(list, sc.true_edges))
             if len(panels) < cfg.figure_scenes:
                 panels.append(
@@ -119,6 +119,19 @@ def support(params: dict, base: BaseConfig) -> None:
     mean = scenes.groupby("method", sort=False)[["precision", "recall"]].mean()
     for method, r in mean.iterrows():
         print(f"support {method}: precision {r['precision']:.3f} recall {r['recall']:.3f}")
+
+
+def physics_depth_row(physics_depth: PhysicsDepthSupport, scene, seed: int) -> dict:
+    """The scene's physics-from-depth row: a perception failure is recorded in it
+    (PhysicsDepthSupport.row); anything else is a bug, one line naming the scene and seed."""
+    try:
+        return physics_depth.row(scene)
+    except ClutterbenchError as exc:
+        raise ClutterbenchError(f"support: test scene {scene.index}, seed {seed}: {exc}") from None
+    except Exception as exc:
+        raise ClutterbenchError(
+            f"support: test scene {scene.index}, seed {seed}: {type(exc).__name__}: {exc}"
+        ) from None
 
 
 if __name__ == "__main__":

@@ -147,3 +147,45 @@ def test_support_from_the_estimated_scene_finds_the_stack(stack3, physics):
     moved, info = estimated_moved(obs, [0, 1, 2], "same", 20, Shelf(), CAM, physics, 0.5, 0.005)
     assert info["at_rest"]
     assert moved[0, 1] and moved[0, 2] and not moved[2].any()
+
+
+def _refuse(*args, **kwargs):
+    from clutterbench.errors import ClutterbenchError
+
+    raise ClutterbenchError("estimated scene: box 7: centre [-0.0084, 0.0994, 0.083] m is outside")
+
+
+def test_a_perception_failure_is_recorded_in_the_episode_not_raised(stack3, monkeypatch):
+    """Issue 53: an observation the world model cannot make a scene of ends nothing: the
+    step records the failure, the planner pulls the target, the record counts it."""
+    import clutterbench.trials.physics_model as physics_model
+
+    monkeypatch.setattr(physics_model, "estimated_scene", _refuse)
+    rec = run_extraction(stack3, _job("physics_from_depth"), target=2).record
+    assert [s["box"] for s in rec["steps"]] == [2]  # the target, as without a plan
+    assert rec["perception_failed"] == 1
+    assert rec["estimate_dropped"] == [None]
+
+
+def test_a_perception_failure_in_table_6_2_is_a_row_not_an_end(stack3, physics, monkeypatch):
+    """The support stage's physics-from-depth row records a scene whose estimate failed."""
+    import clutterbench.trials.physics_model as physics_model
+
+    with pytest.raises(physics_model.PerceptionError, match="outside"):
+        monkeypatch.setattr(physics_model, "estimated_scene", _refuse)
+        obs = _observe(stack3, physics)
+        physics_model.estimated_moved(obs, [0, 1, 2], "same", 20, Shelf(), CAM, physics, 0.5, 0.01)
+    support = physics_model.PhysicsDepthSupport.__new__(physics_model.PhysicsDepthSupport)
+    sim = dataclasses.make_dataclass("Sim", ["camera", "physics"])(CAM, physics)
+    cfg = dataclasses.make_dataclass("Cfg", ["test", "min_pixels", "moved_threshold_m"])(
+        dataclasses.make_dataclass("Test", ["catalogue"])("same"), 20, 0.005
+    )
+    support.cfg, support.sim, support.settle_s, support.not_at_rest = cfg, sim, 0.5, 0
+    support.shelf, support.camera = Shelf(), obs.camera
+    masks = np.stack([obs.instance == k + 1 for k in range(3)])
+    scene = dataclasses.make_dataclass(
+        "Scene",
+        ["index", "family", "n_objects", "ids", "depth_m", "masks", "true_edges", "gaps_m"],
+    )(5, "stacked", 3, [0, 1, 2], obs.depth_m, masks, {(0, 1), (1, 2)}, None)
+    row = support.row(scene)
+    assert row["perception_failed"] == 1 and row["n_pred"] == 0 and row["n_true"] == 2

@@ -16,6 +16,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from clutterbench.errors import PerceptionError
 from clutterbench.observation import Observation
 from clutterbench.perception.box_fit import BoxEstimate
 from clutterbench.planning.extraction import Decision
@@ -28,7 +29,8 @@ None when no clean sequence was found; JSON-able info: search nodes, rest, ...).
 
 class PhysicsFromDepthPlanner:
     """Pull the first box of a clean sequence found by simulation in the estimated scene;
-    the target when none is found (or the target is not among the estimated boxes)."""
+    the target when none is found (or the target is not among the estimated boxes, or the
+    observation gave no model: a PerceptionError, recorded in the step)."""
 
     def __init__(self, estimate: EstimateFn, search: SearchFn, holding: bool):
         self.estimate, self.search, self.holding = estimate, search, holding
@@ -42,15 +44,20 @@ class PhysicsFromDepthPlanner:
         return "physics_from_depth_hold" if self.holding else "physics_from_depth"
 
     def decide(self, obs: Observation, target: int, blocked: frozenset[int]) -> Decision:
-        est = self.estimate(obs)
-        if self.first is None:
-            self.first = est
-        info: dict[str, Any] = {"policy": self.policy, "estimated": list(est.ids)}
-        t = est.index_of(target)
-        if t is None:  # the target is not seen well enough to fit: pull it
-            self.steps.append(info | {"target_missing": True})
-            return Decision(target, None, info | {"plan": None})
-        plan, found = self.search(est, t)
+        info: dict[str, Any] = {"policy": self.policy}
+        try:
+            est = self.estimate(obs)
+            if self.first is None:
+                self.first = est
+            info["estimated"] = list(est.ids)
+            t = est.index_of(target)
+            if t is None:  # the target is not seen well enough to fit: pull it
+                self.steps.append(info | {"target_missing": True})
+                return Decision(target, None, info | {"plan": None})
+            plan, found = self.search(est, t)
+        except PerceptionError as exc:  # this observation gave no model: pull the target
+            self.steps.append(info | {"perception_error": str(exc)})
+            return Decision(target, None, info | {"plan": None, "perception_error": str(exc)})
         info |= found
         self.steps.append(dict(info))
         if not plan:

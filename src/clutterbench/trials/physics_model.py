@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from clutterbench.errors import ClutterbenchError, PerceptionError
 from clutterbench.observation import Observation
 from clutterbench.perception.box_fit import BoxEstimate, fit_boxes
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
@@ -58,14 +59,8 @@ class EstimatedWorldModel:
         self.last: EstimatedScene | None = None
 
     def scene(self, est: BoxEstimate) -> EstimatedScene:
-        self.last = estimated_scene(
-            est.sizes_m,
-            est.poses,
-            est.ids,
-            self.shelf,
-            self.camera,
-            self.physics,
-            self.params.physics_depth_settle_s,
+        self.last = scene_of(
+            est, self.shelf, self.camera, self.physics, self.params.physics_depth_settle_s
         )
         return self.last
 
@@ -84,6 +79,19 @@ class EstimatedWorldModel:
             return None, info
         # back to the estimate's indices
         return [(scene.kept[p], None if h is None else scene.kept[h]) for (p, h), _ in plan], info
+
+
+def scene_of(
+    est: BoxEstimate, shelf: Shelf, camera: CameraConfig, physics: PhysicsConfig, settle_s: float
+) -> EstimatedScene:
+    """The estimate as a settled scene (sim/estimated.py, whose repair is total); anything a
+    world still refuses is this observation's PerceptionError, never the stage's end."""
+    try:
+        return estimated_scene(est.sizes_m, est.poses, est.ids, shelf, camera, physics, settle_s)
+    except PerceptionError:
+        raise
+    except ClutterbenchError as exc:
+        raise PerceptionError(f"estimated scene: {exc}") from None
 
 
 def catalogue_of(stream_catalogue: str) -> np.ndarray:
@@ -150,6 +158,10 @@ def estimate_record(planner: Any, spec: SceneSpec) -> dict[str, Any]:
         else None,
         "estimate_not_at_rest": sum(not e.get("at_rest", True) for e in est),
         "estimate_settle_mm": [e.get("settle_move_mm") for e in est],
+        # per decision: boxes the repair dropped (sim/estimated.py), of them outside the shelf
+        "estimate_dropped": [e.get("dropped") for e in est],
+        "estimate_outside": [e.get("outside") for e in est],
+        "perception_failed": sum("perception_error" in s for s in steps),
         "search_nodes": sum(
             int(s.get("strict_success_search_nodes", 0)) + int(s.get("success_search_nodes", 0))
             for s in steps
@@ -224,7 +236,7 @@ def estimated_moved(
     from clutterbench.sim.physics import BoxWorld
 
     est = make_estimator(catalogue, min_pixels)(obs)
-    scene = estimated_scene(est.sizes_m, est.poses, est.ids, shelf, camera, physics, settle_s)
+    scene = scene_of(est, shelf, camera, physics, settle_s)
     box_ids = [int(b) for b in scene.spec.meta["ids"]]
     at = {b: ids.index(b) for b in box_ids if b in ids}
     moved = np.zeros((len(ids), len(ids)), dtype=bool)
@@ -254,6 +266,8 @@ class PhysicsDepthSupport:
         self.not_at_rest = 0
 
     def row(self, scene: Any) -> dict[str, Any]:
+        """The scene's row of scenes.csv; a perception failure (PerceptionError) is recorded in
+        it (`perception_failed`, nothing inferred), never raised."""
         from clutterbench.planning.support import (
             edge_precision_recall,
             infer_support,
@@ -265,22 +279,28 @@ class PhysicsDepthSupport:
             instance[scene.masks[k]] = box + 1
         obs = Observation(depth_m=scene.depth_m, instance=instance, camera=self.camera)
         pred: set[tuple[int, int]] = set()
+        info: dict[str, Any] = {}
+        failed = 0
         if len(scene.ids) > 1:
-            moved, info = estimated_moved(
-                obs,
-                scene.ids,
-                self.cfg.test.catalogue,
-                self.cfg.min_pixels,
-                self.shelf,
-                self.sim.camera,
-                self.sim.physics,
-                self.settle_s,
-                self.cfg.moved_threshold_m,
-            )
-            self.not_at_rest += not info["at_rest"]
-            heat = oracle_heatmaps(moved, scene.masks)
-            found = infer_support(heat, scene.masks, scene.ids, self.params, scene.gaps_m)
-            pred = {(e.supporter, e.supported) for e in found}
+            try:
+                moved, info = estimated_moved(
+                    obs,
+                    scene.ids,
+                    self.cfg.test.catalogue,
+                    self.cfg.min_pixels,
+                    self.shelf,
+                    self.sim.camera,
+                    self.sim.physics,
+                    self.settle_s,
+                    self.cfg.moved_threshold_m,
+                )
+            except PerceptionError:
+                failed = 1
+            else:
+                self.not_at_rest += not info["at_rest"]
+                heat = oracle_heatmaps(moved, scene.masks)
+                found = infer_support(heat, scene.masks, scene.ids, self.params, scene.gaps_m)
+                pred = {(e.supporter, e.supported) for e in found}
         truth = scene.true_edges
         precision, recall = edge_precision_recall(pred, truth)
         return {
@@ -294,4 +314,7 @@ class PhysicsDepthSupport:
             "tp": len(pred & truth),
             "precision": precision,
             "recall": recall,
+            "est_dropped": int(info.get("dropped", 0)),
+            "est_outside": int(info.get("outside", 0)),
+            "perception_failed": failed,
         }
