@@ -19,7 +19,7 @@ TORCH_PIP_ARGS := $(if $(TORCH_INDEX_URL),--index-url $(TORCH_INDEX_URL))
 TORCH_CHOICE := $(if $(filter-out torch==2.13.0,$(TORCH_SPEC))$(TORCH_INDEX_URL),echo '$(TORCH_SPEC) $(TORCH_INDEX_URL)';)
 STAMP := $(VENV)/.installed-$(shell ($(TORCH_CHOICE) cat requirements.lock pyproject.toml) 2>/dev/null | sha1sum | cut -c1-12)
 
-.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner clean-venv shell
+.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner dev-perturbed-fit clean-venv shell
 
 setup: system venv .dvc/config
 
@@ -88,6 +88,12 @@ dev-ch4-piles: setup
 # -> reports/dev/ch5_planner.{json,md}
 dev-ch5-planner: setup
 	python -m clutterbench.dev.ch5_planner
+
+# No box fit raises out of a stage (issue 53): both physics-from-depth planners and Table
+# 6.2's row on dev scenes of the 3-10 stream with noisy depth (params dev.perturbed_fit; no
+# network needed) -> reports/dev/perturbed_fit.{json,md}
+dev-perturbed-fit: setup
+	python -m clutterbench.dev.perturbed_fit
 
 clean-venv:
 	rm -rf $(VENV)

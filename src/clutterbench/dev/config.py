@@ -90,6 +90,26 @@ class Ch5PlannerConfig:
 
 
 @dataclasses.dataclass(frozen=True)
+class PerturbedFitConfig:
+    """The perturbed-fit recheck (`python -m clutterbench.dev.perturbed_fit`, issue 53)."""
+
+    streams: tuple[str, ...] = ()
+    """Dev streams whose scenes it draws (params.yaml: dev_ch6_3_10)."""
+    seeds: tuple[int, ...] = (101, 102, 103)
+    """Seeds of the recheck's own (each draws other scenes of every stream)..."""
+    depth_noise_m: tuple[float, ...] = (0.001, 0.002, 0.004)
+    """... and the depth noise (standard deviation, m) of each seed's run."""
+    scenes: int = bounded(160, ge=1)
+    """Scenes per stream and seed."""
+
+    def __post_init__(self) -> None:
+        if not self.seeds or len(self.seeds) != len(self.depth_noise_m):
+            raise ValueError("perturbed_fit: give one depth_noise_m per seed")
+        if any(not 0.0 <= s < 0.05 for s in self.depth_noise_m):
+            raise ValueError("perturbed_fit.depth_noise_m: each in [0, 0.05) m")
+
+
+@dataclasses.dataclass(frozen=True)
 class DevConfig:
     """Dev streams and the rechecks run on them; no stage reads this section."""
 
@@ -99,6 +119,8 @@ class DevConfig:
     """The ch. 4 training-pile recheck."""
     ch5_planner: Ch5PlannerConfig = Ch5PlannerConfig()
     """The ch. 5 planner recheck (how a blocker is carried)."""
+    perturbed_fit: PerturbedFitConfig = PerturbedFitConfig()
+    """The perturbed-fit recheck (no box fit raises out of a stage)."""
 
     def __post_init__(self) -> None:
         for name in self.streams:
@@ -107,6 +129,7 @@ class DevConfig:
         for check, names in (
             ("ch4_piles", self.ch4_piles.streams),
             ("ch5_planner", self.ch5_planner.streams),
+            ("perturbed_fit", self.perturbed_fit.streams),
         ):
             for name in names:
                 if name not in self.streams:
