@@ -7,6 +7,7 @@ import pytest
 
 from clutterbench.dev.config import DevConfig, PerturbedFitConfig
 from clutterbench.observation import Observation
+from clutterbench.trials.config import SceneStreamConfig
 
 
 def test_noise_lands_on_depth_pixels_only_and_is_seeded():
@@ -25,4 +26,8 @@ def test_one_noise_level_per_seed():
     with pytest.raises(ValueError, match="one depth_noise_m per seed"):
         PerturbedFitConfig(seeds=(1, 2), depth_noise_m=(0.001,))
     with pytest.raises(ValueError, match="perturbed_fit.streams: unknown dev stream"):
-        DevConfig(perturbed_fit=PerturbedFitConfig(streams=("ch6_3_10",)))
+        stream = SceneStreamConfig(families={"pile": 1}, n_objects=(5, 5), catalogue="various")
+        DevConfig(
+            streams={"dev_ch4_10": stream, "dev_ch4_5": stream},
+            perturbed_fit=PerturbedFitConfig(streams=("ch6_3_10",)),
+        )
