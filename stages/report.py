@@ -23,6 +23,7 @@ from clutterbench.report.extraction import (
     trial_params_note,
 )
 from clutterbench.report.fig_3_15 import fig_3_15_table
+from clutterbench.report.summary import summary_table
 from clutterbench.report.support import support_table
 from clutterbench.report.table_4_1 import table_4_1, table_4_1_target
 from clutterbench.report.table_4_2 import table_4_2
@@ -160,6 +161,8 @@ def report(params: dict, base: BaseConfig) -> None:
             "(yamakuzushi.pomdp.when_no_state_fits, chosen on validation piles)"
         ],
     )
+    # last: the summary reads the tables above from their CSVs
+    summary_table(Path("reports/tables"), figures, cfg.table_6_2_methods, base.scale)
 
 
 if __name__ == "__main__":
