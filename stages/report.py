@@ -56,7 +56,7 @@ def report(params: dict, base: BaseConfig) -> None:
         for name, ds in gen.datasets.items()
     }
     # The report's metrics file also names the machine (CPU model, threads, versions): tables
-    # are byte-identical only on the same CPU model and thread count (README: Determinism).
+    # are byte-identical only on the same CPU model and thread count (docs/determinism.md).
     # Not among the outputs the smoke test compares byte for byte.
     write_json(
         Path("reports/metrics/datasets.json"),

@@ -448,7 +448,7 @@ def test_evaluate_agent_refuses_a_bad_agent_in_one_line(agent: str, message: str
 
 
 def test_evaluate_agent_writes_records_and_summary(tmp_path: Path) -> None:
-    """The README's random agent, one tiny episode: the trials' records and summary."""
+    """The random agent of docs/environments-guide.md, one tiny episode: records, summary."""
     example = Path(__file__).resolve().parents[2] / "docs" / "examples" / "random_agent.py"
     agent = f"{example}:make_agent"
     args = ["evaluate-agent", agent, "--episodes", "1", "--scale", "tiny", "--out", str(tmp_path)]

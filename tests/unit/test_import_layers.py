@@ -1,4 +1,4 @@
-"""One direction of imports in src/ (README "Architecture"): no module imports another that
+"""One direction of imports in src/ (docs/architecture.md): no module imports another that
 imports it back, however long the loop, and the arm level (maniskill/) stands below the
 trials, the planners and the report. Imports inside functions count: a lazy import is still a
 dependency that can break."""

@@ -1,4 +1,5 @@
-"""The results-at-a-glance table (report/summary.py) on made-up tables and thesis figures."""
+"""The results-at-a-glance table (report/summary.py) on made-up tables and thesis figures,
+and the README's copy of reports/tables/summary.md (byte for byte, so it cannot drift)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,9 @@ import pytest
 
 from clutterbench.errors import ClutterbenchError
 from clutterbench.report.summary import summary_markdown, summary_rows, summary_table
+
+ROOT = Path(__file__).resolve().parents[2]
+BEGIN, END = "<!-- summary:begin -->\n", "<!-- summary:end -->"
 
 FIGURES = {
     "fig_3_15": {
@@ -142,3 +146,11 @@ def test_summary_refuses_a_missing_or_ambiguous_table(tmp_path: Path):
         summary_rows(frames, FIGURES, {"iou": "the iou rule"})
     with pytest.raises(ClutterbenchError, match="missing"):
         summary_table(tmp_path, FIGURES, {"iou": "the iou rule"}, "tiny")
+
+
+def test_readme_embeds_the_summary_byte_for_byte():
+    readme = (ROOT / "README.md").read_text()
+    assert readme.count(BEGIN) == 1 and readme.count(END) == 1, "README: summary markers"
+    block = readme.split(BEGIN)[1].split(END)[0]
+    summary = (ROOT / "reports/tables/summary.md").read_text()
+    assert block == summary, "README's summary differs from reports/tables/summary.md: copy it"
