@@ -74,19 +74,10 @@ def run_job(job: dict[str, Any]) -> dict[str, Any]:
     """One scene: Table 6.2's row on its perturbed first image, then each planner's episode."""
     from clutterbench.sim.pull import SceneState, world_at
     from clutterbench.sim.render import observe
-    from clutterbench.trials.ch6 import run_extraction
+    from clutterbench.trials.ch6 import job_spec, run_extraction
     from clutterbench.trials.physics_model import estimated_moved
-    from clutterbench.trials.scenes import draw_trial_spec
 
-    spec = draw_trial_spec(
-        job["stream"],
-        job["stream_cfg"],
-        job["seed"],
-        job["index"],
-        job["physics"],
-        job["camera"],
-        job["max_attempts"],
-    )
+    spec = job_spec(job)
     obs = observe(
         world_at(spec, SceneState.start(spec), job["physics"], render=True), job["camera"]
     )

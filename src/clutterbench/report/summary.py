@@ -107,6 +107,20 @@ def _thesis_rows(figures: Mapping[str, Any], table: str) -> list[Mapping[str, An
     return list(figures[table].get("rows", []))
 
 
+def _rate_row(
+    table: str, page: str, quantity: str, thesis: Mapping[str, Any], ours: pd.Series
+) -> Row:
+    """A trials row: the thesis' rate beside ours under both criteria."""
+    return Row(
+        table,
+        page,
+        quantity,
+        thesis_rate_text(thesis) or "—",
+        rate_text(ours, "success") or "—",
+        rate_text(ours, "strict_success") or "—",
+    )
+
+
 def _fig_3_15(frames: Mapping[str, pd.DataFrame], figures: Mapping[str, Any]) -> list[Row]:
     frame, rows = frames["fig_3_15"], []
     for label, key in fig_3_15.VARIANTS.values():
@@ -139,13 +153,12 @@ def _table_4_1(frames: Mapping[str, pd.DataFrame], figures: Mapping[str, Any]) -
         method = table_4_1.METHODS[ours["method"]].label
         boxes = "total of 4 cells" if thesis["row"].endswith("/total") else ours["boxes"]
         rows.append(
-            Row(
+            _rate_row(
                 "table_4_1",
                 "ch4",
                 f"success, {method}, {boxes}",
-                thesis_rate_text(thesis) or "—",
-                rate_text(ours, "success") or "—",
-                rate_text(ours, "strict_success") or "—",
+                thesis,
+                ours,
             )
         )
     target = thesis_row(figures, table_4_1.TARGET_FIGURES, table_4_1.TARGET_THESIS_ROW)
@@ -155,13 +168,12 @@ def _table_4_1(frames: Mapping[str, pd.DataFrame], figures: Mapping[str, Any]) -
         )
         method = table_4_1.METHODS[table_4_1.TARGET_THESIS_METHOD].label
         rows.append(
-            Row(
+            _rate_row(
                 "table_4_1_target",
                 "ch4",
                 f"success, predetermined target, {method}",
-                thesis_rate_text(target) or "—",
-                rate_text(ours, "success") or "—",
-                rate_text(ours, "strict_success") or "—",
+                target,
+                ours,
             )
         )
     return rows
@@ -202,13 +214,12 @@ def _table_5_2(frames: Mapping[str, pd.DataFrame], figures: Mapping[str, Any]) -
         method, scene = thesis["row"].split("/")
         ours = _by(frames["table_5_2"], "table_5_2", method=method, scene=scene)
         rows.append(
-            Row(
+            _rate_row(
                 "table_5_2",
                 "ch5",
                 f"success, {table_5_2.METHODS[method]}, {scene}",
-                thesis_rate_text(thesis) or "—",
-                rate_text(ours, "success") or "—",
-                rate_text(ours, "strict_success") or "—",
+                thesis,
+                ours,
             )
         )
     return rows

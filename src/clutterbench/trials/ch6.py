@@ -135,9 +135,9 @@ def execute_decision(
     return record | arm_fields, state, elapsed
 
 
-def run_ch6_episode(job: dict[str, Any]) -> EpisodeResult:
-    """One ch. 6 extraction episode on scene `job["index"]` of its stream."""
-    spec = draw_trial_spec(
+def job_spec(job: dict[str, Any]) -> SceneSpec:
+    """The settled scene `job["index"]` of the job's stream."""
+    return draw_trial_spec(
         job["stream"],
         job["stream_cfg"],
         job["seed"],
@@ -146,7 +146,11 @@ def run_ch6_episode(job: dict[str, Any]) -> EpisodeResult:
         job["camera"],
         job["max_attempts"],
     )
-    return run_extraction(spec, job)
+
+
+def run_ch6_episode(job: dict[str, Any]) -> EpisodeResult:
+    """One ch. 6 extraction episode on scene `job["index"]` of its stream."""
+    return run_extraction(job_spec(job), job)
 
 
 def run_extraction(
