@@ -95,9 +95,9 @@ class PerturbedFitConfig:
 
     streams: tuple[str, ...] = ()
     """Dev streams whose scenes it draws (params.yaml: dev_ch6_3_10)."""
-    seeds: tuple[int, ...] = (101, 102, 103)
+    seeds: tuple[int, ...] = (101, 102, 103, 104)
     """Seeds of the recheck's own (each draws other scenes of every stream)..."""
-    depth_noise_m: tuple[float, ...] = (0.001, 0.002, 0.004)
+    depth_noise_m: tuple[float, ...] = (0.001, 0.002, 0.003, 0.004)
     """... and the depth noise (standard deviation, m) of each seed's run."""
     scenes: int = bounded(160, ge=1)
     """Scenes per stream and seed."""
