@@ -137,6 +137,11 @@ def test_get_state_set_state_round_trips(env_id):
     e.close()
 
 
+@pytest.fixture(scope="module")
+def stack3() -> SceneSpec:
+    return SceneSpec.load(STACK3)
+
+
 OBS_MODES = ["none", "state_dict", "sensor_data", "depth+segmentation", "depth", "rgbd"]
 
 
@@ -169,17 +174,13 @@ def test_other_obs_modes_are_refused_with_maniskills_error(stack3):
         gym.make("ClutterShelfExtract-v1", spec=stack3, obs_mode="normal")
 
 
-@pytest.fixture(scope="module")
-def stack3() -> SceneSpec:
-    return SceneSpec.load(STACK3)
-
-
 @pytest.mark.parametrize("env_id", MANISKILL_IDS)
 @pytest.mark.parametrize(
     "control_mode", ["pd_joint_delta_pos", "pd_joint_pos", "pd_ee_delta_pos", "pd_ee_delta_pose"]
 )
 def test_the_standard_control_modes_step(stack3, env_id, control_mode):
     e = gym.make(env_id, spec=stack3, target=2, control_mode=control_mode)
+    assert e.unwrapped.control_mode == control_mode
     e.reset(seed=0)
     for _ in range(2):
         obs, reward, *_ = e.step(e.action_space.sample())
