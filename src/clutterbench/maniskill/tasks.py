@@ -16,14 +16,17 @@ target; `scene_source=` plugs in another); the stream is
 `stream=` (a key of trials.streams, default ch6_3_10) or `family=` / `n_objects=` /
 `catalogue=`, as make kwargs or reset options (`scale=`: the params' scale profile). Box
 observations are then padded to MAX_BOXES (a padded slot is out of the scene), so the
-observation space stays fixed across scenes. Obs modes: SUPPORTED_OBS_MODES (the sensor modes
-render on the CPU backend). An action holding NaN is refused (ValueError).
+observation space stays fixed across scenes, as state dicts (box_0..box_29 always:
+get_state_dict). Obs modes: SUPPORTED_OBS_MODES (the sensor modes, and render_mode
+"rgb_array" / "sensors", render on the CPU backend). An action holding NaN is refused
+(ValueError). Every id's observation, action, info and episode end: docs/environments.md.
 
 `evaluate()` judges the scene as the project's judge does (trials/protocol.py), with the
 same function: `target_out` (the target is out of the shelf, in front of its opening),
 `others_still` (no box but the target and the held one moved beyond the threshold or left
-the shelf, measured from the episode's start), `released` (no tool holds a box) and
-`success` (all three). The sparse reward is `success`. The dense reward (reward_mode="dense")
+the shelf, measured from the episode's start), `released` (no tool holds a box),
+`success` (all three) and `fail` (another box moved: ManiSkill ends the episode on either).
+The sparse reward is `success`. The dense reward (reward_mode="dense")
 is the target's progress out of the shelf (0 at the start, 1 once its back face is past the
 opening) minus the other boxes' displacement (each box still in the scene: its displacement
 from the start over the moved threshold, capped at 1, averaged over those boxes; a box off
