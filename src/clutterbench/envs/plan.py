@@ -27,7 +27,8 @@ trials stage drives): executed by the kinematic executor from the step's canonic
 the held box released and the scene settled, judged from physics. `info` carries the step
 record's named booleans (protocol.STEP_FIELDS), `end` (protocol.EPISODE_ENDS, None while it
 goes on) and, once it ended, `episode` (the episode's named outcome: `success`, collapse-free,
-and `strict_success`). terminated: the protocol ended the episode; truncated: its attempt cap
+and `strict_success`): `info["success"]` is the step's, `info["episode"]["success"]` the
+episode's. terminated: the protocol ended the episode; truncated: its attempt cap
 (trials.ch6.max_steps). Reward (sparse): 1 on the step that ends a collapse-free success.
 `render_mode="rgb_array"`: the observation's depth image as grey (near: bright), boxes tinted.
 
