@@ -142,13 +142,37 @@ def stack3() -> SceneSpec:
     return SceneSpec.load(STACK3)
 
 
-OBS_MODES = ["none", "state_dict", "sensor_data", "depth+segmentation", "depth", "rgbd"]
+EXTRACT_OBS_MODES = [
+    "none",
+    "state_dict",
+    "sensor_data",
+    "rgb",
+    "depth",
+    "segmentation",
+    "rgbd",
+    "rgb+depth",
+    "rgb+segmentation",
+    "depth+segmentation",
+    "rgb+depth+segmentation",
+    "pointcloud",
+]
+BIMANUAL_OBS_MODES = ["none", "state_dict", "sensor_data", "depth+segmentation", "pointcloud"]
 
 
-@pytest.mark.parametrize("env_id", MANISKILL_IDS)
-@pytest.mark.parametrize("obs_mode", [*OBS_MODES, "pointcloud"])
+def test_the_obs_mode_test_covers_every_mode_listed():
+    from clutterbench.maniskill.tasks import ClutterShelfEnv
+
+    assert {"state", *EXTRACT_OBS_MODES} == set(ClutterShelfEnv.SUPPORTED_OBS_MODES)
+
+
+@pytest.mark.parametrize(
+    "env_id, obs_mode",
+    [("ClutterShelfExtract-v1", m) for m in EXTRACT_OBS_MODES]
+    + [("ClutterShelfBimanual-v1", m) for m in BIMANUAL_OBS_MODES],
+)
 def test_every_obs_mode_builds_and_steps(env_id, obs_mode):
-    """(state: the default, covered above.) On a hand-built 3-stack, as `spec=` still works."""
+    """(state: the default, covered above.) On a hand-built 3-stack, as `spec=` still works:
+    every mode the task lists with one arm, one of each kind with two."""
     e = gym.make(env_id, spec=SceneSpec.load(STACK3), target=2, obs_mode=obs_mode)
     assert obs_mode in e.unwrapped.SUPPORTED_OBS_MODES
     e.reset(seed=0)
@@ -156,13 +180,11 @@ def test_every_obs_mode_builds_and_steps(env_id, obs_mode):
         obs, *_ = e.step(e.action_space.sample())
     if obs_mode == "sensor_data":
         assert all(v.numel() for v in obs["sensor_data"]["shelf_camera"].values())
-    if obs_mode in ("depth+segmentation", "depth", "rgbd"):
+    elif obs_mode not in ("none", "state_dict", "pointcloud"):  # the textures asked for
         cam = obs["sensor_data"]["shelf_camera"]
-        assert int(cam["depth"].max()) > 0
-        assert ("segmentation" in cam) == ("segmentation" in obs_mode)
-        assert ("rgb" in cam) == (obs_mode == "rgbd")
-        if "segmentation" in cam:
-            assert int(cam["segmentation"].max()) > 0
+        want = set(obs_mode.replace("rgbd", "rgb+depth").split("+"))  # and only those
+        assert set(cam) == want
+        assert all(int(cam[k].max()) > 0 for k in want)
     if obs_mode == "pointcloud":
         cloud = obs["pointcloud"]
         assert int(cloud["segmentation"].max()) > 0 and bool((cloud["xyzw"][..., 3] > 0).any())
@@ -216,11 +238,14 @@ def test_rgb_array_and_sensors_render_and_a_video_is_recorded(stack3, env_id, tm
 
 
 def test_success_and_fail_robot_uids_and_num_envs(stack3):
-    """evaluate() gives `success` and `fail` (ManiSkill: either ends the episode); the task's
-    own robot_uids is accepted, another refused in one line, as num_envs > 1 (make_vec)."""
+    """evaluate() gives `success` and `fail` (ManiSkill: either ends the episode); a reset
+    that reconfigures gives the same start; the task's own robot_uids is accepted, another
+    refused in one line, as num_envs > 1 (make_vec)."""
     e = gym.make("ClutterShelfExtract-v1", spec=stack3, target=2)
-    _, info = e.reset(seed=0)
+    obs, info = e.reset(seed=0)
     assert {"success", "fail"} <= set(info) and not bool(info["fail"].any())
+    again, _ = e.reset(seed=0, options={"reconfigure": True})
+    assert _equal(obs, again)
     uid = e.unwrapped.robot_uids
     e.close()
     gym.make("ClutterShelfExtract-v1", spec=stack3, target=2, robot_uids=uid).close()
