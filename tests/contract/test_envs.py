@@ -1,7 +1,10 @@
 """Every registered environment, made with defaults (ManiSkill's checks on its own tasks):
 make by id, reset(seed) deterministic and equal to the pipeline's episode, 5 random steps,
-every obs mode, get/set_state, NaN refused, dense reward; the planning env replays committed
-trial episodes step for step and, fed the multi-step planner, writes the trials' records."""
+every obs mode and the four standard control modes, get/set_state (across episodes with
+other box counts), rgb_array / sensors rendering and a recorded video, success and fail,
+gym.make_vec (async), gymnasium's check_env, NaN refused, dense reward; the planning env
+replays committed trial episodes step for step and, fed the multi-step planner, writes the
+trials' records."""
 
 from __future__ import annotations
 
@@ -14,6 +17,7 @@ import pytest
 gym = pytest.importorskip("gymnasium")
 
 from clutterbench.envs import ENV_IDS, NO_BOX, PLAN_ENV_ID  # noqa: E402
+from clutterbench.errors import ActionError, ClutterbenchError  # noqa: E402
 from clutterbench.sim.spec import SceneSpec  # noqa: E402
 from clutterbench.trials.protocol import STEP_FIELDS  # noqa: E402
 
@@ -98,23 +102,77 @@ def test_nan_actions_are_refused(env):
 
 @pytest.mark.parametrize("env_id", MANISKILL_IDS)
 def test_get_state_set_state_round_trips(env_id):
+    """... in an episode of 10 boxes, then in one of 6 (the states keyed alike: box_0..box_29,
+    one flat size), a box taken out of the scene and put back by the state; a state of the
+    other episode's scene is refused in one line (never written into the arm's joints)."""
     e = gym.make(env_id)
+    u = e.unwrapped
     e.reset(seed=1)
     for _ in range(3):
         e.step(e.action_space.sample())
-    state, obs = e.unwrapped.get_state(), e.unwrapped.get_obs()
+    state, obs = u.get_state(), u.get_obs()
+    keys = list(u.get_state_dict()["actors"])
     for _ in range(5):
         e.step(e.action_space.sample())
-    assert not _equal(obs, e.unwrapped.get_obs())
-    e.unwrapped.set_state(state)
-    assert _equal(obs, e.unwrapped.get_obs())
+    assert not _equal(obs, u.get_obs())
+    u.set_state(state)
+    assert _equal(obs, u.get_obs())
+    n = u.scene_spec.n
+    e.reset(seed=1000)
+    assert u.scene_spec.n < n
+    for _ in range(2):
+        e.step(e.action_space.sample())
+    before = u.get_state()
+    u.park(0)
+    parked, obs_parked = u.get_state(), u.get_obs()
+    assert parked.shape == state.shape and list(u.get_state_dict()["actors"]) == keys
+    for _ in range(3):
+        e.step(e.action_space.sample())
+    u.set_state(before)
+    assert 0 not in u.removed and not u.bodies[0].kinematic
+    u.set_state(parked)
+    assert 0 in u.removed and _equal(obs_parked, u.get_obs())
+    with pytest.raises(ClutterbenchError, match=f"boxes 0..{n - 1};.*reset to the state"):
+        u.set_state(state)
     e.close()
 
 
-@pytest.mark.parametrize("env_id", MANISKILL_IDS)
-@pytest.mark.parametrize("obs_mode", ["none", "state_dict", "sensor_data", "depth+segmentation"])
+@pytest.fixture(scope="module")
+def stack3() -> SceneSpec:
+    return SceneSpec.load(STACK3)
+
+
+EXTRACT_OBS_MODES = [
+    "none",
+    "state_dict",
+    "sensor_data",
+    "rgb",
+    "depth",
+    "segmentation",
+    "rgbd",
+    "rgb+depth",
+    "rgb+segmentation",
+    "depth+segmentation",
+    "rgb+depth+segmentation",
+    "pointcloud",
+]
+BIMANUAL_OBS_MODES = ["none", "state_dict", "sensor_data", "depth+segmentation", "pointcloud"]
+
+
+def test_the_obs_mode_test_covers_every_mode_listed():
+    from clutterbench.maniskill.tasks import ClutterShelfEnv
+
+    assert {"state", *EXTRACT_OBS_MODES} == set(ClutterShelfEnv.SUPPORTED_OBS_MODES)
+
+
+@pytest.mark.parametrize(
+    "env_id, obs_mode",
+    [("ClutterShelfExtract-v1", m) for m in EXTRACT_OBS_MODES]
+    + [("ClutterShelfBimanual-v1", m) for m in BIMANUAL_OBS_MODES],
+)
 def test_every_obs_mode_builds_and_steps(env_id, obs_mode):
-    """(state: the default, covered above.) On a hand-built 3-stack, as `spec=` still works."""
+    """(state: the default, covered above.) On a hand-built 3-stack, as `spec=` still works:
+    every mode the task lists with one arm, one of each kind with two."""
     e = gym.make(env_id, spec=SceneSpec.load(STACK3), target=2, obs_mode=obs_mode)
     assert obs_mode in e.unwrapped.SUPPORTED_OBS_MODES
     e.reset(seed=0)
@@ -122,10 +180,148 @@ def test_every_obs_mode_builds_and_steps(env_id, obs_mode):
         obs, *_ = e.step(e.action_space.sample())
     if obs_mode == "sensor_data":
         assert all(v.numel() for v in obs["sensor_data"]["shelf_camera"].values())
-    if obs_mode == "depth+segmentation":
+    elif obs_mode not in ("none", "state_dict", "pointcloud"):  # the textures asked for
         cam = obs["sensor_data"]["shelf_camera"]
-        assert int(cam["depth"].max()) > 0 and int(cam["segmentation"].max()) > 0
+        want = set(obs_mode.replace("rgbd", "rgb+depth").split("+"))  # and only those
+        assert set(cam) == want
+        assert all(int(cam[k].max()) > 0 for k in want)
+    if obs_mode == "pointcloud":
+        cloud = obs["pointcloud"]
+        assert int(cloud["segmentation"].max()) > 0 and bool((cloud["xyzw"][..., 3] > 0).any())
     e.close()
+
+
+def test_other_obs_modes_are_refused_with_maniskills_error(stack3):
+    with pytest.raises(NotImplementedError, match="Unsupported obs mode: normal"):
+        gym.make("ClutterShelfExtract-v1", spec=stack3, obs_mode="normal")
+
+
+@pytest.mark.parametrize("env_id", MANISKILL_IDS)
+@pytest.mark.parametrize(
+    "control_mode", ["pd_joint_delta_pos", "pd_joint_pos", "pd_ee_delta_pos", "pd_ee_delta_pose"]
+)
+def test_the_standard_control_modes_step(stack3, env_id, control_mode):
+    e = gym.make(env_id, spec=stack3, target=2, control_mode=control_mode)
+    got = e.unwrapped.control_mode  # two arms: one mode per arm uid
+    assert set(got.values() if isinstance(got, dict) else [got]) == {control_mode}
+    e.reset(seed=0)
+    for _ in range(2):
+        obs, reward, *_ = e.step(e.action_space.sample())
+    assert bool(obs.isfinite().all()) and bool(reward.isfinite().all())
+    e.close()
+
+
+@pytest.mark.parametrize("env_id", MANISKILL_IDS)
+def test_rgb_array_and_sensors_render_and_a_video_is_recorded(stack3, env_id, tmp_path):
+    """With defaults but the picture's size: render_mode rgb_array (the render camera) and
+    sensors (the shelf camera) on the CPU, and ManiSkill's RecordEpisode writes the video."""
+    from mani_skill.utils.wrappers.record import RecordEpisode
+
+    small = dict(width=48, height=48)
+    e = gym.make(env_id, spec=stack3, target=2, render_mode="sensors", sensor_configs=small)
+    e.reset(seed=0)
+    picture = e.render()  # the shelf camera's pictures side by side
+    assert picture.shape[:2] == (1, 48) and picture.shape[3] == 3 and float(picture.max()) > 0
+    e.close()
+    e = gym.make(
+        env_id, spec=stack3, target=2, render_mode="rgb_array", human_render_camera_configs=small
+    )
+    e = RecordEpisode(e, str(tmp_path), save_trajectory=False, video_fps=5)
+    e.reset(seed=0)
+    frame = e.render()
+    assert tuple(frame.shape) == (1, 48, 48, 3) and float(frame.float().std()) > 1.0
+    for _ in range(3):
+        e.step(e.action_space.sample())
+    e.close()
+    videos = list(tmp_path.glob("*.mp4"))
+    assert len(videos) == 1 and videos[0].stat().st_size > 0
+
+
+def test_success_and_fail_robot_uids_and_num_envs(stack3):
+    """evaluate() gives `success` and `fail` (ManiSkill: either ends the episode); a reset
+    that reconfigures gives the same start; the task's own robot_uids is accepted, another
+    refused in one line, as num_envs > 1 (make_vec)."""
+    e = gym.make("ClutterShelfExtract-v1", spec=stack3, target=2)
+    obs, info = e.reset(seed=0)
+    assert {"success", "fail"} <= set(info) and not bool(info["fail"].any())
+    again, _ = e.reset(seed=0, options={"reconfigure": True})
+    assert _equal(obs, again)
+    uid = e.unwrapped.robot_uids
+    e.close()
+    gym.make("ClutterShelfExtract-v1", spec=stack3, target=2, robot_uids=uid).close()
+    with pytest.raises(ClutterbenchError, match="robot_uids='panda'.*leave robot_uids out"):
+        gym.make("ClutterShelfExtract-v1", spec=stack3, robot_uids="panda")
+    with pytest.raises(ClutterbenchError, match="num_envs=2.*make_vec"):
+        gym.make("ClutterShelfExtract-v1", spec=stack3, num_envs=2)
+
+
+VEC_SCRIPT = """
+import sys
+import gymnasium as gym
+import clutterbench.envs
+from clutterbench.sim.spec import SceneSpec
+from mani_skill.utils.wrappers.gymnasium import CPUGymWrapper
+
+spec = SceneSpec.load(sys.argv[1])
+for env_id, kwargs in (
+    ("ClutterShelfPlan-v1", dict(scale="tiny")),
+    ("ClutterShelfExtract-v1", dict(spec=spec, target=2, wrappers=[CPUGymWrapper])),
+    ("ClutterShelfBimanual-v1", dict(spec=spec, target=2, wrappers=[CPUGymWrapper])),
+):
+    v = gym.make_vec(env_id, num_envs=2, vectorization_mode="async", **kwargs)
+    v.action_space.seed(0)
+    obs, info = v.reset(seed=[2, 3])
+    action = v.action_space.sample()
+    if env_id == "ClutterShelfPlan-v1":
+        action[:] = 30  # NO_BOX: give up (no pull to wait for)
+    obs, reward, terminated, truncated, info = v.step(action)
+    assert reward.shape == terminated.shape == truncated.shape == (2,), env_id
+    if env_id == "ClutterShelfPlan-v1":
+        assert obs["depth_m"].shape[0] == 2 and terminated.all()
+    else:
+        assert obs.shape == (2, *v.single_observation_space.shape), obs.shape
+    v.close()
+    print("ok", env_id)
+"""
+
+
+def test_make_vec_async_runs_two_envs_of_every_id():
+    """gym.make_vec(id, num_envs=2, vectorization_mode="async") from a fresh process (one env
+    per worker process; the ManiSkill tasks with CPUGymWrapper: numpy, unbatched), as
+    docs/environments.md shows."""
+    import subprocess
+    import sys
+
+    assert NO_BOX == 30  # as the script gives up
+    run = subprocess.run(
+        [sys.executable, "-c", VEC_SCRIPT, str(STACK3)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    want = [PLAN_ENV_ID, "ClutterShelfExtract-v1", "ClutterShelfBimanual-v1"]
+    assert run.stdout.split() == [w for env_id in want for w in ("ok", env_id)]
+
+
+def test_a_worker_forked_after_rendering_is_refused_in_one_line():
+    """SAPIEN's renderer does not survive a fork (the child hangs): a forked child refuses
+    to render, naming spawn / forkserver, instead of hanging."""
+    import os
+
+    from clutterbench.sim.renderer import ensure_renderer
+
+    ensure_renderer()
+    pid = os.fork()
+    if pid == 0:  # the child: refuse at once, never render
+        try:
+            ensure_renderer()
+        except ClutterbenchError as exc:
+            os._exit(7 if "forkserver" in str(exc) and "\n" not in str(exc) else 1)
+        os._exit(0)
+    _, status = os.waitpid(pid, 0)
+    assert os.waitstatus_to_exitcode(status) == 7
+    ensure_renderer()  # the parent renders on
 
 
 def test_dense_reward_is_target_progress_minus_the_others_displacement(physics):
@@ -145,8 +341,10 @@ def test_dense_reward_is_target_progress_minus_the_others_displacement(physics):
     u.bodies[2].entity.set_pose(sapien.Pose(top[:3] - [u.target_back0_m / 2, 0, 0], top[3:]))
     assert reward() == pytest.approx(0.5, abs=1e-3)  # half way out, nothing else moved
     mid = spec.poses[1]
+    assert not bool(u.evaluate()["fail"])
     u.bodies[1].entity.set_pose(sapien.Pose(mid[:3] + [0, 0.1, 0], mid[3:]))
     assert reward() == pytest.approx(0.0, abs=1e-3)  # one of the two others moved: -1/2
+    assert bool(u.evaluate()["fail"])  # another box moved: the episode has failed
     u.park(2)
     u.bodies[1].entity.set_pose(sapien.Pose(mid[:3], mid[3:]))
     assert reward() == pytest.approx(2.0, abs=1e-3)  # out, the others still: success
@@ -214,15 +412,34 @@ def test_giving_up_ends_the_episode(plan_env):
     assert plan_env.unwrapped.episode_result().record["steps"] == []
 
 
-def test_actions_naming_no_box_of_the_scene_are_refused(plan_env):
-    from clutterbench.errors import ClutterbenchError
-
-    plan_env.reset(seed=2)
+def test_actions_naming_no_box_of_the_scene_are_no_ops(plan_env):
+    """Every action of the space is valid: one naming a box the scene does not have (or
+    holding the pulled box) changes nothing and says why; a malformed one is refused."""
+    obs, _ = plan_env.reset(seed=2)
     n = plan_env.unwrapped.episode.spec.n
-    with pytest.raises(ClutterbenchError, match="not a box in the scene"):
-        plan_env.step((n, NO_BOX))
-    with pytest.raises(ClutterbenchError, match="hold"):
-        plan_env.step((0, 0))
+    for action, why in (((n, NO_BOX), "not a box in the scene"), ((0, 0), "hold 0")):
+        again, reward, terminated, truncated, info = plan_env.step(action)
+        assert why in info["invalid_action"] and info["end"] is None
+        assert (reward, terminated, truncated) == (0.0, False, False) and _equal(obs, again)
+    for bad in ((NO_BOX + 1, NO_BOX), (-1, NO_BOX), (0.5, NO_BOX), (0,)):
+        with pytest.raises(ActionError, match="action"):
+            plan_env.step(bad)
+
+
+def test_the_plan_env_passes_gymnasiums_check_env():
+    """check_env (warnings are errors): random actions of the whole space, finite bounds,
+    seeded determinism, render_mode rgb_array."""
+    import warnings
+
+    from gymnasium.utils.env_checker import check_env
+
+    e = gym.make(PLAN_ENV_ID, scale="tiny", render_mode="rgb_array")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(e.unwrapped)
+    e.reset(seed=0)
+    assert e.render().shape == (*e.observation_space["depth_m"].shape, 3)
+    e.close()
 
 
 @pytest.fixture(scope="module")

@@ -447,6 +447,27 @@ def test_evaluate_agent_refuses_a_bad_agent_in_one_line(agent: str, message: str
     assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0]
 
 
+def test_an_agent_that_raises_is_one_line_or_its_trace_with_traceback(tmp_path: Path) -> None:
+    """An exception in the agent's act(): one line naming the agent, the episode and the
+    exception; --traceback: the agent's whole trace, then that line."""
+    agent = tmp_path / "broken_agent.py"
+    agent.write_text(
+        "def make(env):\n    def act(obs):\n        return {}['no_such_key']\n    return act\n"
+    )
+    args = ["evaluate-agent", f"{agent}:make", "--episodes", "1", "--first", "2"]
+    args += ["--scale", "tiny", "--out", str(tmp_path / "out")]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0] == "error: agent make, episode 2: act() raised KeyError: 'no_such_key'"
+    result = runner.invoke(app, [*args, "--traceback"])
+    assert result.exit_code == 2
+    lines = result.stderr.strip().splitlines()
+    assert lines[0].startswith("Traceback") and "in act" in result.stderr
+    assert lines[-1] == "error: agent make, episode 2: act() raised KeyError: 'no_such_key'"
+
+
 def test_evaluate_agent_writes_records_and_summary(tmp_path: Path) -> None:
     """The random agent of docs/environments-guide.md, one tiny episode: records, summary."""
     example = Path(__file__).resolve().parents[2] / "docs" / "examples" / "random_agent.py"

@@ -3,6 +3,8 @@ episodes, written as the trials' records."""
 
 from __future__ import annotations
 
+import sys
+import traceback
 from pathlib import Path
 from typing import Annotated
 
@@ -37,17 +39,27 @@ def evaluate_agent(
     scale: Annotated[
         str | None, typer.Option("--scale", help="Scale profile (default: base.scale).")
     ] = None,
+    show_traceback: Annotated[
+        bool,
+        typer.Option("--traceback", help="When the agent raises: its whole trace, then the line."),
+    ] = False,
 ) -> None:
     """Run an agent through ClutterShelfPlan-v1 on episodes of a stream (the trials' scenes
     and targets, the episode protocol, judged from physics) and write the trials' records,
     summary (both success criteria) and MCAP; print the summary's headline."""
     with user_errors():
+        from clutterbench.envs.evaluate import AgentError
         from clutterbench.envs.evaluate import evaluate_agent as run
 
         out_dir = default_path(out, "reports/agents")
         if out_dir.exists() and not out_dir.is_dir():
             raise ClutterbenchError(f"--out {out_dir}: is a file, not a directory")
-        summary = run(agent, stream, episodes, out_dir, name=name, first=first, scale=scale)
+        try:
+            summary = run(agent, stream, episodes, out_dir, name=name, first=first, scale=scale)
+        except AgentError as exc:
+            if show_traceback and exc.__cause__ is not None:
+                traceback.print_exception(exc.__cause__, file=sys.stderr)
+            raise
         cond = summary["condition"]
         typer.echo(
             f"{cond} on {summary['stream']} ({summary['episodes']} episodes): "

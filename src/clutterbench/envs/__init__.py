@@ -10,6 +10,8 @@ this package is imported):
 With no arguments every env draws its scenes from the stream ch6_3_10: `reset(seed=i)` is
 the pipeline's episode i (scene and target). `clutterbench evaluate-agent` runs a policy
 through the planning env and writes records like the trials stage (envs/evaluate.py).
+Every id's observation, action, action mask, info, episode end and vectorised use:
+docs/environments.md.
 """
 
 from __future__ import annotations

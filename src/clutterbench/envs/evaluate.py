@@ -17,7 +17,18 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from clutterbench.errors import ClutterbenchError
+from clutterbench.errors import ActionError, ClutterbenchError
+
+
+class AgentError(ClutterbenchError):
+    """An agent failed during an episode (its act() or reset() raised, or its action was
+    refused): one line naming the agent, the episode and the exception; the exception itself
+    is the __cause__ (`clutterbench evaluate-agent --traceback` prints its trace)."""
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 def load_factory(ref: str) -> Callable[[Any], Any]:
@@ -47,7 +58,10 @@ def load_factory(ref: str) -> Callable[[Any], Any]:
 
 
 def run_agent(env: Any, agent: Any, episodes: range, label: str = "episodes") -> list[Any]:
-    """Run `agent` on each episode index of `episodes` -> their EpisodeResults, in order."""
+    """Run `agent` on each episode index of `episodes` -> their EpisodeResults, in order.
+    An agent that raises, or whose action the env refuses or takes as a no-op
+    (info["invalid_action"]), ends the run with an AgentError naming `label` and the
+    episode."""
     from clutterbench.progress import progress_bar
 
     u = env.unwrapped
@@ -61,11 +75,25 @@ def run_agent(env: Any, agent: Any, episodes: range, label: str = "episodes") ->
     with progress_bar(label, total=len(episodes)) as advance:
         for i in episodes:
             obs, _ = env.reset(seed=i)
+            where = f"agent {label}, episode {i}"
             if hasattr(agent, "reset"):
-                agent.reset(i)
+                try:
+                    agent.reset(i)
+                except Exception as exc:
+                    raise AgentError(f"{where}: reset() raised {_one_line(exc)}") from exc
             done = False
             while not done:
-                obs, _, terminated, truncated, _ = env.step(policy(obs))
+                try:
+                    action = policy(obs)
+                except Exception as exc:
+                    raise AgentError(f"{where}: act() raised {_one_line(exc)}") from exc
+                try:
+                    obs, _, terminated, truncated, info = env.step(action)
+                except ActionError as exc:
+                    raise AgentError(f"{where}: action refused: {exc}") from exc
+                if "invalid_action" in info:
+                    why = info["invalid_action"]
+                    raise AgentError(f"{where}: invalid action {action!r}: {why}")
                 done = terminated or truncated
             results.append(u.episode_result())
             advance(1)

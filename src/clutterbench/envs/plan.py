@@ -15,17 +15,22 @@ history, as the trials hand it to their planners).
 
 Action: (box to pull, box to hold), MultiDiscrete([MAX_BOXES + 1] * 2); NO_BOX (=
 MAX_BOXES) holds nothing, and as the box to pull gives up (the episode ends, "gave_up").
-A box not in the scene is refused (ActionError); `info["action_mask"]` masks the visible
-boxes (and the target) for `action_space.sample(mask=...)`; the held box must differ from the
-pulled one.
+An action naming a box not in the scene, or holding the pulled box, is a no-op: nothing
+moves, reward 0, the episode goes on, `info["invalid_action"]` says why (so every action of
+the space is valid and `action_space.sample()` works; `clutterbench evaluate-agent` refuses
+such an action, one line). A malformed action (not two integers of the space, NaN) is
+refused (ActionError). `info["action_mask"]` masks the visible boxes (and the target) for
+`action_space.sample(mask=...)`; the held box must differ from the pulled one.
 
 Each step is one step of the trials' episode protocol (trials.ch6.Extraction, the object the
 trials stage drives): executed by the kinematic executor from the step's canonical start,
 the held box released and the scene settled, judged from physics. `info` carries the step
 record's named booleans (protocol.STEP_FIELDS), `end` (protocol.EPISODE_ENDS, None while it
 goes on) and, once it ended, `episode` (the episode's named outcome: `success`, collapse-free,
-and `strict_success`). terminated: the protocol ended the episode; truncated: its attempt cap
+and `strict_success`): `info["success"]` is the step's, `info["episode"]["success"]` the
+episode's. terminated: the protocol ended the episode; truncated: its attempt cap
 (trials.ch6.max_steps). Reward (sparse): 1 on the step that ends a collapse-free success.
+`render_mode="rgb_array"`: the observation's depth image as grey (near: bright), boxes tinted.
 
 A policy may also monitor its pulls as Algorithm 1 does: `env.unwrapped.set_monitor(score,
 cp_max)` with `score(obs, pull, hold) -> float`, called before every pull increment with
@@ -99,7 +104,7 @@ class ClutterShelfPlanEnv(gym.Env):
     params' scale profile, default base.scale); `name` (the records' condition and planner
     fields); `record_images` (depth and instance images in the episode's MCAP events)."""
 
-    metadata = {"render_modes": []}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 1}
 
     def __init__(
         self,
@@ -110,16 +115,23 @@ class ClutterShelfPlanEnv(gym.Env):
         scale: str | None = None,
         name: str = "agent",
         record_images: bool = False,
+        render_mode: str | None = None,
     ):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ClutterbenchError(
+                f"render_mode={render_mode!r}: one of {self.metadata['render_modes']} or None"
+            )
+        self.render_mode = render_mode
         self.source: StreamSource = stream_source(stream, family, n_objects, catalogue, scale)
         self.name, self.record_images = name, record_images
         size = self.source.camera.image_size
+        far_m = float(self.source.camera.far_m)
         self.observation_space = spaces.Dict(
             {
-                "depth_m": spaces.Box(0.0, np.inf, (size, size), np.float32),
+                "depth_m": spaces.Box(0.0, far_m, (size, size), np.float32),
                 "instance": spaces.Box(0, 255, (size, size), np.uint8),
-                "K": spaces.Box(-np.inf, np.inf, (3, 3), np.float64),
-                "T_world_from_cam": spaces.Box(-np.inf, np.inf, (4, 4), np.float64),
+                "K": spaces.Box(0.0, 1e6, (3, 3), np.float64),  # pixels
+                "T_world_from_cam": spaces.Box(-1e3, 1e3, (4, 4), np.float64),  # metres
                 "target": spaces.Discrete(MAX_BOXES),
                 "blocked": spaces.MultiBinary(MAX_BOXES),
             }
@@ -218,7 +230,9 @@ class ClutterShelfPlanEnv(gym.Env):
         hold[NO_BOX] = 1
         return pull, hold
 
-    def _check(self, action: Any) -> tuple[int, int | None]:
+    def _check(self, action: Any) -> tuple[int, int | None, str | None]:
+        """-> (pull, hold or None, why the action is a no-op or None); a malformed action
+        raises ActionError."""
         ep = self.episode
         if isinstance(action, dict):
             action = (action.get("pull"), action.get("hold", NO_BOX))
@@ -227,27 +241,44 @@ class ClutterShelfPlanEnv(gym.Env):
             raise ActionError(f"action {action!r}: (box to pull, box to hold or {NO_BOX})")
         if np.isnan(a).any():
             raise ActionError("action holds NaN (a policy produced NaN; refused)")
-        if not np.array_equal(a, np.round(a)):
-            raise ActionError(f"action {action!r}: box indices are integers")
+        if not np.array_equal(a, np.round(a)) or a.min() < 0 or a.max() > NO_BOX:
+            raise ActionError(f"action {action!r}: box indices are integers 0..{NO_BOX}")
         pull, hold = int(a[0]), int(a[1])
         n = ep.spec.n
         in_scene = [k for k in range(n) if k not in ep.state.removed]
+        why = None
         if pull != NO_BOX and pull not in in_scene:
-            raise ActionError(
-                f"action: pull {pull}: not a box in the scene (boxes {in_scene}; {NO_BOX}: give up)"
-            )
-        if hold != NO_BOX and (hold not in in_scene or hold == pull):
-            raise ActionError(
-                f"action: hold {hold}: not a box in the scene other than the pulled one "
+            why = f"pull {pull}: not a box in the scene (boxes {in_scene}; {NO_BOX}: give up)"
+        elif hold != NO_BOX and (hold not in in_scene or hold == pull):
+            why = (
+                f"hold {hold}: not a box in the scene other than the pulled one "
                 f"(boxes {in_scene}; {NO_BOX}: hold nothing)"
             )
-        return pull, (None if hold == NO_BOX else hold)
+        return pull, (None if hold == NO_BOX else hold), why
+
+    def render(self) -> np.ndarray | None:
+        """render_mode "rgb_array": (H, W, 3) uint8 of the observation (module doc)."""
+        if self.render_mode is None or self._obs is None:
+            return None
+        depth, instance = self._obs["depth_m"], self._obs["instance"]
+        hit = depth > 0
+        grey = np.zeros(depth.shape, dtype=np.float64)
+        if hit.any():
+            near, far = float(depth[hit].min()), float(depth[hit].max())
+            grey[hit] = 1.0 - 0.75 * (depth[hit] - near) / max(far - near, 1e-6)
+        tint = np.array([[1.0, 1.0, 1.0], [1.0, 0.6, 0.6], [0.6, 1.0, 0.6], [0.6, 0.6, 1.0]])
+        rgb = grey[..., None] * tint[np.where(instance > 0, 1 + instance % 3, 0)]
+        return (255 * rgb).astype(np.uint8)
 
     def step(self, action: Any):
         ep = self.episode
         if ep is None or ep.done:
             raise ClutterbenchError("ClutterShelfPlan: the episode has ended; call reset()")
-        pull, hold = self._check(action)
+        pull, hold, why = self._check(action)
+        if why is not None:  # a no-op: nothing moves, the episode goes on
+            self._obs = self._observation()
+            info = {"action_mask": self.action_mask(), "end": None, "invalid_action": why}
+            return self._obs, 0.0, False, False, info
         step: dict[str, Any] | None = None
         decider = self._decider()
         ep.before_decision(decider)

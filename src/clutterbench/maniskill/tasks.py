@@ -16,14 +16,17 @@ target; `scene_source=` plugs in another); the stream is
 `stream=` (a key of trials.streams, default ch6_3_10) or `family=` / `n_objects=` /
 `catalogue=`, as make kwargs or reset options (`scale=`: the params' scale profile). Box
 observations are then padded to MAX_BOXES (a padded slot is out of the scene), so the
-observation space stays fixed across scenes. Obs modes: SUPPORTED_OBS_MODES (the sensor modes
-render on the CPU backend). An action holding NaN is refused (ValueError).
+observation space stays fixed across scenes, as state dicts (box_0..box_29 always:
+get_state_dict). Obs modes: SUPPORTED_OBS_MODES (the sensor modes, and render_mode
+"rgb_array" / "sensors", render on the CPU backend). An action holding NaN is refused
+(ValueError). Every id's observation, action, info and episode end: docs/environments.md.
 
 `evaluate()` judges the scene as the project's judge does (trials/protocol.py), with the
 same function: `target_out` (the target is out of the shelf, in front of its opening),
 `others_still` (no box but the target and the held one moved beyond the threshold or left
-the shelf, measured from the episode's start), `released` (no tool holds a box) and
-`success` (all three). The sparse reward is `success`. The dense reward (reward_mode="dense")
+the shelf, measured from the episode's start), `released` (no tool holds a box),
+`success` (all three) and `fail` (another box moved: ManiSkill ends the episode on either).
+The sparse reward is `success`. The dense reward (reward_mode="dense")
 is the target's progress out of the shelf (0 at the start, 1 once its back face is past the
 opening) minus the other boxes' displacement (each box still in the scene: its displacement
 from the start over the moved threshold, capped at 1, averaged over those boxes; a box off
@@ -78,8 +81,24 @@ tool turned half a turn about its rod, which the rod does not feel: tool_quat)."
 MAX_BOXES = 30
 """Box observations of a stream-drawn env are padded to this many boxes (SceneStreamConfig
 allows at most 30)."""
-SENSOR_OBS_MODES = ("sensor_data", "depth+segmentation")
+STATE_OBS_MODES = ("state", "state_dict", "none")
+"""Obs modes that render nothing (no render backend needed)."""
+TEXTURE_OBS_MODES = (
+    "rgb",
+    "depth",
+    "segmentation",
+    "rgbd",
+    "rgb+depth",
+    "rgb+segmentation",
+    "depth+segmentation",
+    "rgb+depth+segmentation",
+)
+"""ManiSkill's texture obs modes of the shelf camera (`rgbd` = rgb+depth)."""
+SENSOR_OBS_MODES = ("sensor_data", *TEXTURE_OBS_MODES, "pointcloud")
 """Obs modes that render (they need a render backend: the CPU one by default)."""
+RENDER_SIZE = 512
+"""The human render camera's picture (render_mode="rgb_array"), as ManiSkill's tasks; smaller
+with `human_render_camera_configs=dict(width=..., height=...)`."""
 ROD_START_M = 0.05
 """ManiSkill's `panda_stick` rod starts this far in front of the hand's origin (8 mm radius)."""
 
@@ -198,7 +217,7 @@ class ClutterShelfEnv(BaseEnv):
     (with `reconfigure=True` when the boxes change) to start another scene or step in the
     same env."""
 
-    SUPPORTED_OBS_MODES = ("none", "state", "state_dict", "sensor_data", "depth+segmentation")
+    SUPPORTED_OBS_MODES = ("state", *STATE_OBS_MODES[1:], *SENSOR_OBS_MODES)
     N_ARMS = 1
 
     def __init__(
@@ -254,9 +273,23 @@ class ClutterShelfEnv(BaseEnv):
         robot = rod_robot(arm.rod_length_m)
         uids = robot if self.N_ARMS == 1 else (robot,) * self.N_ARMS
         self.SUPPORTED_ROBOTS = [uids]
+        asked = kwargs.pop("robot_uids", None)
+        if asked is not None and asked not in (uids, (robot,) * self.N_ARMS, [robot] * self.N_ARMS):
+            raise ClutterbenchError(
+                f"robot_uids={asked!r}: this task's robots are fixed ({uids!r}: ManiSkill's "
+                f"panda_stick with the rod of arm.rod_length_m); leave robot_uids out"
+            )
+        if kwargs.get("num_envs", 1) != 1:
+            raise ClutterbenchError(
+                f"num_envs={kwargs['num_envs']}: the CPU backend runs one env per process; use "
+                'gym.make_vec(id, num_envs=N, vectorization_mode="async") (docs/environments.md)'
+            )
         kwargs.setdefault("sim_backend", "physx_cpu")
-        sensors = kwargs.get("obs_mode", "state") in SENSOR_OBS_MODES
-        kwargs.setdefault("render_backend", "cpu" if sensors else "none")
+        renders = (
+            kwargs.get("obs_mode", "state") not in STATE_OBS_MODES
+            or kwargs.get("render_mode") is not None
+        )
+        kwargs.setdefault("render_backend", "cpu" if renders else "none")
         kwargs.setdefault("obs_mode", "state")
         kwargs.setdefault("control_mode", "pd_joint_pos")
         super().__init__(*args, robot_uids=uids, **kwargs)
@@ -348,6 +381,18 @@ class ClutterShelfEnv(BaseEnv):
                 cam.far_m,
             )
         ]
+
+    @property
+    def _default_human_render_camera_configs(self):
+        """render_mode="rgb_array": the shelf and the arms, seen from above the right arm."""
+        from mani_skill.utils import sapien_utils
+
+        shelf = self.scene_spec.shelf
+        x, y, _ = self.arm_cfg.base_m
+        centre = [(shelf.depth_m + x) / 2, 0.0, shelf.height_m / 2]
+        eye = [centre[0] + 0.2, -abs(y) - 1.1, shelf.height_m + 0.8]
+        pose = sapien_utils.look_at(eye=eye, target=centre)
+        return MsCameraConfig("render_camera", pose, RENDER_SIZE, RENDER_SIZE, 1.0, 0.01, 10.0)
 
     def arm_bases(self) -> list[np.ndarray]:
         """Each arm's base pose [x, y, z, qw, qx, qy, qz] (arm.*_base_m, arm.base_pitch_deg)."""
@@ -499,6 +544,51 @@ class ClutterShelfEnv(BaseEnv):
             out[k, :3], out[k, 3:] = pose.p, pose.q
         return out
 
+    @property
+    def state_boxes(self) -> int:
+        """How many box entries a state dict holds (`box_0`..): MAX_BOXES, or more for a
+        bigger scene; so a flat state (get_state) has one size across episodes."""
+        return max(MAX_BOXES, self.scene_spec.n)
+
+    def get_state_dict(self) -> dict:
+        """ManiSkill's state dict (each box's pose and velocities, each arm's joints, the
+        controllers') with `box_0`..`box_{state_boxes - 1}` always: a box the scene does not
+        have is all zeros (NO_BOX_STATE); a box out of the scene sits at PARK_POSE."""
+        state = super().get_state_dict()
+        actors = state.get("actors", {})
+        boxes = {f"box_{k}": actors.get(f"box_{k}", NO_BOX_STATE) for k in range(self.state_boxes)}
+        others = {k: v for k, v in actors.items() if not _is_box_key(k)}
+        return {"actors": boxes | others} | {k: v for k, v in state.items() if k != "actors"}
+
+    def set_state_dict(self, state: dict, env_idx: torch.Tensor | None = None) -> None:
+        """Set a state of this scene (get_state_dict's; a state of a scene with another
+        number of boxes is refused, one line: reset to its episode first). A box at the
+        parking pose is taken out of the scene (park); a box out that the state puts back is
+        dynamic again. Grasps (attach) are not part of the state."""
+        actors = dict(state.get("actors", {}))
+        n = self.scene_spec.n
+        boxes = {int(k[4:]): actors.pop(k) for k in list(actors) if _is_box_key(k)}
+        present = sorted(k for k, v in boxes.items() if bool(torch.as_tensor(v).any()))
+        if present != list(range(n)):
+            raise ClutterbenchError(
+                f"set_state: a state of a scene with boxes {_ranges(present)}; this episode's "
+                f"scene has boxes 0..{n - 1} (reset to the state's episode first)"
+            )
+        parked = []
+        for k in range(n):
+            v = torch.as_tensor(boxes[k]).reshape(-1, 13)
+            if float(v[0, 2]) < PARK_POSE.p[2] / 2:
+                parked.append(k)
+                continue
+            actors[f"box_{k}"] = v
+            if k in self.removed:  # back in the scene
+                self.bodies[k].set_kinematic(False)
+                self.removed.discard(k)
+        super().set_state_dict(dict(state) | {"actors": actors}, env_idx)
+        for k in parked:
+            if k not in self.removed:
+                self.park(k)
+
     def front_face_m(self, box: int) -> np.ndarray:
         """The centre of `box`'s face toward the camera (its AABB's front, at its centre)."""
         pose = self.box_poses()[box]
@@ -529,6 +619,7 @@ class ClutterShelfEnv(BaseEnv):
             "others_still": n == 0,
             "released": released,
             "success": out and n == 0 and released,
+            "fail": n > 0,  # another box moved: the step can no longer succeed
         }
         return {name: torch.tensor([v]) for name, v in flags.items()}
 
@@ -573,15 +664,27 @@ class ClutterShelfEnv(BaseEnv):
         }
 
 
+NO_BOX_STATE = torch.zeros(1, 13)
+"""A state dict's entry for a box the scene does not have."""
+
+
+def _is_box_key(name: str) -> bool:
+    return name.startswith("box_") and name[4:].isdigit()
+
+
+def _ranges(boxes: list[int]) -> str:
+    return f"0..{boxes[-1]}" if boxes == list(range(len(boxes))) and boxes else str(boxes)
+
+
 _RENDER_DEVICE: list[sapien.Device] = []
 
 
 def _process_render_device() -> sapien.Device:
     """The device of the process-wide renderer (SAPIEN's default render device)."""
-    if not _RENDER_DEVICE:
-        from clutterbench.sim.renderer import ensure_renderer
+    from clutterbench.sim.renderer import ensure_renderer
 
-        ensure_renderer()
+    ensure_renderer()  # (refuses a process forked after rendering)
+    if not _RENDER_DEVICE:
         _RENDER_DEVICE.append(sapien.render.RenderSystem().device)
     return _RENDER_DEVICE[0]
 
@@ -610,3 +713,24 @@ class ClutterShelfBimanualEnv(ClutterShelfEnv):
     ch. 6 bimanual steps, ch. 4 extract-while-support)."""
 
     N_ARMS = 2
+
+
+def make_task(env_id: str, **kwargs: Any) -> BaseEnv:
+    """gymnasium's entry point of this module's ids: ManiSkill's make, from this module, so
+    that a worker process that unpickles it (gym.make_vec with spawn or forkserver) imports
+    this module and so registers the tasks with ManiSkill first."""
+    from mani_skill.utils.registration import make
+
+    return make(env_id, **kwargs)
+
+
+def _entry_points_from_here() -> None:
+    import functools
+
+    import gymnasium as gym
+
+    for env_id in ("ClutterShelfExtract-v1", "ClutterShelfBimanual-v1"):
+        gym.registry[env_id].entry_point = functools.partial(make_task, env_id=env_id)
+
+
+_entry_points_from_here()
