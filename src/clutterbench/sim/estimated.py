@@ -38,9 +38,6 @@ from clutterbench.sim.spec import (
 GAP_M = 0.0005
 """Boxes pushed apart end this far apart (under the spec's 1 mm overlap)."""
 MAX_PUSHES = 60
-SHELF_TOL_M = 0.005
-"""How far a centre may lie outside the shelf's interior (Shelf.contains' default, which
-`validate_spec` applies)."""
 
 
 def is_box(size_m: np.ndarray, pose: np.ndarray) -> bool:
@@ -142,7 +139,7 @@ def _resolve(
         worst = deepest_overlap(sizes_m[kept], poses[kept])
         if worst is None:
             # dropping a box makes no new overlap, so the outside ones go last
-            inside = shelf.contains(poses[kept, :3], SHELF_TOL_M) if kept else []
+            inside = shelf.contains(poses[kept, :3]) if kept else []  # validate_spec's test
             placed = [k for k, ok in zip(kept, inside) if ok]
             return poses, placed, pushes, len(kept) - len(placed)
         a, b, depth = kept[worst[0]], kept[worst[1]], worst[2]
@@ -176,7 +173,8 @@ class Repair:
 
 def repair(sizes_m: np.ndarray, poses: np.ndarray, shelf: Shelf) -> Repair:
     """Any fit (N boxes of any sizes and poses) -> poses and kept boxes a spec may hold: the
-    boxes that are no box dropped, quaternions normalized, then `resolve_overlaps`."""
+    boxes that are no box (`is_box`) dropped, then `_resolve` (validate_spec normalizes the
+    near-unit quaternions)."""
     sizes_m = np.asarray(sizes_m, dtype=np.float64).reshape(-1, 3)
     poses = np.array(poses, dtype=np.float64).reshape(-1, 7)
     boxes = [k for k in range(len(poses)) if is_box(sizes_m[k], poses[k])]
