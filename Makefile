@@ -19,7 +19,7 @@ TORCH_PIP_ARGS := $(if $(TORCH_INDEX_URL),--index-url $(TORCH_INDEX_URL))
 TORCH_CHOICE := $(if $(filter-out torch==2.13.0,$(TORCH_SPEC))$(TORCH_INDEX_URL),echo '$(TORCH_SPEC) $(TORCH_INDEX_URL)';)
 STAMP := $(VENV)/.installed-$(shell ($(TORCH_CHOICE) cat requirements.lock pyproject.toml) 2>/dev/null | sha1sum | cut -c1-12)
 
-.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner dev-perturbed-fit clean-venv shell
+.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner dev-perturbed-fit benchmark-scenes clean-venv shell
 
 setup: system venv .dvc/config
 
@@ -94,6 +94,12 @@ dev-ch5-planner: setup
 # network needed) -> reports/dev/perturbed_fit.{json,md}
 dev-perturbed-fit: setup
 	python -m clutterbench.dev.perturbed_fit
+
+# The benchmark scenes (data/benchmark/: every table's test-stream starts and targets, the
+# same bytes on every CPU), regenerated for the tiny and default profiles. Never run by a
+# stage: the new scenes are used once params.yaml pins the printed manifest hash.
+benchmark-scenes: setup
+	python -m clutterbench.trials.benchmark --scales tiny default
 
 clean-venv:
 	rm -rf $(VENV)

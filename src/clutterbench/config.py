@@ -62,6 +62,24 @@ def load_params(path: Path | str = "params.yaml") -> dict[str, Any]:
     return raw
 
 
+PACKAGE_REPO = Path(__file__).resolve().parents[2]
+"""The repository the package lives in when installed editable (src/clutterbench/)."""
+
+
+def project_params_path() -> Path:
+    """The project's params.yaml: the nearest at or above the working directory holding a
+    dvc.yaml beside it, else the package's own repository's."""
+    cwd = Path.cwd().resolve()
+    for d in (cwd, *cwd.parents):
+        if (d / "dvc.yaml").is_file() and (d / "params.yaml").is_file():
+            return d / "params.yaml"
+    if (PACKAGE_REPO / "params.yaml").is_file():
+        return PACKAGE_REPO / "params.yaml"
+    raise ClutterbenchError(
+        "no params.yaml found (run inside the clutterbench project, or pass spec= to the env)"
+    )
+
+
 def resolve_scale(value: Any, scale: str, key: str) -> Any:
     """Replace every {tiny:, default:, paper:} mapping below `value` by its `scale` entry."""
     if isinstance(value, Mapping):

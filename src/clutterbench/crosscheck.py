@@ -51,7 +51,14 @@ DATASET = "ch6_test"
 CONDITIONS = ("multi_step", "oracle")
 ALPHA = 0.01  # family-wise: Bonferroni over the compared rows
 Z95 = 1.959963984540054
-COPY = ["dvc.yaml", "params.yaml", "stages", "src", "reports/thesis_figures.yaml"]
+COPY = [
+    "dvc.yaml",
+    "params.yaml",
+    "stages",
+    "src",
+    "reports/thesis_figures.yaml",
+    "data/benchmark",
+]
 # Outputs whose bytes are compared with the recorded ones (md5 over every file).
 DIGESTED = [
     "data/generate/ch6",
@@ -177,6 +184,8 @@ def copy_pipeline(root: Path, dst: Path, scale: str = "tiny") -> Path:
     dst.mkdir(parents=True)
     for item in COPY:
         src = root / item
+        if not src.exists():  # data/benchmark before its first make benchmark-scenes
+            continue
         (dst / item).parent.mkdir(parents=True, exist_ok=True)
         if src.is_dir():
             shutil.copytree(src, dst / item, ignore=shutil.ignore_patterns("__pycache__"))

@@ -119,6 +119,14 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     trials = load_section(TrialsConfig, "trials", params)
     ch4 = read_records(a / "reports/trials_ch4/records.jsonl")
     assert len(ch4) == sum(c.episodes for c in trials.ch4_conditions.values())
+    # every table's episode starts from the committed benchmark scenes, on any CPU
+    for records in (
+        ch4,
+        read_records(a / "reports/trials_ch5/records.jsonl"),
+        read_records(a / "reports/trials_ch3/records.jsonl"),
+        *(read_records(p) for p in sorted((a / "reports/trials").glob("*/records.jsonl"))),
+    ):
+        assert records and {r["scene_source"] for r in records} == {"benchmark"}
     for name in trials.ch4_conditions:
         assert (
             read_episode(a / "data/trials_ch4" / name / "episodes.mcap")["topics"]["/trial/outcome"]

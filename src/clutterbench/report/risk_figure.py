@@ -168,7 +168,7 @@ def draw_figure(job: dict[str, Any], out_path: Path) -> None:
     )
     world = BoxWorld.from_spec(spec, job["physics"], render=True)
     obs, seg = observe_and_segment(world, spec, job)
-    box = draw_target(job["seed"], cond.stream, job["index"], obs, params.min_target_pixels)
+    box = draw_target(job["seed"], cond.stream, job["index"], obs, params.min_target_pixels, spec)
     k = target_segment(seg, obs.instance, box)
     if k is None or len(seg.ids) < 2:
         raise ClutterbenchError(f"figure: episode {job['index']} has no target segment to draw")

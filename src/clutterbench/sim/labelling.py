@@ -20,6 +20,7 @@ from typing import Literal
 import numpy as np
 
 from clutterbench.errors import ClutterbenchError
+from clutterbench.sim import benchmark
 from clutterbench.sim.catalog import box_extents_m
 from clutterbench.sim.clusters import scene_clusters
 from clutterbench.sim.config import REJECT_REASONS, CameraConfig, PhysicsConfig
@@ -154,13 +155,71 @@ def draw_settled_spec(
     meta: Mapping[str, object] | None = None,
     keep_groups: bool = False,
     accept: Callable[[SceneSpec], str | None] | None = None,
+    accept_key: str | None = None,
 ) -> SceneSpec:
     """Scene `index` of the seed stream `key`, placed and settled (no labels): the canonical
     start of a trial, or a single scene for the CLI; its meta records the attempt and the
     rejections before it, and with `keep_groups` the groups the family arranged (meta
     "groups", the seeds of the ground-truth arrangement clusters, sim/clusters.py).
     `accept`: the caller's own test of a settled start (None: accepted, else the reason it
-    is rejected and the next attempt drawn), e.g. chapter 5's "no free place at the start"."""
+    is rejected and the next attempt drawn), e.g. chapter 5's "no free place at the start";
+    `accept_key`: what `accept` depends on (a start drawn with an accept but no key is never
+    read from the benchmark scenes). A start in the benchmark scenes (sim/benchmark.py) is
+    read from them, bit for bit the start drawn where they were made."""
+    fields = {
+        "seed": seed,
+        "key": key,
+        "index": index,
+        "families": {f: float(w) for f, w in sorted(families.items())},
+        "n_objects": [int(v) for v in n_objects],
+        "catalogue": catalogue,
+        "physics": physics,
+        "camera": camera,
+        "max_attempts": max_attempts,
+        "shelf": shelf,
+        "meta": dict(meta or {}),
+        "keep_groups": keep_groups,
+        "accept": accept_key if accept is not None else None,
+    }
+    stored_key, stored = benchmark.lookup("settled", fields)
+    if stored is not None and (accept is None or accept_key is not None):
+        return SceneSpec.from_dict(stored["spec"], where=f"{benchmark.DIR} {key} scene {index}")
+    spec = _draw_settled_spec(
+        seed,
+        key,
+        index,
+        families,
+        n_objects,
+        catalogue,
+        physics,
+        camera,
+        max_attempts,
+        shelf,
+        meta,
+        keep_groups,
+        accept,
+    )
+    if accept is None or accept_key is not None:
+        value = {"spec": spec.to_dict(), "scene_hash": benchmark.scene_hash(spec)}
+        benchmark.remember(stored_key, "settled", key, index, value)
+    return spec
+
+
+def _draw_settled_spec(
+    seed: int,
+    key: str,
+    index: int,
+    families: Mapping[str, float],
+    n_objects: Sequence[int],
+    catalogue: str,
+    physics: PhysicsConfig,
+    camera: CameraConfig,
+    max_attempts: int,
+    shelf: Shelf,
+    meta: Mapping[str, object] | None,
+    keep_groups: bool,
+    accept: Callable[[SceneSpec], str | None] | None,
+) -> SceneSpec:
     family, n = draw_scene_setup(seed, key, index, families, n_objects)
     rejected: dict[str, int] = {}
     for attempt in range(max_attempts):
@@ -293,10 +352,95 @@ def generate_labelled_scene(
     shelf: Shelf | None = None,
 ) -> LabelledScene:
     """Scene `index` of `dataset`, regenerable alone from (seed, dataset, index)."""
-    shelf = shelf or Shelf()
+    tally = _Tally()
+    spec, groups, rejected = dataset_start(
+        seed,
+        dataset,
+        index,
+        family_weights,
+        catalogue,
+        n_objects,
+        physics,
+        camera,
+        max_attempts,
+        shelf or Shelf(),
+        tally,
+    )
+    return _label_start(spec, groups, rejected, pulls, physics, camera, tally)
+
+
+def dataset_start(
+    seed: int,
+    dataset: str,
+    index: int,
+    family_weights: Mapping[str, float],
+    catalogue: str,
+    n_objects: Sequence[int],
+    physics: PhysicsConfig,
+    camera: CameraConfig,
+    max_attempts: int,
+    shelf: Shelf,
+    tally: _Tally | None = None,
+) -> tuple[SceneSpec, list, dict[str, int]]:
+    """A dataset scene's settled start, its family's groups and the rejections before it; a
+    start in the benchmark scenes (sim/benchmark.py: Table 6.2's test scenes) is read from
+    them."""
+    fields = {
+        "seed": seed,
+        "dataset": dataset,
+        "index": index,
+        "families": {f: float(w) for f, w in sorted(family_weights.items())},
+        "n_objects": [int(v) for v in n_objects],
+        "catalogue": catalogue,
+        "physics": physics,
+        "camera": camera,
+        "max_attempts": max_attempts,
+        "shelf": shelf,
+    }
+    key, stored = benchmark.lookup("dataset", fields)
+    if stored is not None:
+        spec = SceneSpec.from_dict(stored["spec"], where=f"{benchmark.DIR} {dataset} scene {index}")
+        rejected = dict.fromkeys(REJECT_REASONS, 0) | stored["rejected"]
+        return spec, [list(g) for g in stored["groups"]], rejected
+    spec, groups, rejected = _dataset_start(
+        seed,
+        dataset,
+        index,
+        dict(family_weights),
+        catalogue,
+        tuple(n_objects),
+        physics,
+        camera,
+        max_attempts,
+        shelf,
+        tally or _Tally(),
+    )
+    value = {
+        "spec": spec.to_dict(),
+        "scene_hash": benchmark.scene_hash(spec),
+        "groups": [[int(i) for i in g] for g in groups],
+        "rejected": rejected,
+    }
+    benchmark.remember(key, "dataset", dataset, index, value)
+    return spec, groups, rejected
+
+
+def _dataset_start(
+    seed: int,
+    dataset: str,
+    index: int,
+    family_weights: dict,
+    catalogue: str,
+    n_objects: tuple[int, int],
+    physics: PhysicsConfig,
+    camera: CameraConfig,
+    max_attempts: int,
+    shelf: Shelf,
+    tally: _Tally,
+) -> tuple[SceneSpec, list, dict[str, int]]:
+    """A dataset scene's settled start, its family's groups and the rejections before it."""
     rejected = dict.fromkeys(REJECT_REASONS, 0)
     family, n = draw_scene_setup(seed, dataset, index, family_weights, n_objects)
-    tally = _Tally()
     for attempt in range(max_attempts):
         rng = scene_rng(seed, dataset, index, attempt)
         world, groups, reason = place_and_settle(family, catalogue, n, rng, physics, shelf)
@@ -314,29 +458,44 @@ def generate_labelled_scene(
             meta={"dataset": dataset, "index": index, "seed": seed, "attempt": attempt},
             type_ids=catalogue_type_ids(sizes, catalogue),
         )
-        view = BoxWorld.from_spec(spec, physics, render=True)
-        depth_m, instance = render_depth_instance(view, camera)
-        tally.add(view)
-        contacts = settled_contacts(spec, physics, tally)
-        cluster_of, classes, boxes = scene_clusters(sizes, spec.poses, groups, contacts, instance)
-        removal = removal_matrix(spec, physics, tally)
-        pull = pull_tensor(spec, physics, tally) if pulls else None
-        return LabelledScene(
-            spec,
-            depth_m,
-            instance,
-            removal,
-            pull,
-            cluster_of,
-            classes,
-            boxes,
-            contacts,
-            rejected,
-            tally.steps,
-            1,
-            tally.sapien_s,
-        )
+        return spec, groups, rejected
     raise ClutterbenchError(
         f"{dataset} scene {index}: rejected {max_attempts} times ({rejected}); "
         f"the {family} family cannot fit {n} boxes"
+    )
+
+
+def _label_start(
+    spec: SceneSpec,
+    groups: list,
+    rejected: dict[str, int],
+    pulls: bool,
+    physics: PhysicsConfig,
+    camera: CameraConfig,
+    tally: _Tally,
+) -> LabelledScene:
+    """Render and label a settled dataset start."""
+    view = BoxWorld.from_spec(spec, physics, render=True)
+    depth_m, instance = render_depth_instance(view, camera)
+    tally.add(view)
+    contacts = settled_contacts(spec, physics, tally)
+    cluster_of, classes, boxes = scene_clusters(
+        spec.sizes_m, spec.poses, groups, contacts, instance
+    )
+    removal = removal_matrix(spec, physics, tally)
+    pull = pull_tensor(spec, physics, tally) if pulls else None
+    return LabelledScene(
+        spec,
+        depth_m,
+        instance,
+        removal,
+        pull,
+        cluster_of,
+        classes,
+        boxes,
+        contacts,
+        rejected,
+        tally.steps,
+        1,
+        tally.sapien_s,
     )

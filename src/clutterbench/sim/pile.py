@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 from typing import Any
 
 import numpy as np
@@ -27,6 +28,7 @@ from clutterbench.shogi_piece import (
     piece_vertices,
     piece_volume_m3,
 )
+from clutterbench.sim import benchmark
 from clutterbench.sim.geometry import (
     displacement_m,
     quat_from_axis_angle,
@@ -344,7 +346,24 @@ def generate_pile(cfg: PileConfig, seed: int) -> PileSpec:
     """A settled pile of n pieces (n drawn from the seed), dropped one after another into the
     drop disc. An attempt is redrawn (next sub-seed) when the pile does not come to rest, a
     piece ends off the board, or its canonical start creeps; the same (cfg, seed) gives
-    bit-identical poses."""
+    bit-identical poses. A pile in the benchmark scenes (sim/benchmark.py: Fig. 3.15's games)
+    is read from them."""
+    key, stored = benchmark.lookup("pile", {"cfg": cfg, "seed": seed})
+    if stored is not None:
+        return PileSpec(seed=seed, poses=np.array(stored["poses"], dtype=np.float64))
+    spec = _generate_pile(cfg, seed)
+    value = {"poses": spec.poses.tolist(), "scene_hash": pile_hash(spec)}
+    benchmark.remember(key, "pile", "ch3_games", seed, value)
+    return spec
+
+
+def pile_hash(spec: PileSpec) -> str:
+    """A pile's name in records: the sha256 of its poses' bytes (16 hex digits)."""
+    data = np.ascontiguousarray(spec.poses, dtype=np.float64).tobytes()
+    return hashlib.sha256(data).hexdigest()[:16]
+
+
+def _generate_pile(cfg: PileConfig, seed: int) -> PileSpec:
     n = int(np.random.default_rng(seed).integers(cfg.n_pieces[0], cfg.n_pieces[1] + 1))
     rejected: dict[str, int] = {}
     for attempt in range(cfg.max_attempts):

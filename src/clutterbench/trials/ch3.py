@@ -179,7 +179,15 @@ def _targets(variant: str, job: dict[str, Any], top: Observation, rng) -> list[T
 
 def run_ch3_game(job: dict[str, Any]) -> EpisodeResult:
     """One game of one variant on the pile of `job["seed"]`."""
-    from clutterbench.sim.pile import PileWorld, generate_pile, on_board, slide, top_observation
+    from clutterbench.sim import benchmark
+    from clutterbench.sim.pile import (
+        PileWorld,
+        generate_pile,
+        on_board,
+        pile_hash,
+        slide,
+        top_observation,
+    )
 
     cfg, variant = job["cfg"], job["variant"]
     spec = generate_pile(cfg.pile, job["seed"])
@@ -281,6 +289,8 @@ def run_ch3_game(job: dict[str, Any]) -> EpisodeResult:
         "seed": job["seed"],
         "moved_threshold_m": cfg.slide.moved_threshold_m,
         "collapse_free_params": dataclasses.asdict(job["collapse_free"]),
+        "scene": pile_hash(spec),
+        "scene_source": benchmark.source_of(pile_hash(spec)),
         "n_pieces": int(len(spec.poses)),
         "pieces_removed": int(removed),
         "slides": len(steps),

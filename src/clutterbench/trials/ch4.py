@@ -36,6 +36,7 @@ from clutterbench.planning.risk import (
     random_pair,
 )
 from clutterbench.planning.risk_planner import plan_risk
+from clutterbench.sim import benchmark
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import observe
@@ -93,7 +94,7 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
     target_box = target_k = None
     if cond.mode == "target":
         target_box = draw_target(
-            job["seed"], cond.stream, job["index"], obs, params.min_target_pixels
+            job["seed"], cond.stream, job["index"], obs, params.min_target_pixels, spec
         )
         target_k = target_segment(seg, obs.instance, target_box)
     decision: dict[str, Any] = {"candidates": 0}
@@ -202,6 +203,7 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
         "seed": job["seed"],
         "stream": cond.stream,
         "family": spec.family,
+        **benchmark.scene_fields(spec),
         "catalogue": job["stream_cfg"].catalogue,
         "n_objects": spec.n,
         "planner": cond.planner,

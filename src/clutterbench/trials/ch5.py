@@ -23,6 +23,7 @@ The chapter in four modules: this one (the episode, its record, the jobs), `ch5_
 
 from __future__ import annotations
 
+import json
 import re
 import zlib
 from pathlib import Path
@@ -44,6 +45,7 @@ from clutterbench.planning.replenish import (
     place_clusters,
     rect_mask,
 )
+from clutterbench.sim import benchmark
 from clutterbench.sim.catalog import box_extents_m
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.pull import SceneState, world_at
@@ -108,6 +110,16 @@ def draw_start(job: dict[str, Any]) -> tuple[SceneSpec, np.ndarray]:
         job["max_attempts"],
         keep_groups=True,
         accept=no_free_place,
+        # what no_free_place reads: the new box and the candidates' geometry
+        accept_key=json.dumps(
+            {
+                "no_free_place": list(NO_FREE_PLACE),
+                "size_m": [float(v) for v in size_m],
+                "finger_m": params.finger_m,
+                "min_points": params.min_points,
+            },
+            sort_keys=True,
+        ),
     )
     return spec, size_m
 
@@ -234,6 +246,7 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
         "seed": job["seed"],
         "stream": cond.stream,
         "family": spec.family,
+        **benchmark.scene_fields(spec),
         "scene_type": job["scene_type"],
         "n_objects": spec.n,
         "planner": cond.planner,

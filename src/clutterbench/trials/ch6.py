@@ -22,6 +22,7 @@ from clutterbench.planning.extraction import (
     Decision,
 )
 from clutterbench.planning.support import SupportParams
+from clutterbench.sim import benchmark
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.pull import SceneState, execute_pull, world_at
@@ -195,7 +196,12 @@ class Extraction:
         )
         if target is None:
             target = draw_target(
-                job["seed"], job["stream"], job["index"], self.obs, self.params.min_target_pixels
+                job["seed"],
+                job["stream"],
+                job["index"],
+                self.obs,
+                self.params.min_target_pixels,
+                spec,
             )
         self.target = target
         self.steps: list[dict[str, Any]] = []
@@ -287,6 +293,7 @@ class Extraction:
             "seed": job["seed"],
             "stream": job["stream"],
             "family": spec.family,
+            **benchmark.scene_fields(spec),
             "n_objects": spec.n,
             "target": self.target,
             "planner": job["planner"],

@@ -13,6 +13,7 @@ from collections.abc import Callable
 import numpy as np
 
 from clutterbench.observation import Observation
+from clutterbench.sim import benchmark
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.labelling import draw_settled_spec, removal_matrix, settled_contacts
 from clutterbench.sim.shelf import Shelf
@@ -35,10 +36,12 @@ def draw_trial_spec(
     shelf: Shelf | None = None,
     keep_groups: bool = False,
     accept: Callable[[SceneSpec], str | None] | None = None,
+    accept_key: str | None = None,
 ) -> SceneSpec:
     """Scene `index` of a trials stream, settled (the canonical start of its episode); with
     `keep_groups` its meta holds the family's groups (ground-truth clusters); `accept`: a
-    further test of the start (sim.labelling.draw_settled_spec)."""
+    further test of the start, `accept_key` what it depends on
+    (sim.labelling.draw_settled_spec). Read from the benchmark scenes when they hold it."""
     return draw_settled_spec(
         seed=seed,
         key=stream_key(stream),
@@ -52,11 +55,45 @@ def draw_trial_spec(
         shelf=shelf or Shelf(),
         keep_groups=keep_groups,
         accept=accept,
+        accept_key=accept_key,
     )
 
 
-def draw_target(seed: int, stream: str, index: int, obs: Observation, min_pixels: int) -> int:
-    """The episode's target: uniform among the boxes with >= `min_pixels` visible pixels."""
+def draw_target(
+    seed: int,
+    stream: str,
+    index: int,
+    obs: Observation,
+    min_pixels: int,
+    spec: SceneSpec | None = None,
+) -> int:
+    """The episode's target: uniform among the boxes with >= `min_pixels` visible pixels in
+    the start's observation; with the start's `spec`, read from the benchmark scenes when
+    they hold it (the observation is a render, and renders differ across CPUs too)."""
+    if spec is None:
+        return _draw_target(seed, stream, index, obs, min_pixels)
+    key, stored = benchmark.lookup("target", target_fields(seed, stream, index, min_pixels, spec))
+    if stored is not None:
+        return int(stored["target"])
+    target = _draw_target(seed, stream, index, obs, min_pixels)
+    benchmark.remember(key, "target", stream_key(stream), index, {"target": target})
+    return target
+
+
+def target_fields(
+    seed: int, stream: str, index: int, min_pixels: int, spec: SceneSpec
+) -> dict[str, object]:
+    """What an episode's target depends on (its key in the benchmark scenes)."""
+    return {
+        "seed": seed,
+        "stream": stream,
+        "index": index,
+        "min_pixels": min_pixels,
+        "scene": benchmark.scene_hash(spec),
+    }
+
+
+def _draw_target(seed: int, stream: str, index: int, obs: Observation, min_pixels: int) -> int:
     rng = np.random.default_rng([seed, zlib.crc32(f"{stream_key(stream)}/target".encode()), index])
     counts = np.bincount(obs.instance.ravel(), minlength=256)[1:]
     candidates = np.nonzero(counts >= min_pixels)[0]

@@ -17,7 +17,13 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from clutterbench.config import BaseConfig, load_base, load_params, load_section
+from clutterbench.config import (
+    BaseConfig,
+    load_base,
+    load_params,
+    load_section,
+    project_params_path,
+)
 from clutterbench.errors import ClutterbenchError
 from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
 from clutterbench.sim.spec import SceneSpec
@@ -25,22 +31,6 @@ from clutterbench.trials.config import SceneStreamConfig, TrialsConfig
 
 DEFAULT_STREAM = "ch6_3_10"
 """The environments' default: Table 6.3's 3-10 box mix."""
-PACKAGE_REPO = Path(__file__).resolve().parents[3]
-"""The repository the package lives in when installed editable (src/clutterbench/trials/)."""
-
-
-def project_params_path() -> Path:
-    """The project's params.yaml: the nearest at or above the working directory holding a
-    dvc.yaml beside it, else the package's own repository's."""
-    cwd = Path.cwd().resolve()
-    for d in (cwd, *cwd.parents):
-        if (d / "dvc.yaml").is_file() and (d / "params.yaml").is_file():
-            return d / "params.yaml"
-    if (PACKAGE_REPO / "params.yaml").is_file():
-        return PACKAGE_REPO / "params.yaml"
-    raise ClutterbenchError(
-        "no params.yaml found (run inside the clutterbench project, or pass spec= to the env)"
-    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,7 +78,9 @@ class StreamSource:
 
         spec = self.spec(index)  # the episode's canonical start, as trials.ch6.Extraction's
         obs = observe(world_at(spec, SceneState.start(spec), self.physics, True), self.camera)
-        target = draw_target(self.seed, self.name, index, obs, self.trials.ch6.min_target_pixels)
+        target = draw_target(
+            self.seed, self.name, index, obs, self.trials.ch6.min_target_pixels, spec
+        )
         return spec, target
 
 
