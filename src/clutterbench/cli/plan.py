@@ -182,7 +182,7 @@ def plan(
                 for k in (
                     "planner",
                     "success",
-                    "target_out",
+                    "target_extracted",
                     "others_still",
                     "end",
                     "n_disturbed",

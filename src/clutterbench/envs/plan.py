@@ -50,6 +50,7 @@ from gymnasium import spaces
 from clutterbench.errors import ActionError, ClutterbenchError
 from clutterbench.observation import CameraModel, Observation
 from clutterbench.planning.extraction import Decision
+from clutterbench.sim import benchmark
 from clutterbench.trials.harness import EpisodeResult
 from clutterbench.trials.protocol import STEP_FIELDS, judge_episode
 from clutterbench.trials.streams import StreamSource, stream_source
@@ -212,7 +213,8 @@ class ClutterShelfPlanEnv(gym.Env):
         spec = self.source.spec(index)
         self.episode = Extraction(spec, self.job(index))
         self._obs = self._observation()
-        return self._obs, {"action_mask": self.action_mask(), "episode_index": index}
+        info = {"action_mask": self.action_mask(), "episode_index": index}
+        return self._obs, info | benchmark.scene_fields(spec)
 
     def _observation(self) -> dict[str, Any]:
         ep = self.episode

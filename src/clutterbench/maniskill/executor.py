@@ -456,5 +456,6 @@ class ArmExecutor:
             on_shelf,
             poses_start,
             self.u.box_poses(),
+            self.u.scene_spec.shelf.contains(poses_start[:, :3]),
         )
         return result, step, SceneState(self.u.box_poses(), frozenset(self.u.removed))

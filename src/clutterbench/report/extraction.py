@@ -68,7 +68,7 @@ COLUMNS = [
     Column("below_oracle", "points below its oracle (collapse-free)", "{}"),
     Column("below_oracle_strict", "points below its oracle (strict)", "{}"),
     Column("success_held", "per episode, strict, judged while held", "{}"),
-    Column("aborts", "aborts (nothing moved)", "{}"),
+    Column("aborts", "aborts without a collapse (of them: before any motion / moved a box)", "{}"),
     Column("mean_steps", "mean steps", "{:.3g}"),
     Column("mean_n_disturbed", "mean disturbed boxes", "{:.2f}"),
     Column("mean_disturbance_mm", "mean disturbance (mm)", "{:.1f}"),
@@ -100,7 +100,9 @@ SUCCESS_NOTE = (
     "counts stop there. The thesis column stands beside the collapse-free one: the thesis "
     "judged its real-robot trials by whether objects collapsed or fell, not by millimetres. "
     "success per step: over the judged steps (executed pulls that took their box out or "
-    "disturbed the pile under that criterion); aborts that moved nothing are counted apart. "
+    "disturbed the pile under that criterion); aborts without a collapse are counted apart: "
+    "before any motion, or after it (an abort that moved another box beyond the label "
+    "threshold is a strict failure, counted in the strict columns). "
     "Intervals: per episode, Wilson 95%; per step, a 95% cluster bootstrap over episodes "
     "(2,000 resamples, seed 0), since the steps of one episode are not independent. judged "
     "while held: the strict judgement before the release, where that differs. Every record "
@@ -148,14 +150,33 @@ def oracle_gaps(
             continue
         gap = 100.0 * (sum(theirs[e] for e in shared) - sum(ours[e] for e in shared)) / len(shared)
         beat = [e for e in shared if ours[e] and not theirs[e]]
-        out[cond] = {"oracle": oracle, "points": gap, "beat": beat, "episodes": len(shared)}
+        by_episode = {int(r["episode"]): r for r in recs}
+        partial = [e for e in beat if moved_by_a_partial_pull(by_episode[e])]
+        out[cond] = {
+            "oracle": oracle,
+            "points": gap,
+            "beat": beat,
+            "beat_partial": partial,
+            "episodes": len(shared),
+        }
     return out
+
+
+def moved_by_a_partial_pull(record: Mapping[str, Any]) -> bool:
+    """Whether an episode has a pull that stopped after motion and moved another box: an
+    action outside the search oracles' set (they simulate whole pulls)."""
+    return any(
+        s.get("aborted_after_motion") and int(s.get("n_disturbed", 0)) > 0
+        for s in record.get("steps", [])
+    )
 
 
 def _gap_text(gap: Mapping[str, Any] | None, condition: str) -> str | None:
     if gap is None or gap["oracle"] == condition:
         return None
-    return f"{gap['points']:.1f} ({gap['oracle']}; beat it in {len(gap['beat'])})"
+    partial = len(gap.get("beat_partial", []))
+    through = f", {partial} through a partial pull" if partial else ""
+    return f"{gap['points']:.1f} ({gap['oracle']}; beat it in {len(gap['beat'])}{through})"
 
 
 def _parse_row(row: str) -> tuple[str, str]:
@@ -282,7 +303,7 @@ def extraction_table(
             "below_oracle": _gap_text(gap, condition),
             "below_oracle_strict": _gap_text(strict_gaps.get(condition), condition),
             "success_held": rate_text(a, "success_held"),
-            "aborts": None if pd.isna(a.get("aborts", pd.NA)) else str(int(a["aborts"])),
+            "aborts": aborts_text(a),
             "mean_steps": a.get("mean_steps"),
             "mean_n_disturbed": a.get("mean_n_disturbed"),
             "mean_disturbance_mm": 1000.0 * a["mean_disturbance_m"]
@@ -462,6 +483,18 @@ def _notes(
         "points below its oracle: the matching search oracle's per-episode success on the same "
         "scenes and targets (oracle_hold for planners that hold a box, oracle otherwise) minus "
         "the row's, in points; 'beat it in': episodes the row succeeded in and its oracle did "
-        "not.",
+        "not; 'through a partial pull': of those, episodes with a pull stopped after motion "
+        "that moved another box, an action outside the oracle's set (it simulates whole pulls).",
         *search_notes(used),
     ]
+
+
+def aborts_text(a: Mapping[str, Any]) -> str | None:
+    """'142 (0 / 106)': aborts without a collapse (before any motion / moved another box
+    beyond the label threshold), or just the count for records without the split."""
+    if pd.isna(a.get("aborts", pd.NA)):
+        return None
+    text = str(int(a["aborts"]))
+    if pd.isna(a.get("aborts_moved", pd.NA)) or pd.isna(a.get("aborts_before_motion", pd.NA)):
+        return text
+    return f"{text} ({int(a['aborts_before_motion'])} / {int(a['aborts_moved'])})"

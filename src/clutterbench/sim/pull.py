@@ -59,6 +59,9 @@ class PullResult:
     """(N, 7) every box's pose [x, y, z, qw, qx, qy, qz] at the step's start."""
     poses_end: np.ndarray
     """(N, 7) the same at the settled end, after every held box was released."""
+    on_shelf_start: np.ndarray | None = None
+    """(N,) bool: each box's centre inside the shelf at the step's start (None: all that
+    were in the scene). A box already off the shelf then is no collapse of this step."""
 
 
 def execute_pull(
@@ -110,6 +113,7 @@ def execute_pull(
         on_shelf,
         poses_start,
         world.poses(),
+        world.shelf.contains(poses_start[:, :3]),
     )
 
 

@@ -1,7 +1,9 @@
 """The two success criteria of every trial step, from per-box motion (no SAPIEN, no torch).
 
-Every step record carries `box_motion`: for every box other than the manipulated ones, and
-for the held boxes released at the step's end (`held: true`), its centre displacement, its
+Every step record carries `box_motion`: for every box on the shelf at the step's start other
+than the manipulated ones, and for the manipulated boxes released at the step's end (`held:
+true`: the held box, and the pulled box of a pull stopped before it was out), its centre
+displacement, its
 drop in height, its change of tilt and whether it left the shelf, from the step's start to
 the settled end. Both criteria are computed from these fields alone, so a record file can be
 re-judged under other thresholds (trials/rejudge.py):

@@ -125,11 +125,18 @@ def judge_pull(
 def _motion(
     result: PullResult, box: int, hold: int | None, gone: frozenset[int]
 ) -> list[dict[str, Any]]:
-    """Per-box motion of every box still in the scene at the step's start but the pulled one
-    (the held one marked `held`)."""
+    """Per-box motion of every box on the shelf at the step's start but the pulled one; the
+    manipulated boxes released at the step's end are marked `held` (must stay on the shelf):
+    the held one, and the pulled one when its pull stopped before it was out (let go where it
+    is). A box already off the shelf at the step's start (an earlier step left it there) is
+    not this step's."""
     n = len(result.displacement_m)
-    others = [k for k in range(n) if k != box and k != hold and k not in gone]
-    held = [hold] if hold is not None and hold not in gone else []
+    start = result.on_shelf_start
+    present = [k for k in range(n) if k not in gone and (start is None or bool(start[k]))]
+    others = [k for k in present if k != box and k != hold]
+    held = [k for k in (hold,) if k is not None and k in present]
+    if not result.extracted and result.increments > 0 and box in present:
+        held.append(box)
     return criteria.box_motion(result.poses_start, result.poses_end, result.on_shelf, others, held)
 
 
@@ -159,9 +166,11 @@ def episode_end(step: dict[str, Any], target_out: bool, target_on_shelf: bool) -
 
 def judge_episode(steps: list[dict[str, Any]], end: str, target: int) -> dict[str, Any]:
     """The episode's named outcome: `success` (collapse-free) when the target came out and no
-    step made a box collapse (the episode ended at "target_out"); `strict_success` when, in
-    addition, no step disturbed the pile beyond the label threshold (the strict episode, the
-    prefix up to its first strict failure, ended with the target out); their judged steps.
+    step made a box collapse (the episode ended at "target_out"); `target_extracted` when the
+    target came out at all (a step that took it out may still have made a box collapse);
+    `strict_success` when, in addition, no step disturbed the pile beyond the label threshold
+    (the strict episode, the prefix up to its first strict failure, ended with the target
+    out); their judged steps.
     `success_held`: the strict judgement while the second arm still held, where that is
     decidable (it differs only when the strict episode's last step pulled the target and its
     release disturbed the pile)."""
@@ -181,7 +190,9 @@ def judge_episode(steps: list[dict[str, Any]], end: str, target: int) -> dict[st
     )
     return {
         "end": end,
-        "target_out": any(s["extracted"] and s["box"] == target for s in steps),
+        # the target came out in some step, whether or not that step made a box collapse
+        # (`success` also needs no collapse; this field was `target_out` before)
+        "target_extracted": any(s["extracted"] and s["box"] == target for s in steps),
         "others_still": all(s["others_still"] for s in steps),
         "success": end == "target_out",
         "strict_success": strict_ok,

@@ -202,8 +202,10 @@ def aggregate(records: Sequence[Mapping[str, Any]], group_by: str = "condition")
     """One row per value of `group_by` (in order of first appearance): episode success
     k/n, rate and Wilson 95% bounds; with per-episode `steps`, the pooled per-step success
     over judged steps with an episode-cluster bootstrap interval, the mean steps and the
-    aborts that moved nothing; the means of `n_disturbed` / `disturbance_m` and the `strict_success`
-    rate where the records have them (columns absent where no record has the field)."""
+    aborts without a collapse (`aborts`; of them `aborts_before_motion`, and `aborts_moved`:
+    after motion, another box moved beyond the label threshold); the means of `n_disturbed` /
+    `disturbance_m` and the `strict_success` rate where the records have them (columns absent
+    where no record has the field)."""
     groups: dict[Any, list[Mapping[str, Any]]] = {}
     for r in records:
         if group_by not in r:
@@ -227,6 +229,13 @@ def aggregate(records: Sequence[Mapping[str, Any]], group_by: str = "condition")
                 row["aborts_before_motion"] = sum(
                     bool(s["aborted_before_motion"]) for r in recs for s in _steps(r)
                 )
+                # of the aborts without a collapse: those that moved another box beyond the
+                # label threshold (strict failures)
+                row["aborts_moved"] = sum(
+                    bool(s["aborted_after_motion"]) and not _judged(s) and not s["others_still"]
+                    for r in recs
+                    for s in _steps(r)
+                )
         for key, column in OPTIONAL_MEANS.items():
             if _has(recs, key, value):
                 row[column] = _mean(recs, key)
@@ -245,6 +254,7 @@ def aggregate(records: Sequence[Mapping[str, Any]], group_by: str = "condition")
         "mean_steps",
         "aborts",
         "aborts_before_motion",
+        "aborts_moved",
         *OPTIONAL_MEANS.values(),
         *_rate_columns("strict_success", Rate(0, 0)),
         *_rate_columns("success_held", Rate(0, 0)),
@@ -257,7 +267,8 @@ def aggregate(records: Sequence[Mapping[str, Any]], group_by: str = "condition")
     counts = [
         c
         for c in columns
-        if c in ("episodes", "aborts", "aborts_before_motion") or c.endswith(("_k", "_n"))
+        if c in ("episodes", "aborts", "aborts_before_motion", "aborts_moved")
+        or c.endswith(("_k", "_n"))
     ]
     return frame.astype(dict.fromkeys(counts, "Int64"))
 
