@@ -298,6 +298,35 @@ def test_a_truth_map_covers_exactly_the_boxes_its_removal_moves(spec_path, physi
         assert np.array_equal(heat[k] > 0, expected), x
 
 
+@pytest.mark.parametrize("spec_path", [STACK3, HOLD_QUIET])
+def test_a_pull_truth_map_is_what_executing_the_whole_pull_moves(spec_path, physics):
+    """Issue 50: the map of pulling x is the boxes that executing the trials' whole pull of x
+    moves beyond the label threshold or off the shelf, bit for bit (the same executor, the
+    same increments, from the same state)."""
+    from clutterbench.planning.extraction import visible_objects
+    from clutterbench.sim.render import observe
+    from clutterbench.trials.truth_maps import TruthCollapseMaps, pull_outcome
+
+    spec = SceneSpec.load(spec_path)
+    state = SceneState.start(spec)
+    obs = observe(world_at(spec, state, physics, render=True), CAM)
+    ids, masks = visible_objects(obs, 5)
+    pull = (PARAMS.pull_increment_m, PARAMS.grasp_lift_m)
+    maps = TruthCollapseMaps(spec, physics, THR, pull)
+    maps.at(state, obs.instance)
+    heat = maps(obs.depth_m, masks.astype(np.uint8))
+    for k, x in enumerate(ids):
+        # the executed step: a fresh rendered world, the pull run to its end
+        result = execute_pull(world_at(spec, state, physics, render=True), x, None, *pull)
+        simulated = pull_outcome(spec, state, physics, x, (), pull)
+        assert np.array_equal(simulated.poses_end, result.poses_end), x  # bit for bit
+        moved = (np.nan_to_num(result.displacement_m, nan=0.0) > THR) | ~result.on_shelf
+        moved[x] = False
+        expected = np.isin(obs.instance, np.flatnonzero(moved) + 1)
+        assert np.array_equal(heat[k] > 0, expected), x
+    assert maps.simulations == len(ids)
+
+
 def test_the_truth_planner_takes_the_tower_down_and_rereads_physics_mid_pull():
     """With physics-truth maps, Algorithm 1 takes a tower of six down from the top; the maps
     are simulated for every visible box at each decision and again at every monitor check

@@ -40,6 +40,24 @@ def test_the_gap_splits_into_planning_and_perception():
     assert all(r["planner"] != "bimanual" for r in decompose(by_condition))
 
 
+def test_with_pull_truth_maps_the_gap_splits_three_ways(tmp_path):
+    by_condition = {
+        "multi_step": _records("multi_step", "s", 3),
+        "multi_step_truth": _records("multi_step_truth", "s", 4),
+        "multi_step_pull_truth": _records("multi_step_pull_truth", "s", 7),
+        "oracle": _records("oracle", "s", 8),
+    }
+    free = next(r for r in decompose(by_condition) if r["key"] == "success")
+    assert free["planning"] == pytest.approx(10.0)  # oracle - pull truth
+    assert free["meaning"] == pytest.approx(30.0)  # pull truth - deletion truth
+    assert free["perception"] == pytest.approx(10.0)
+    assert free["gap"] == pytest.approx(free["planning"] + free["meaning"] + free["perception"])
+    assert free["pull_truth_condition"] == "multi_step_pull_truth"
+    decomposition_table(by_condition, tmp_path, "tiny")
+    text = (tmp_path / "table_6_3_decomposition.md").read_text()
+    assert "what the map predicts" in text and "30.0 [" in text
+
+
 def test_parts_are_taken_over_the_episodes_all_three_rows_ran():
     by_condition = {
         "m": _records("multi_step", "s", 2, n=4),

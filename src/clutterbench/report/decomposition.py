@@ -11,6 +11,12 @@ and its matching search oracle. Per episode and under each criterion:
 each part in points of per-episode success over the episodes all three ran, with a paired
 95% bootstrap interval over episodes (the same resampled episodes for every part). A
 negative part means the better-informed row did worse on those episodes.
+
+Where the stream also has the planner on truth maps of the trials' own pull
+(`*_pull_truth`), the split is three ways:
+
+    oracle - CP  =  (oracle - pull truth) + (pull truth - truth) + (truth - CP)
+                      planning               what the map predicts   perception
 """
 
 from __future__ import annotations
@@ -28,7 +34,10 @@ from clutterbench.trials.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
 TABLE = "table_6_3_decomposition"
 
 TRUTH_OF = {"multi_step": "multi_step_truth", "bimanual": "bimanual_truth"}
-"""CP planner -> the same planner on physics-truth maps."""
+"""CP planner -> the same planner on physics-truth maps (of deletion, as its labels)."""
+
+PULL_TRUTH_OF = {"multi_step": "multi_step_pull_truth", "bimanual": "bimanual_pull_truth"}
+"""CP planner -> the same planner on physics-truth maps of the trials' pull."""
 
 ORACLE_OF = {"multi_step": "oracle", "bimanual": "oracle_hold"}
 """CP planner -> its matching search oracle (the one its Table 6.3 row is measured against)."""
@@ -39,10 +48,12 @@ COLUMNS = [
     Column("criterion", "criterion", "{}"),
     Column("stream", "stream", "{}"),
     Column("oracle_pct", "oracle %", "{:.1f}"),
+    Column("pull_truth_pct", "pull truth maps %", "{:.1f}"),
     Column("truth_pct", "truth maps %", "{:.1f}"),
     Column("cp_pct", "CP %", "{:.1f}"),
     Column("gap_text", "points below the oracle", "{}"),
-    Column("planning_text", "planning part (oracle - truth)", "{}"),
+    Column("planning_text", "planning part (oracle - pull truth, else - truth)", "{}"),
+    Column("meaning_text", "what the map predicts (pull truth - truth)", "{}"),
     Column("perception_text", "perception part (truth - CP)", "{}"),
     Column("episodes", "episodes", "{:d}"),
 ]
@@ -64,12 +75,18 @@ def paired_parts(
     cp: Sequence[bool],
     resamples: int = BOOTSTRAP_RESAMPLES,
     seed: int = BOOTSTRAP_SEED,
+    pull_truth: Sequence[bool] | None = None,
 ) -> dict[str, Any]:
     """Points (100 x mean difference) of the gap, planning and perception parts over paired
-    episodes, each with a 95% percentile interval from one seeded bootstrap over episodes."""
+    episodes (with `pull_truth`, also the map-meaning part), each with a 95% percentile
+    interval from one seeded bootstrap over episodes."""
     o, t, c = (np.asarray(x, dtype=np.float64) for x in (oracle, truth, cp))
     assert len(o) == len(t) == len(c) > 0, "paired outcomes of the same episodes"
     diffs = {"gap": o - c, "planning": o - t, "perception": t - c}
+    if pull_truth is not None:
+        p = np.asarray(pull_truth, dtype=np.float64)
+        assert len(p) == len(o), "paired outcomes of the same episodes"
+        diffs |= {"planning": o - p, "meaning": p - t}
     picks = np.random.default_rng(seed).integers(0, len(o), size=(resamples, len(o)))
     out: dict[str, Any] = {}
     for name, d in diffs.items():
@@ -91,33 +108,32 @@ def decompose(
             continue
         truth = index.get((TRUTH_OF[planner], stream))
         oracle = index.get((ORACLE_OF[planner], stream))
+        pull = index.get((PULL_TRUTH_OF[planner], stream))
         if truth is None or oracle is None:
             continue
         for key, criterion in CRITERIA.items():
-            sets = [
-                {int(r["episode"]): bool(r[key]) for r in rs if key in r}
-                for rs in (oracle[1], truth[1], recs)
-            ]
-            shared = sorted(set(sets[0]) & set(sets[1]) & set(sets[2]))
+            runs = [oracle[1], truth[1], recs] + ([pull[1]] if pull is not None else [])
+            sets = [{int(r["episode"]): bool(r[key]) for r in rs if key in r} for rs in runs]
+            shared = sorted(set.intersection(*(set(s) for s in sets)))
             if not shared:
                 continue
-            o, t, c = ([s[e] for e in shared] for s in sets)
-            rows.append(
-                {
-                    "planner": planner,
-                    "condition": cond,
-                    "truth_condition": truth[0],
-                    "oracle_condition": oracle[0],
-                    "stream": stream,
-                    "criterion": criterion,
-                    "key": key,
-                    "episodes": len(shared),
-                    "oracle_pct": 100.0 * float(np.mean(o)),
-                    "truth_pct": 100.0 * float(np.mean(t)),
-                    "cp_pct": 100.0 * float(np.mean(c)),
-                }
-                | paired_parts(o, t, c)
-            )
+            o, t, c, *p = ([s[e] for e in shared] for s in sets)
+            row = {
+                "planner": planner,
+                "condition": cond,
+                "truth_condition": truth[0],
+                "pull_truth_condition": pull[0] if pull is not None else None,
+                "oracle_condition": oracle[0],
+                "stream": stream,
+                "criterion": criterion,
+                "key": key,
+                "episodes": len(shared),
+                "oracle_pct": 100.0 * float(np.mean(o)),
+                "pull_truth_pct": 100.0 * float(np.mean(p[0])) if p else None,
+                "truth_pct": 100.0 * float(np.mean(t)),
+                "cp_pct": 100.0 * float(np.mean(c)),
+            }
+            rows.append(row | paired_parts(o, t, c, pull_truth=p[0] if p else None))
     return rows
 
 
@@ -137,18 +153,17 @@ def decomposition_table(
         return None
     shown = []
     for r in rows:
-        label = (
-            f"{r['planner']} [{r['condition']} / {r['truth_condition']} / {r['oracle_condition']}]"
-        )
+        truths = " / ".join(c for c in (r["truth_condition"], r["pull_truth_condition"]) if c)
+        label = f"{r['planner']} [{r['condition']} / {truths} / {r['oracle_condition']}]"
+        parts = ("gap", "planning", "meaning", "perception")
         shown.append(
             {"row": label}
             | {c.key: r.get(c.key) for c in COLUMNS}
-            | {f"{p}_text": _text(r, p) for p in ("gap", "planning", "perception")}
+            | {f"{p}_text": _text(r, p) if p in r else None for p in parts}
         )
-    frame = pd.DataFrame(
-        [{"CP planner [CP / truth / oracle condition]": s["row"]} | s for s in shown]
-    )
-    frame = frame[["CP planner [CP / truth / oracle condition]", *[c.key for c in COLUMNS]]].rename(
+    head = "CP planner [CP / truth (/ pull truth) / oracle condition]"
+    frame = pd.DataFrame([{head: s["row"]} | s for s in shown])
+    frame = frame[[head, *[c.key for c in COLUMNS]]].rename(
         columns={c.key: c.header for c in COLUMNS}
     )
     notes = [
@@ -165,6 +180,12 @@ def decomposition_table(
         "(e.g. truth maps block more candidates, so the planner gives up or takes a longer path).",
         "Oracles: oracle (one arm) for multi-step, oracle_hold (may hold one box) for bimanual, "
         "as in Table 6.3.",
+        "Where the stream has the planner on physics-truth maps of the trials' own pull "
+        "(*_pull_truth: the boxes that move beyond the label threshold or leave the shelf when "
+        "box x is pulled out by the trials' executor from the present state, bit for bit what "
+        "executing that pull does), the split is three ways: planning = oracle - pull truth; "
+        "what the map predicts = pull truth - truth (deletion maps, as the network's labels); "
+        "perception = truth - CP.",
     ]
     write_table(
         frame,
@@ -191,17 +212,19 @@ def _figure(rows: Sequence[Mapping[str, Any]], path: Path) -> None:
 
     labels = [f"{r['planner']}\n{r['stream']}\n{r['criterion']}" for r in rows]
     x = np.arange(len(rows))
-    plan = np.array([r["planning"] for r in rows])
-    perc = np.array([r["perception"] for r in rows])
     fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(rows)), 4.0))
-    ax.bar(x, plan, color="#4c72b0", label="planning (oracle - truth maps)")
-    ax.bar(
-        x,
-        perc,
-        bottom=np.where(perc >= 0, np.maximum(plan, 0), np.minimum(plan, 0)),
-        color="#dd8452",
-        label="perception (truth maps - CP)",
-    )
+    up, down = np.zeros(len(rows)), np.zeros(len(rows))
+    parts = [
+        ("planning", "planning (oracle - best truth maps)", "#4c72b0"),
+        ("meaning", "what the map predicts (pull truth - truth)", "#55a868"),
+        ("perception", "perception (truth maps - CP)", "#dd8452"),
+    ]
+    for key, label, color in parts:
+        v = np.array([float(r.get(key) or 0.0) for r in rows])
+        if key == "meaning" and not np.any(v):
+            continue
+        ax.bar(x, v, bottom=np.where(v >= 0, up, down), color=color, label=label)
+        up, down = up + np.maximum(v, 0), down + np.minimum(v, 0)
     ax.scatter(x, [r["gap"] for r in rows], color="black", zorder=3, label="gap to the oracle")
     ax.axhline(0, color="grey", lw=0.8)
     ax.set_xticks(x, labels, fontsize=7)

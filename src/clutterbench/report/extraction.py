@@ -41,6 +41,8 @@ METHODS = {
     "bimanual": "multi-step + bimanual hold",
     "multi_step_truth": "multi-step on physics-truth collapse maps (perception ceiling)",
     "bimanual_truth": "multi-step + bimanual hold on physics-truth maps (perception ceiling)",
+    "multi_step_pull_truth": "multi-step on physics-truth maps of the trials' pull",
+    "bimanual_pull_truth": "multi-step + bimanual hold on physics-truth maps of the pull",
     "oracle": "search oracle, one arm (ceiling)",
     "oracle_hold": "search oracle, may hold one box (ceiling)",
     "random": "random (floor)",
@@ -53,6 +55,7 @@ MATCHING_ORACLE = {
     "single_step": "oracle_hold",
     "bimanual": "oracle_hold",
     "bimanual_truth": "oracle_hold",
+    "bimanual_pull_truth": "oracle_hold",
     "oracle_hold": "oracle_hold",
     "physics_from_depth_hold": "oracle_hold",
 }

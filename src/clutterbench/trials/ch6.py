@@ -301,7 +301,11 @@ class Extraction:
             "rule": job["rule"] if job["planner"] in CP_PLANNERS else None,
             "collapse_maps": None
             if job["planner"] not in CP_PLANNERS
-            else ("physics truth" if truth is not None else "predicted"),
+            else (
+                "predicted"
+                if truth is None
+                else ("physics truth of the pull" if truth.pull else "physics truth")
+            ),
             "rejected_starts": dict(spec.meta.get("rejected", {})),
             "collapse_free_params": {
                 "drop_m": job["collapse_free"].drop_m,

@@ -115,14 +115,18 @@ def _oracle_hold(job: dict[str, Any], spec: SceneSpec):
     )
 
 
-def _cpg_planner(job: dict[str, Any], bimanual: bool, spec: SceneSpec | None = None):
+def _cpg_planner(
+    job: dict[str, Any], bimanual: bool, spec: SceneSpec | None = None, pull: bool = False
+):
     """Algorithm 1 with the collapse predictor, or (`spec` given) with physics-truth maps of
-    that scene through the same interface: the same planner, rule and thresholds."""
+    that scene through the same interface (`pull`: maps of the trials' pull, else of
+    deleting the box): the same planner, rule and thresholds."""
     params: Ch6TrialParams = job["params"]
     if spec is None:
         predictor = load_predictor(job["model_path"], job["camera"].image_size)
     else:
-        predictor = TruthCollapseMaps(spec, job["physics"], params.moved_threshold_m)
+        action = (params.pull_increment_m, params.grasp_lift_m) if pull else None
+        predictor = TruthCollapseMaps(spec, job["physics"], params.moved_threshold_m, action)
     return CollapseGraphPlanner(
         predictor, job["support"], job["cp_max"], params.min_pixels, bimanual=bimanual
     )
@@ -146,6 +150,16 @@ def _multi_step_truth(job: dict[str, Any], spec: SceneSpec):
 @register_planner("bimanual_truth")
 def _bimanual_truth(job: dict[str, Any], spec: SceneSpec):
     return _cpg_planner(job, bimanual=True, spec=spec)
+
+
+@register_planner("multi_step_pull_truth")
+def _multi_step_pull_truth(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=False, spec=spec, pull=True)
+
+
+@register_planner("bimanual_pull_truth")
+def _bimanual_pull_truth(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=True, spec=spec, pull=True)
 
 
 def _physics_from_depth(job: dict[str, Any], spec: SceneSpec, holding: bool):
@@ -179,8 +193,16 @@ def _pfd_hold(job: dict[str, Any], spec: SceneSpec):
     return _physics_from_depth(job, spec, holding=True)
 
 
-CP_PLANNERS = ("multi_step", "bimanual", "multi_step_truth", "bimanual_truth")
-"""The planners of Algorithm 1 (a support rule, cp_max); `*_truth` read physics-truth maps."""
+CP_PLANNERS = (
+    "multi_step",
+    "bimanual",
+    "multi_step_truth",
+    "bimanual_truth",
+    "multi_step_pull_truth",
+    "bimanual_pull_truth",
+)
+"""The planners of Algorithm 1 (a support rule, cp_max); `*_truth` read physics-truth maps
+(`*_pull_truth`: of the trials' pull, the others of deletion)."""
 
 
 def reads_truth_maps(name: str) -> bool:

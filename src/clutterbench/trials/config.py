@@ -21,6 +21,8 @@ PLANNERS = (
     "bimanual",
     "multi_step_truth",
     "bimanual_truth",
+    "multi_step_pull_truth",
+    "bimanual_pull_truth",
     "oracle",
     "oracle_hold",
     "random",
@@ -31,7 +33,8 @@ PLANNERS = (
 target at once, nothing held; the thesis' single-step method (its previous work, ch. 4: pull
 the target while holding the support of least risk); Algorithm 1 with one arm; Algorithm 1
 with the bimanual option (Fig. 6.7); the same two fed physics-truth collapse maps instead of
-the predictor's (the perception ceiling, trials/truth_maps.py); the search oracles with one
+the predictor's (the perception ceiling, trials/truth_maps.py), of deletion (the labels'
+meaning) and of the trials' own pull; the search oracles with one
 arm and with a holding arm; a uniformly random visible box each step; the search on boxes
 fitted to each observation instead of the true scene, one arm and holding
 (planning/physics_depth.py)."""

@@ -9,6 +9,16 @@ dataset labels are), with the boxes the second arm holds at that moment still he
 harness tells it the present state before the planner's decision and before every monitor
 check during a pull (`at`); the planner itself is unchanged, so a truth row differs from its
 CP row only in the maps. Lives in trials/, not planning/, because it reads the world.
+
+With `pull=(increment_m, lift_m)` the maps are of the trial's own action instead (issue 50,
+`*_pull_truth`): the map of box x is the boxes that move beyond the label threshold or leave
+the shelf when x is pulled out of the present state by the trials' executor
+(sim.pull.execute_pull, the same increments and lift, the held box held and released, the
+scene settled), so it agrees bit for bit with executing that whole pull. Friction drags
+what rests on or leans against the pulled box, which deleting it never shows. During a pull
+the maps keep the decision's answers: the pull in progress is the very pull simulated, so
+the rest of it is already known (the monitor of a truth-pull planner never fires on its own
+choice).
 """
 
 from __future__ import annotations
@@ -19,15 +29,23 @@ import numpy as np
 
 from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.physics import BoxWorld
-from clutterbench.sim.pull import SceneState
+from clutterbench.sim.pull import PullResult, SceneState, execute_pull, world_at
 from clutterbench.sim.spec import SceneSpec
 
 
 class TruthCollapseMaps:
     """A PredictFn (planning/extraction.py) answered by simulation at the present state."""
 
-    def __init__(self, spec: SceneSpec, physics: PhysicsConfig, moved_threshold_m: float):
+    def __init__(
+        self,
+        spec: SceneSpec,
+        physics: PhysicsConfig,
+        moved_threshold_m: float,
+        pull: tuple[float, float] | None = None,
+    ):
         self.spec, self.physics, self.threshold = spec, physics, moved_threshold_m
+        self.pull = pull
+        """(increment_m, lift_m) of the trials' pull: maps of pulling; None: of deleting."""
         self._state: SceneState | None = None
         self._instance: np.ndarray | None = None
         self._held: tuple[int, ...] = ()
@@ -38,23 +56,31 @@ class TruthCollapseMaps:
     def at(self, state: SceneState, instance: np.ndarray, held: Iterable[int] = ()) -> None:
         """The present state, the instance image the masks are cut from (box k is k + 1) and
         the boxes held there; the next calls answer for it."""
+        mid_pull = self.pull is not None and bool(tuple(held))
         self._state, self._instance = state, np.asarray(instance)
-        self._held = tuple(sorted(int(k) for k in held))
-        self._cache = {}
+        if not mid_pull:  # a pull in progress is the one simulated: keep its answers
+            self._held = tuple(sorted(int(k) for k in held))
+            self._cache = {}
 
     def moved_by_removing(self, box: int) -> np.ndarray:
         """(N,) bool: the boxes (not `box`, not held, not already out) that move beyond the
-        label threshold when `box` is lifted out of the present state."""
+        label threshold when `box` is lifted out of the present state (with `pull`: pulled
+        out by the trials' executor; leaving the shelf counts as moving)."""
         if box not in self._cache:
             state = self._state
             assert state is not None, "the harness sets the present state first (at)"
-            world = BoxWorld.from_state(self.spec, state.poses, state.removed, self.physics)
             held = [k for k in self._held if k != box]
-            if held:
-                world.hold(held)
-            disp = np.nan_to_num(world.lift_out(box).displacement_m, nan=0.0)
+            if self.pull is None:
+                world = BoxWorld.from_state(self.spec, state.poses, state.removed, self.physics)
+                if held:
+                    world.hold(held)
+                disp = np.nan_to_num(world.lift_out(box).displacement_m, nan=0.0)
+                moved = disp > self.threshold
+            else:
+                result = pull_outcome(self.spec, state, self.physics, box, held, self.pull)
+                disp = np.nan_to_num(result.displacement_m, nan=0.0)
+                moved = (disp > self.threshold) | ~result.on_shelf
             self.simulations += 1
-            moved = disp > self.threshold
             moved[[box, *held, *sorted(state.removed)]] = False
             self._cache[box] = moved
         return self._cache[box]
@@ -77,3 +103,18 @@ class TruthCollapseMaps:
             moved = np.flatnonzero(self.moved_by_removing(self.box_of(mask)))
             out[k] = np.isin(self._instance, moved + 1)
         return out
+
+
+def pull_outcome(
+    spec: SceneSpec,
+    state: SceneState,
+    physics: PhysicsConfig,
+    box: int,
+    held: Iterable[int],
+    pull: tuple[float, float],
+) -> PullResult:
+    """The trials' whole pull of `box` from `state` (a fresh world there, the first of
+    `held` held): what an executed step that the monitor lets run does, bit for bit."""
+    hold = next(iter(held), None)
+    increment_m, lift_m = pull
+    return execute_pull(world_at(spec, state, physics), box, hold, increment_m, lift_m)
