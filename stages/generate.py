@@ -9,6 +9,7 @@ from clutterbench.data.generate import generate_dataset
 from clutterbench.errors import ClutterbenchError
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
+from clutterbench.trials.config import TrialsConfig
 
 
 def generate(params: dict, base: BaseConfig) -> None:
@@ -19,8 +20,11 @@ def generate(params: dict, base: BaseConfig) -> None:
         raise ClutterbenchError(
             f"generate.datasets.{name}: no such dataset (known: {', '.join(gen.datasets)})"
         )
+    # a dataset with pull outcomes pulls as the ch. 6 trials do (the same executor and params)
+    ch6 = load_section(TrialsConfig, "trials", params).ch6
+    pull = (ch6.pull_increment_m, ch6.grasp_lift_m)
     manifest = generate_dataset(
-        name, gen.datasets[name], gen, sim, base.seed, Path("data/generate") / name
+        name, gen.datasets[name], gen, sim, base.seed, Path("data/generate") / name, pull
     )
     print(f"{name}: {manifest['n_scenes']} scenes, rejected {manifest['rejected']}")
 

@@ -98,3 +98,35 @@ def test_stacked_removals_move_something_and_clusters_cover_every_box(shards):
         if str(s["family"]) in ("stacked", "pile"):
             # a stack's bottom box carries others: some removal must move a box
             assert np.nanmax(s["removal_m"][:n, :n]) > 0.005, s["family"]
+
+
+def test_stored_pull_outcomes_replay_as_the_trials_pull(tmp_path, camera):
+    """Issue 50's labels: the stored outcome of pulling each box is what the trials' executor
+    does from the stored start, bit for bit; without the trials' pull the stage refuses."""
+    from clutterbench.errors import ClutterbenchError
+    from clutterbench.sim.pull import SceneState, execute_pull, world_at
+
+    sim = SimConfig(camera=camera)
+    ds = DatasetConfig(
+        n_scenes=1,
+        families={"stacked": 1.0},
+        catalogue="various",
+        n_objects=(3, 4),
+        pull_outcomes=True,
+    )
+    pull = (0.02, 0.003)
+    gen = GenerateConfig(shard_size=10, workers=1, max_attempts=30, datasets={"po": ds})
+    manifest = generate_dataset("po", ds, gen, sim, 0, tmp_path / "po", pull)
+    z = load_npz(tmp_path / "po" / manifest["shards"][0])
+    spec = SceneSpec.from_json(str(z["spec_json"][0]))
+    n = spec.n
+    for x in range(n):
+        result = execute_pull(world_at(spec, SceneState.start(spec), sim.physics), x, None, *pull)
+        shift = np.linalg.norm(result.poses_end[:, :3] - result.poses_start[:, :3], axis=1)
+        shift[x] = np.nan
+        assert np.array_equal(z["pullout_displacement_m"][0, x, :n], shift, equal_nan=True)
+        left = ~result.on_shelf
+        left[x] = False
+        assert np.array_equal(z["pullout_left_shelf"][0, x, :n], left)
+    with pytest.raises(ClutterbenchError, match="pull_outcomes needs the trials' pull"):
+        generate_dataset("po2", ds, gen, sim, 0, tmp_path / "po2")

@@ -304,6 +304,7 @@ def test_a_pull_truth_map_is_what_executing_the_whole_pull_moves(spec_path, phys
     moves beyond the label threshold or off the shelf, bit for bit (the same executor, the
     same increments, from the same state)."""
     from clutterbench.planning.extraction import visible_objects
+    from clutterbench.sim.labelling import pull_outcomes
     from clutterbench.sim.render import observe
     from clutterbench.trials.truth_maps import TruthCollapseMaps, pull_outcome
 
@@ -315,6 +316,7 @@ def test_a_pull_truth_map_is_what_executing_the_whole_pull_moves(spec_path, phys
     maps = TruthCollapseMaps(spec, physics, THR, pull)
     maps.at(state, obs.instance)
     heat = maps(obs.depth_m, masks.astype(np.uint8))
+    labels = pull_outcomes(spec, physics, pull)  # the dataset's pull-consequence labels
     for k, x in enumerate(ids):
         # the executed step: a fresh rendered world, the pull run to its end
         result = execute_pull(world_at(spec, state, physics, render=True), x, None, *pull)
@@ -324,6 +326,10 @@ def test_a_pull_truth_map_is_what_executing_the_whole_pull_moves(spec_path, phys
         moved[x] = False
         expected = np.isin(obs.instance, np.flatnonzero(moved) + 1)
         assert np.array_equal(heat[k] > 0, expected), x
+        others = [y for y in range(spec.n) if y != x]
+        shift = np.linalg.norm(result.poses_end[:, :3] - result.poses_start[:, :3], axis=1)
+        assert np.array_equal(labels.displacement_m[x, others], shift[others])
+        assert np.array_equal(labels.left_shelf[x, others], ~result.on_shelf[others])
     assert maps.simulations == len(ids)
 
 

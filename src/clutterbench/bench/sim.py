@@ -21,9 +21,10 @@ from clutterbench.io import load_npz
 from clutterbench.platform_info import cpu_description
 from clutterbench.progress import progress_bar
 from clutterbench.sim.config import SimConfig
-from clutterbench.sim.labelling import act_on_spec, build_world
+from clutterbench.sim.labelling import act_on_spec, build_world, pull_outcomes, removal_matrix
 from clutterbench.sim.render import ensure_renderer, render_depth_instance
 from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.config import TrialsConfig
 
 BENCH_DATASET = "ch6"  # 5-10 boxes, shelved : stacked : random = 1 : 1 : 3
 N_SCENES = 60
@@ -49,6 +50,19 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
     # Raw cost, measured in the same run: wall time inside SAPIEN's own step and render
     # calls; the rest is the pipeline's overhead (placement, rest checks, state restore).
     sapien_s = sum(s.sapien_s for s in scenes)
+
+    # Issue 50's pull-consequence labels: the trials' whole pull of every box, against the
+    # deletion labels every dataset scene already pays for, on the same scenes.
+    ch6 = load_section(TrialsConfig, "trials", params).ch6
+    pull = (ch6.pull_increment_m, ch6.grasp_lift_m)
+    t0 = time.perf_counter()
+    for sc in scenes:
+        removal_matrix(sc.spec, sim.physics)
+    removals_s = (time.perf_counter() - t0) / n_scenes
+    t0 = time.perf_counter()
+    for sc in scenes:
+        pull_outcomes(sc.spec, sim.physics, pull)
+    pulls_s = (time.perf_counter() - t0) / n_scenes
 
     # Render: per picture of the pipeline's own function, and SAPIEN's raw take_picture.
     world = build_world(warm.spec, sim.physics, render=True)
@@ -87,6 +101,9 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
         "raw_render_ms_per_picture": 1e3 * raw_picture_s,
         "sapien_step_render_ms_per_scene": 1e3 * sapien_s / n_scenes,
         "overhead_ratio": pipeline_s / sapien_s,
+        "ms_per_scene_deletion_labels": 1e3 * removals_s,
+        "ms_per_scene_pull_outcome_labels": 1e3 * pulls_s,
+        "pull_outcome_labels_vs_scene": pulls_s / (pipeline_s / n_scenes),
         "processes": 1,
         **cpu_description(),  # cpu_model, logical_cpus, torch_threads, machine
     }
@@ -95,6 +112,10 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
         "",
         "Targets: >= 20 labelled scenes / s / core; overhead_ratio <= 2 "
         "(pipeline time / time inside SAPIEN step + render calls in the same run).",
+        "Pull-outcome labels (generate.datasets.<name>.pull_outcomes, issue 50): the trials' "
+        "whole pull of every box of the same scenes, per scene, against the deletion labels "
+        "(removal of every box) each labelled scene already includes; "
+        "pull_outcome_labels_vs_scene is what they add to a labelled scene's time.",
     ]
     write_result(out_dir, "sim", result, lines)
     return result

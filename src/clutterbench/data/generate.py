@@ -29,8 +29,18 @@ FORMAT_VERSION = 3  # 2: canonical-start labels, clusters, contacts, float64 lab
 # leaning box is C^r / C^l, replenish_shelved as thesis Fig. 5.9 (old shards are not reused)
 
 
-def config_hash(dataset: str, ds: DatasetConfig, sim: SimConfig, seed: int) -> str:
+def config_hash(
+    dataset: str,
+    ds: DatasetConfig,
+    sim: SimConfig,
+    seed: int,
+    pull: tuple[float, float] | None = None,
+) -> str:
     ds_fields = {k: v for k, v in as_dict(ds).items() if k != "moved_threshold_m"}
+    if not ds.pull_outcomes:  # datasets without them keep their hash (finished shards resume)
+        ds_fields.pop("pull_outcomes")
+    else:
+        ds_fields["pull_outcomes"] = list(pull or ())
     payload = {
         "format": FORMAT_VERSION,
         "dataset": dataset,
@@ -55,9 +65,16 @@ def _shard_is_done(path: Path, digest: str) -> bool:
 
 
 def label_scene(
-    dataset: str, ds: DatasetConfig, sim: SimConfig, seed: int, index: int, max_attempts: int
+    dataset: str,
+    ds: DatasetConfig,
+    sim: SimConfig,
+    seed: int,
+    index: int,
+    max_attempts: int,
+    pull: tuple[float, float] | None = None,
 ) -> LabelledScene:
-    """Scene `index` of a dataset configured by `ds` (regenerable alone)."""
+    """Scene `index` of a dataset configured by `ds` (regenerable alone); `pull`: the trials'
+    (increment_m, lift_m), needed when ds.pull_outcomes."""
     return generate_labelled_scene(
         seed=seed,
         dataset=dataset,
@@ -69,6 +86,7 @@ def label_scene(
         physics=sim.physics,
         camera=sim.camera,
         max_attempts=max_attempts,
+        pull_outcome=pull if ds.pull_outcomes else None,
     )
 
 
@@ -78,7 +96,7 @@ def make_shard(job: dict[str, Any]) -> dict[str, Any]:
     sim: SimConfig = job["sim"]
     ensure_renderer()
     scenes = [
-        label_scene(job["dataset"], ds, sim, job["seed"], i, job["max_attempts"])
+        label_scene(job["dataset"], ds, sim, job["seed"], i, job["max_attempts"], job["pull"])
         for i in job["indices"]
     ]
     n_max = ds.n_objects[1]
@@ -108,6 +126,10 @@ def make_shard(job: dict[str, Any]) -> dict[str, Any]:
     }
     if ds.pulls:
         arrays["pull_m"] = np.full((s, n_max, n_max + 1, n_max), np.nan, np.float64)
+    if ds.pull_outcomes:
+        for key in ("pullout_displacement_m", "pullout_drop_m", "pullout_tilt_deg"):
+            arrays[key] = np.full((s, n_max, n_max), np.nan, np.float64)
+        arrays["pullout_left_shelf"] = np.zeros((s, n_max, n_max), bool)
     for k, sc in enumerate(scenes):
         n, c = sc.spec.n, len(sc.cluster_class)
         arrays["sizes_m"][k, :n] = sc.spec.sizes_m
@@ -120,6 +142,12 @@ def make_shard(job: dict[str, Any]) -> dict[str, Any]:
         arrays["cluster_of"][k, :n] = sc.cluster_of
         arrays["cluster_class"][k, :c] = sc.cluster_class
         arrays["cluster_bbox_px"][k, :c] = sc.cluster_bbox_px
+        if ds.pull_outcomes:
+            po = sc.pull_outcome
+            arrays["pullout_displacement_m"][k, :n, :n] = po.displacement_m
+            arrays["pullout_drop_m"][k, :n, :n] = po.drop_m
+            arrays["pullout_tilt_deg"][k, :n, :n] = po.tilt_deg
+            arrays["pullout_left_shelf"][k, :n, :n] = po.left_shelf
         if ds.pulls:
             # support slot n (no support) is stored in the last slot, n_max
             arrays["pull_m"][k, :n, :n, :n] = sc.pull_m[:, :n]
@@ -129,11 +157,20 @@ def make_shard(job: dict[str, Any]) -> dict[str, Any]:
 
 
 def generate_dataset(
-    name: str, ds: DatasetConfig, gen: GenerateConfig, sim: SimConfig, seed: int, out_dir: Path
+    name: str,
+    ds: DatasetConfig,
+    gen: GenerateConfig,
+    sim: SimConfig,
+    seed: int,
+    out_dir: Path,
+    pull: tuple[float, float] | None = None,
 ) -> dict[str, Any]:
-    """Write (or finish) every shard of dataset `name` under `out_dir`; returns the manifest."""
+    """Write (or finish) every shard of dataset `name` under `out_dir`; returns the manifest.
+    `pull`: the trials' (increment_m, lift_m), for a dataset with pull_outcomes."""
+    if ds.pull_outcomes and pull is None:
+        raise ClutterbenchError(f"generate.datasets.{name}: pull_outcomes needs the trials' pull")
     out_dir.mkdir(parents=True, exist_ok=True)
-    digest = config_hash(name, ds, sim, seed)
+    digest = config_hash(name, ds, sim, seed, pull)
     n_shards = -(-ds.n_scenes // gen.shard_size)
     for stale in out_dir.glob("shard-*.npz"):  # shards beyond a shrunken dataset
         if int(stale.stem.split("-")[1]) >= n_shards:
@@ -155,6 +192,7 @@ def generate_dataset(
                 "dataset": name,
                 "digest": digest,
                 "max_attempts": gen.max_attempts,
+                "pull": pull,
             }
         )
     done_before = ds.n_scenes - sum(len(j["indices"]) for j in jobs)

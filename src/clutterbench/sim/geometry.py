@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -112,3 +114,12 @@ def obb_penetration_m(
             return 0.0
         depth = min(depth, overlap)
     return float(depth)
+
+
+def tilt_change_deg(quat_start: np.ndarray, quat_end: np.ndarray) -> float:
+    """Angle (degrees) between the world's up direction in the box's frame at the start and
+    at the end ([qw, qx, qy, qz] each): tipping counts, turning about the vertical does not."""
+    up = np.array([0.0, 0.0, 1.0])
+    a = quat_to_matrix(np.asarray(quat_start, dtype=np.float64)).T @ up
+    b = quat_to_matrix(np.asarray(quat_end, dtype=np.float64)).T @ up
+    return math.degrees(math.acos(float(np.clip(a @ b, -1.0, 1.0))))

@@ -53,6 +53,25 @@ class LabelledScene:
     pictures: int
     sapien_s: float
     """Wall time spent inside SAPIEN step/render calls, rejected attempts included."""
+    pull_outcome: PullOutcomes | None = None
+    """What the trials' own pull of each box does (issue 50), or None."""
+
+
+@dataclasses.dataclass(frozen=True)
+class PullOutcomes:
+    """The trials' whole pull of each box x from the canonical start (sim.pull.execute_pull,
+    nothing held, the trials' increments and lift; the scene settled after): per (x, y), box
+    y's centre displacement, drop and tilt change and whether it ended off the shelf. Row x
+    of every array is what a truth map of pulling x reads; NaN / False at y == x."""
+
+    displacement_m: np.ndarray
+    """(N, N) float64."""
+    drop_m: np.ndarray
+    """(N, N) float64: start height - end height."""
+    tilt_deg: np.ndarray
+    """(N, N) float64: change of the world's up direction in the box's frame."""
+    left_shelf: np.ndarray
+    """(N, N) bool."""
 
 
 def scene_rng(seed: int, dataset: str, index: int, attempt: int) -> np.random.Generator:
@@ -326,6 +345,38 @@ def pull_tensor(spec: SceneSpec, physics: PhysicsConfig, tally: _Tally | None = 
     return out
 
 
+def pull_outcomes(
+    spec: SceneSpec,
+    physics: PhysicsConfig,
+    pull: tuple[float, float],
+    tally: _Tally | None = None,
+) -> PullOutcomes:
+    """Pull every box out of the canonical start with the trials' executor (`pull`:
+    increment_m, lift_m) -> PullOutcomes. The one code path of these labels, the truth maps
+    of the pull (trials/truth_maps.py) and executed steps."""
+    from clutterbench.sim.geometry import tilt_change_deg
+    from clutterbench.sim.pull import SceneState, execute_pull, world_at
+
+    n = spec.n
+    disp, drop, tilt = (np.full((n, n), np.nan) for _ in range(3))
+    left = np.zeros((n, n), dtype=bool)
+    start = SceneState.start(spec)
+    for x in range(n):
+        world = world_at(spec, start, physics)
+        result = execute_pull(world, x, None, *pull)
+        if tally is not None:
+            tally.add(world)
+        for y in range(n):
+            if y == x:
+                continue
+            a, b = result.poses_start[y], result.poses_end[y]
+            disp[x, y] = float(np.linalg.norm(b[:3] - a[:3]))
+            drop[x, y] = float(a[2] - b[2])
+            tilt[x, y] = tilt_change_deg(a[3:], b[3:])
+            left[x, y] = not bool(result.on_shelf[y])
+    return PullOutcomes(disp, drop, tilt, left)
+
+
 def settled_contacts(
     spec: SceneSpec, physics: PhysicsConfig, tally: _Tally | None = None
 ) -> list[tuple[int, int]]:
@@ -350,8 +401,10 @@ def generate_labelled_scene(
     camera: CameraConfig,
     max_attempts: int,
     shelf: Shelf | None = None,
+    pull_outcome: tuple[float, float] | None = None,
 ) -> LabelledScene:
-    """Scene `index` of `dataset`, regenerable alone from (seed, dataset, index)."""
+    """Scene `index` of `dataset`, regenerable alone from (seed, dataset, index); with
+    `pull_outcome` (the trials' increment_m, lift_m), what the trials' pull of each box does."""
     tally = _Tally()
     spec, groups, rejected = dataset_start(
         seed,
@@ -366,7 +419,13 @@ def generate_labelled_scene(
         shelf or Shelf(),
         tally,
     )
-    return _label_start(spec, groups, rejected, pulls, physics, camera, tally)
+    scene = _label_start(spec, groups, rejected, pulls, physics, camera, tally)
+    if pull_outcome is None:
+        return scene
+    outcomes = pull_outcomes(spec, physics, pull_outcome, tally)
+    return dataclasses.replace(
+        scene, pull_outcome=outcomes, steps=tally.steps, sapien_s=tally.sapien_s
+    )
 
 
 def dataset_start(

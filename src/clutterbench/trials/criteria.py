@@ -27,14 +27,13 @@ relative rotation would count such a twist as a tip.
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from clutterbench.config import bounded
-from clutterbench.sim.geometry import quat_to_matrix
+from clutterbench.sim.geometry import tilt_change_deg
 
 MOTION_FIELDS = ("box", "held", "displacement_m", "drop_m", "tilt_change_deg", "left_shelf")
 """The fields of each entry of a step's `box_motion`."""
@@ -48,15 +47,6 @@ class CollapseFreeConfig:
     """A box other than the manipulated ones collapsed when its centre dropped more than this."""
     tilt_deg: float = bounded(15.0, gt=0.0, le=180.0)
     """... or when its tilt (world up in its own frame) changed by more than this (degrees)."""
-
-
-def tilt_change_deg(quat_start: np.ndarray, quat_end: np.ndarray) -> float:
-    """Angle (degrees) between the world's up direction in the box's frame at the start and
-    at the end ([qw, qx, qy, qz] each): tipping counts, turning about the vertical does not."""
-    up = np.array([0.0, 0.0, 1.0])
-    a = quat_to_matrix(np.asarray(quat_start, dtype=np.float64)).T @ up
-    b = quat_to_matrix(np.asarray(quat_end, dtype=np.float64)).T @ up
-    return math.degrees(math.acos(float(np.clip(a @ b, -1.0, 1.0))))
 
 
 def box_motion(
