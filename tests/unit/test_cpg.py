@@ -123,3 +123,19 @@ def test_duplicate_edges_keep_the_highest_score_and_self_support_is_rejected():
         assert build_cpg(edges(*triples), target=0).edges[0, 1]["score"] == 0.8
     with pytest.raises(ValueError, match="itself"):
         build_cpg(edges((0, 0, 0.9)), target=0)
+
+
+def test_bimanual_clears_the_held_boxs_load_first_when_asked():
+    """Issue 50: the held box is let go after the pull and what it carries falls then; with
+    clear_hold_load its subtree goes first, leaves first, then the held pull."""
+    g = build_cpg(edges((0, 1, 0.9), (1, 2, 0.9), (2, 3, 0.9)), target=0)
+    assert bimanual_plan(g, 0) == BimanualPlan(hold=1, pull=0, steps_to_target=0)  # thesis
+    assert bimanual_plan(g, 0, clear_hold_load=True) == BimanualPlan(None, 3, 2)
+    # once the load is gone: hold 1, pull the target
+    bare = build_cpg(edges((0, 1, 0.9)), target=0)
+    assert bimanual_plan(bare, 0, clear_hold_load=True) == BimanualPlan(1, 0, 0)
+    # a blocked load leaf: the held pull goes ahead (nothing else to clear first)
+    assert bimanual_plan(g, 0, frozenset({3}), clear_hold_load=True) == BimanualPlan(1, 0, 0)
+    # two children: the kept child's load is cleared once the others are gone
+    g2 = build_cpg(edges((0, 9, 0.9), (0, 1, 0.9), (1, 2, 0.9)), target=0)
+    assert bimanual_plan(g2, 0, clear_hold_load=True) == BimanualPlan(None, 9, 1)

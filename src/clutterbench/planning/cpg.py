@@ -138,7 +138,10 @@ def single_arm_plan(
 
 
 def bimanual_plan(
-    graph: nx.DiGraph, target: int, blocked: frozenset[int] = frozenset()
+    graph: nx.DiGraph,
+    target: int,
+    blocked: frozenset[int] = frozenset(),
+    clear_hold_load: bool = False,
 ) -> BimanualPlan:
     """Bimanual extraction (thesis Fig. 6.7).
 
@@ -147,11 +150,21 @@ def bimanual_plan(
     children's subtrees are removed first, smallest subtree first, leaves in reverse level
     order (c). When the target itself or every such leaf is blocked, the plan falls back to
     the single-arm plan (any non-blocked leaf; steps_to_target counts every other box).
+
+    `clear_hold_load` (issue 50; not the thesis): the box to be held is let go after the pull,
+    and what it carries falls then, so its own subtree is removed first (its leaves, as any
+    other), and the held pull comes after.
     """
     _check_cpg(graph, target)
     children = sorted(graph.successors(target))
     if len(children) <= 1 and target not in blocked:
-        return BimanualPlan(hold=children[0] if children else None, pull=target, steps_to_target=0)
+        hold = children[0] if children else None
+        if clear_hold_load and hold is not None:
+            load = _subtree(graph, hold) - {hold}
+            leaves = [n for n in extractable(graph, target) if n in load and n not in blocked]
+            if leaves:
+                return BimanualPlan(hold=None, pull=leaves[0], steps_to_target=len(load))
+        return BimanualPlan(hold=hold, pull=target, steps_to_target=0)
     if len(children) >= 2:
         subtrees = {c: _subtree(graph, c) for c in children}
         kept = min(children, key=lambda c: (-len(subtrees[c]), c))

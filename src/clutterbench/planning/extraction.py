@@ -9,6 +9,7 @@ imports neither SAPIEN nor torch. The trial harness executes the `Decision` and 
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from typing import Any
 
@@ -68,9 +69,12 @@ class CollapseGraphPlanner:
         cp_max: float,
         min_pixels: int,
         bimanual: bool = False,
+        clear_hold_load: bool = False,
     ):
         self.predict, self.params, self.cp_max = predict, params, cp_max
         self.min_pixels, self.bimanual = min_pixels, bimanual
+        self.clear_hold_load = clear_hold_load
+        """Bimanual: remove what the box to be held carries before the held pull (cpg)."""
         self._maps: tuple[Observation, list[int], np.ndarray] | None = None
         """The last observation's heatmaps of every visible object (from support_edges):
         the decision's collapse scores and the pull's first abort check read the same
@@ -98,7 +102,10 @@ class CollapseGraphPlanner:
         motion. Raises ValueError when every candidate is blocked (the planner gives up)."""
         edges = self.support_edges(obs)
         graph = build_cpg(edges, target)
-        plan_fn = bimanual_plan if self.bimanual else single_arm_plan
+        if self.bimanual:
+            plan_fn = functools.partial(bimanual_plan, clear_hold_load=self.clear_hold_load)
+        else:
+            plan_fn = single_arm_plan
         rejected: list[list[float]] = []
         now = set(blocked)
         while True:

@@ -120,7 +120,8 @@ def _cpg_planner(
 ):
     """Algorithm 1 with the collapse predictor, or (`spec` given) with physics-truth maps of
     that scene through the same interface (`pull`: maps of the trials' pull, else of
-    deleting the box): the same planner, rule and thresholds."""
+    deleting the box, and the bimanual plan clears the held box's load first, issue 50): the
+    same planner, rule and thresholds."""
     params: Ch6TrialParams = job["params"]
     if spec is None:
         predictor = load_predictor(job["model_path"], job["camera"].image_size)
@@ -128,7 +129,12 @@ def _cpg_planner(
         action = (params.pull_increment_m, params.grasp_lift_m) if pull else None
         predictor = TruthCollapseMaps(spec, job["physics"], params.moved_threshold_m, action)
     return CollapseGraphPlanner(
-        predictor, job["support"], job["cp_max"], params.min_pixels, bimanual=bimanual
+        predictor,
+        job["support"],
+        job["cp_max"],
+        params.min_pixels,
+        bimanual=bimanual,
+        clear_hold_load=pull,  # the pull planners clear the held box's load first
     )
 
 
