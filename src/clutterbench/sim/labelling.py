@@ -185,17 +185,18 @@ def draw_settled_spec(
     `accept_key`: what `accept` depends on (a start drawn with an accept but no key is never
     read from the benchmark scenes). A start in the benchmark scenes (sim/benchmark.py) is
     read from them, bit for bit the start drawn where they were made."""
-    fields = {
-        "seed": seed,
-        "key": key,
-        "index": index,
-        "families": {f: float(w) for f, w in sorted(families.items())},
-        "n_objects": [int(v) for v in n_objects],
-        "catalogue": catalogue,
-        "physics": physics,
-        "camera": camera,
-        "max_attempts": max_attempts,
-        "shelf": shelf,
+    fields = _start_fields(
+        seed,
+        ("key", key),
+        index,
+        families,
+        n_objects,
+        catalogue,
+        physics,
+        camera,
+        max_attempts,
+        shelf,
+    ) | {
         "meta": dict(meta or {}),
         "keep_groups": keep_groups,
         "accept": accept_key if accept is not None else None,
@@ -222,6 +223,34 @@ def draw_settled_spec(
         value = {"spec": spec.to_dict(), "scene_hash": benchmark.scene_hash(spec)}
         benchmark.remember(stored_key, "settled", key, index, value)
     return spec
+
+
+def _start_fields(
+    seed: int,
+    stream: tuple[str, str],
+    index: int,
+    families: Mapping[str, float],
+    n_objects: Sequence[int],
+    catalogue: str,
+    physics: PhysicsConfig,
+    camera: CameraConfig,
+    max_attempts: int,
+    shelf: Shelf,
+) -> dict[str, object]:
+    """What a settled start depends on (its key in the benchmark scenes); `stream`: the seed
+    stream's field name and value."""
+    return {
+        "seed": seed,
+        stream[0]: stream[1],
+        "index": index,
+        "families": {f: float(w) for f, w in sorted(families.items())},
+        "n_objects": [int(v) for v in n_objects],
+        "catalogue": catalogue,
+        "physics": physics,
+        "camera": camera,
+        "max_attempts": max_attempts,
+        "shelf": shelf,
+    }
 
 
 def _draw_settled_spec(
@@ -444,18 +473,18 @@ def dataset_start(
     """A dataset scene's settled start, its family's groups and the rejections before it; a
     start in the benchmark scenes (sim/benchmark.py: Table 6.2's test scenes) is read from
     them."""
-    fields = {
-        "seed": seed,
-        "dataset": dataset,
-        "index": index,
-        "families": {f: float(w) for f, w in sorted(family_weights.items())},
-        "n_objects": [int(v) for v in n_objects],
-        "catalogue": catalogue,
-        "physics": physics,
-        "camera": camera,
-        "max_attempts": max_attempts,
-        "shelf": shelf,
-    }
+    fields = _start_fields(
+        seed,
+        ("dataset", dataset),
+        index,
+        family_weights,
+        n_objects,
+        catalogue,
+        physics,
+        camera,
+        max_attempts,
+        shelf,
+    )
     key, stored = benchmark.lookup("dataset", fields)
     if stored is not None:
         spec = SceneSpec.from_dict(stored["spec"], where=f"{benchmark.DIR} {dataset} scene {index}")

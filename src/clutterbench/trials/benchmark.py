@@ -147,17 +147,10 @@ def start_of(job: dict[str, Any], target: bool) -> Any:
     as the episode draws it)."""
     kind = job["kind"]
     if kind in ("ch6", "ch4"):
-        from clutterbench.trials.scenes import draw_target, draw_trial_spec
+        from clutterbench.trials.ch6 import job_spec
+        from clutterbench.trials.scenes import draw_target
 
-        spec = draw_trial_spec(
-            job["stream"],
-            job["stream_cfg"],
-            job["seed"],
-            job["index"],
-            job["physics"],
-            job["camera"],
-            job["max_attempts"],
-        )
+        spec = job_spec(job)  # the stream's settled scene job["index"], as every trial draws it
         if target:
             obs = first_observation(spec, job)
             draw_target(job["seed"], job["stream"], job["index"], obs, job["min_pixels"], spec)
