@@ -185,14 +185,18 @@ _WORKER_READY = False
 
 def _ray_task(label: str, fn: Callable[[Any], Any], job: Any, env: dict[str, str]) -> Any:
     """One job in a Ray worker process: the driver's CLUTTERBENCH_* settings and working
-    directory, the worker set up once per process (worker_init), then `fn(job)`."""
+    directory (jobs read the project's files by relative path: the networks, the benchmark
+    scenes), the worker set up once per process (worker_init), then `fn(job)`."""
     global _WORKER_READY
     for key in [k for k in os.environ if k.startswith(SHIPPED_ENV_PREFIX) and k not in env]:
         del os.environ[key]
-    cwd = env.pop("__cwd__", None)
+    cwd = env.pop("__cwd__")
     os.environ.update(env)
-    if cwd and os.path.isdir(cwd) and os.getcwd() != cwd:
-        os.chdir(cwd)  # relative paths in jobs (models/, data/) as the driver sees them
+    if not os.path.isdir(cwd):  # a cluster node without the project: never other bytes
+        where = f"the project directory {cwd} is not on Ray node {socket.gethostname()}"
+        return _Failed(_one_line(label, job, f"{where} (a shared filesystem: docs/scaling.md)"))
+    if os.getcwd() != cwd:
+        os.chdir(cwd)  # jobs' relative paths (models/, data/benchmark/) as the driver's
     if not _WORKER_READY:
         worker_init(1)
         _WORKER_READY = True

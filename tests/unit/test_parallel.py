@@ -4,6 +4,7 @@ and the default backend runs without Ray (its own tests: test_parallel_ray.py)."
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -69,3 +70,17 @@ def test_the_processes_backend_never_imports_ray():
     )
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
     assert out.stdout.strip().splitlines()[-1] == "False"
+
+
+def test_a_ray_task_on_a_node_without_the_project_is_one_line(monkeypatch):
+    """A cluster node that lacks the driver's project directory runs no job (it would draw
+    scenes without the benchmark artifact): one line naming the job and the node."""
+    from clutterbench.parallel import _Failed, _ray_task
+
+    monkeypatch.setattr(os, "environ", dict(os.environ))  # the task sets the driver's env
+    out = _ray_task("trials", abs, JOBS[0], {"__cwd__": "/no/such/project"})
+    assert isinstance(out, _Failed)
+    assert out.message.startswith(
+        "trials: condition multi_step, stream ch6_3_10, index 0, seed 7: the project "
+        "directory /no/such/project is not on Ray node "
+    )
