@@ -254,7 +254,7 @@ def ray_markdown(result: dict[str, Any]) -> list[str]:
             "",
             f"Issue 52's target (Ray overhead <= 5% of a trials stage's wall time at default "
             f"scale on 2 workers), estimated from these numbers for the default `trials` stage "
-            f"({target['episodes']} episodes): {100 * target['fraction']:.1f}%.",
+            f"({target['episodes']} episodes): {100 * target['fraction']:.2f}%.",
         ]
     return lines
 
