@@ -8,6 +8,7 @@ from clutterbench.config import BaseConfig, load_section
 from clutterbench.data.slide_crops import ScanConfig
 from clutterbench.data.slides import SlideDataConfig, generate_slide_dataset
 from clutterbench.io import write_json
+from clutterbench.parallel import ParallelConfig
 from clutterbench.sim.pile_config import PileCameraConfig, PileConfig, SlideConfig
 from clutterbench.stage import run_stage
 
@@ -21,6 +22,7 @@ def slides(params: dict, base: BaseConfig) -> None:
         load_section(ScanConfig, "yamakuzushi.scan", params),
         base.seed,
         Path("data/ch3_slides"),
+        load_section(ParallelConfig, "parallel", params),
     )
     write_json(Path("reports/slides/manifest.json"), manifest)
     print(

@@ -11,6 +11,7 @@ from clutterbench.data.config import DatasetConfig, GenerateConfig
 from clutterbench.data.generate import generate_dataset
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json, write_text
+from clutterbench.parallel import ParallelConfig
 from clutterbench.planning.support import oracle_heatmaps
 from clutterbench.precision import inference_from_params
 from clutterbench.progress import progress_bar
@@ -40,6 +41,7 @@ def support(params: dict, base: BaseConfig) -> None:
     cfg = load_section(SupportEvalConfig, "support", params)
     gen = load_section(GenerateConfig, "generate", params)
     sim = load_section(SimConfig, "sim", params)
+    parallel = load_section(ParallelConfig, "parallel", params)  # the test scenes' backend
     if cfg.val_dataset not in gen.datasets:
         raise ClutterbenchError(f"support.val_dataset: unknown dataset '{cfg.val_dataset}'")
     model = Path(f"models/{cfg.model}/best.pt")
@@ -76,7 +78,8 @@ def support(params: dict, base: BaseConfig) -> None:
         moved_threshold_m=cfg.moved_threshold_m,
     )
     shards = GenerateConfig(shard_size=10, workers=cfg.workers, max_attempts=cfg.max_attempts)
-    generate_dataset(stream_key("support"), test_ds, shards, sim, base.seed, SCENES / "scenes")
+    key = stream_key("support")
+    generate_dataset(key, test_ds, shards, sim, base.seed, SCENES / "scenes", parallel=parallel)
 
     rows, truth, panels = [], {}, []
     rng = np.random.default_rng([base.seed, 62])

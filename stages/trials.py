@@ -11,6 +11,7 @@ from pathlib import Path
 
 from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.errors import ClutterbenchError
+from clutterbench.parallel import ParallelConfig
 from clutterbench.precision import inference_from_params
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
@@ -55,7 +56,8 @@ def trials(params: dict, base: BaseConfig) -> None:
             "cp_max": cp_max,
             "support": as_dict(support),
         }
-    results = run_episodes("trials", run_ch6_episode, jobs, cfg.workers)
+    parallel = load_section(ParallelConfig, "parallel", params)
+    results = run_episodes("trials", run_ch6_episode, jobs, cfg.workers, parallel)
     pfd = [c for c in conditions.values() if c.planner.startswith("physics_from_depth")]
     if pfd:  # estimated vs true boxes of a few scenes of the first such stream
         from clutterbench.report.box_estimation import estimation_figure

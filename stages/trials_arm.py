@@ -14,6 +14,7 @@ import numpy as np
 
 from clutterbench.config import BaseConfig, load_section
 from clutterbench.errors import ClutterbenchError
+from clutterbench.parallel import ParallelConfig
 from clutterbench.precision import inference_from_params
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
@@ -78,8 +79,9 @@ def trials_arm(params: dict, base: BaseConfig) -> None:
             "scale": base.scale,
             "network_precision": precision,
         }
+    parallel = load_section(ParallelConfig, "parallel", params)
     start = time.perf_counter()
-    results = run_episodes("trials_arm", run_arm_episode, jobs, cfg.workers)
+    results = run_episodes("trials_arm", run_arm_episode, jobs, cfg.workers, parallel)
     wall = time.perf_counter() - start
     per_episode = [r.wall_s for r in results if r.wall_s is not None]
     for name in cfg.arm_conditions:

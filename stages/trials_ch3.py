@@ -9,6 +9,7 @@ from pathlib import Path
 from clutterbench.config import BaseConfig, load_section
 from clutterbench.data.slides import pile_seed
 from clutterbench.io import write_json, write_text
+from clutterbench.parallel import ParallelConfig
 from clutterbench.stage import run_stage
 from clutterbench.trials.ch3 import ch3_jobs, run_ch3_game, slide_rows
 from clutterbench.trials.ch3_config import Ch3Config
@@ -39,7 +40,8 @@ def trials_ch3(params: dict, base: BaseConfig) -> None:
         model = str(MODEL)
     collapse_free = load_section(CollapseFreeConfig, "trials.collapse_free", params)
     jobs = ch3_jobs(cfg, lambda g: pile_seed(base.seed, "ch3_games", g), model, collapse_free)
-    results = run_episodes("trials_ch3", run_ch3_game, jobs, cfg.games.workers)
+    parallel = load_section(ParallelConfig, "parallel", params)
+    results = run_episodes("trials_ch3", run_ch3_game, jobs, cfg.games.workers, parallel)
     records = [r.record for r in results]
     write_records(OUT / "records.jsonl", records)
     write_records(OUT / "slides.jsonl", slide_rows(records))

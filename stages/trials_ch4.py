@@ -11,6 +11,7 @@ from pathlib import Path
 from clutterbench.config import BaseConfig, load_section
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json, write_text
+from clutterbench.parallel import ParallelConfig
 from clutterbench.precision import inference_from_params
 from clutterbench.report.risk_figure import draw_figure
 from clutterbench.sim.config import SimConfig
@@ -47,7 +48,8 @@ def trials_ch4(params: dict, base: BaseConfig) -> None:
             cfg.mcap_images,
             collapse_free=cfg.collapse_free,
         )
-    results = run_episodes("trials_ch4", run_ch4_episode, jobs, cfg.workers)
+    parallel = load_section(ParallelConfig, "parallel", params)
+    results = run_episodes("trials_ch4", run_ch4_episode, jobs, cfg.workers, parallel)
     records = [r.record for r in results]
     write_records(OUT / "records.jsonl", records)
     for name, cond in cfg.ch4_conditions.items():

@@ -10,6 +10,7 @@ from pathlib import Path
 from clutterbench.config import BaseConfig, load_section
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json, write_text
+from clutterbench.parallel import ParallelConfig
 from clutterbench.precision import inference_from_params
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
@@ -54,7 +55,8 @@ def trials_ch5(params: dict, base: BaseConfig) -> None:
             with_detector,
             collapse_free=cfg.collapse_free,
         )
-    results = run_episodes("trials_ch5", run_ch5_episode, jobs, cfg.workers)
+    parallel = load_section(ParallelConfig, "parallel", params)
+    results = run_episodes("trials_ch5", run_ch5_episode, jobs, cfg.workers, parallel)
     records = [r.record for r in results]
     write_records(OUT / "records.jsonl", records)
     for name, cond in cfg.ch5_conditions.items():

@@ -1,12 +1,19 @@
 """map_in_workers: a job that raises ends the run with one line naming the run, the job and
-its seed (issue 53), in-process and in worker processes."""
+its seed (issue 53), in-process and in worker processes; params.yaml `parallel` is checked,
+and the default backend runs without Ray (its own tests: test_parallel_ray.py)."""
 
 from __future__ import annotations
 
+import os
+import re
+import subprocess
+import sys
+
 import pytest
 
+from clutterbench.config import load_section
 from clutterbench.errors import ClutterbenchError
-from clutterbench.parallel import job_name, map_in_workers
+from clutterbench.parallel import ParallelConfig, job_name, map_in_workers
 
 
 def _episode(job: dict) -> int:
@@ -39,3 +46,41 @@ def test_a_raising_job_is_one_line_naming_it(workers, monkeypatch):
 
 def test_jobs_that_do_not_raise_come_back_in_order():
     assert map_in_workers("trials", _episode, [JOBS[0], JOBS[2]], 1) == [0, 2]
+
+
+def test_the_parallel_section_is_checked_in_one_line():
+    base = {"base": {"seed": 0}}
+    got = load_section(ParallelConfig, "parallel", base | {"parallel": {"backend": "ray"}})
+    assert got == ParallelConfig(backend="ray", address=None, max_retries=3)
+    for section, expected in (
+        ({"backend": "dask"}, "parallel.backend: 'dask' is not one of processes, ray"),
+        ({"address": "10.0.0.1"}, "parallel: address '10.0.0.1' is not null, local, auto or"),
+        ({"max_retries": -1}, "parallel.max_retries: -1 is out of range (must be >= 0)"),
+    ):
+        with pytest.raises(ClutterbenchError, match=re.escape(expected)):
+            load_section(ParallelConfig, "parallel", base | {"parallel": section})
+
+
+def test_the_processes_backend_never_imports_ray():
+    probe = (
+        "import sys\n"
+        "from clutterbench.parallel import map_in_workers\n"
+        "assert map_in_workers('t', abs, [-1, 2], 1) == [1, 2]\n"
+        "print('ray' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "False"
+
+
+def test_a_ray_task_on_a_node_without_the_project_is_one_line(monkeypatch):
+    """A cluster node that lacks the driver's project directory runs no job (it would draw
+    scenes without the benchmark artifact): one line naming the job and the node."""
+    from clutterbench.parallel import _Failed, _ray_task
+
+    monkeypatch.setattr(os, "environ", dict(os.environ))  # the task sets the driver's env
+    out = _ray_task("trials", abs, JOBS[0], {"__cwd__": "/no/such/project"})
+    assert isinstance(out, _Failed)
+    assert out.message.startswith(
+        "trials: condition multi_step, stream ch6_3_10, index 0, seed 7: the project "
+        "directory /no/such/project is not on Ray node "
+    )

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing as mp
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +19,7 @@ from clutterbench.config import as_dict
 from clutterbench.data.config import DatasetConfig, GenerateConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import load_npz, save_npz, write_json
-from clutterbench.progress import progress_bar
+from clutterbench.parallel import ParallelConfig, iter_in_workers
 from clutterbench.sim.config import REJECT_REASONS, SimConfig
 from clutterbench.sim.labelling import LabelledScene, generate_labelled_scene
 from clutterbench.sim.render import ensure_renderer
@@ -91,7 +90,15 @@ def label_scene(
 
 
 def make_shard(job: dict[str, Any]) -> dict[str, Any]:
-    """Generate and write one shard; runs in a worker process."""
+    """Generate and write one shard (in this process)."""
+    arrays = shard_arrays(job)
+    save_npz(job["path"], arrays)
+    return {"shard": job["shard"], "scenes": len(arrays["scene_index"])}
+
+
+def shard_arrays(job: dict[str, Any]) -> dict[str, np.ndarray]:
+    """One shard's arrays, as its .npz stores them; runs in a worker (a process or a Ray
+    task, perhaps on another machine: the caller writes the shard)."""
     ds: DatasetConfig = job["ds"]
     sim: SimConfig = job["sim"]
     ensure_renderer()
@@ -152,8 +159,7 @@ def make_shard(job: dict[str, Any]) -> dict[str, Any]:
             # support slot n (no support) is stored in the last slot, n_max
             arrays["pull_m"][k, :n, :n, :n] = sc.pull_m[:, :n]
             arrays["pull_m"][k, :n, n_max, :n] = sc.pull_m[:, n]
-    save_npz(job["path"], arrays)
-    return {"shard": job["shard"], "scenes": s}
+    return arrays
 
 
 def generate_dataset(
@@ -164,9 +170,12 @@ def generate_dataset(
     seed: int,
     out_dir: Path,
     pull: tuple[float, float] | None = None,
+    parallel: ParallelConfig | None = None,
 ) -> dict[str, Any]:
     """Write (or finish) every shard of dataset `name` under `out_dir`; returns the manifest.
-    `pull`: the trials' (increment_m, lift_m), for a dataset with pull_outcomes."""
+    `pull`: the trials' (increment_m, lift_m), for a dataset with pull_outcomes; `parallel`:
+    the backend the shards are made on (None: worker processes). Each shard is written here,
+    atomically, as it comes back in shard order."""
     if ds.pull_outcomes and pull is None:
         raise ClutterbenchError(f"generate.datasets.{name}: pull_outcomes needs the trials' pull")
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -195,16 +204,18 @@ def generate_dataset(
                 "pull": pull,
             }
         )
-    done_before = ds.n_scenes - sum(len(j["indices"]) for j in jobs)
-    with progress_bar(f"generate {name}", total=ds.n_scenes, completed=done_before) as advance:
-        if gen.workers == 1 or len(jobs) <= 1:
-            for job in jobs:
-                advance(make_shard(job)["scenes"])
-        else:
-            ctx = mp.get_context("spawn")  # fresh processes: one renderer each, no forked GL
-            with ctx.Pool(min(gen.workers, len(jobs))) as pool:
-                for result in pool.imap_unordered(make_shard, jobs):
-                    advance(result["scenes"])
+    sizes = [len(j["indices"]) for j in jobs]
+    made = iter_in_workers(
+        f"generate {name}",
+        shard_arrays,
+        jobs,
+        gen.workers,
+        parallel,
+        units=sizes,
+        completed=ds.n_scenes - sum(sizes),
+    )
+    for job, arrays in zip(jobs, made):
+        save_npz(job["path"], arrays)
     return write_manifest(name, ds, digest, n_shards, out_dir)
 
 

@@ -32,7 +32,7 @@ from clutterbench.data.slide_crops import (
 )
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import load_npz, save_npz, write_json
-from clutterbench.parallel import map_in_workers
+from clutterbench.parallel import ParallelConfig, map_in_workers
 from clutterbench.sim.pile_config import PileCameraConfig, PileConfig, SlideConfig
 
 CROP_DTYPE = np.float16
@@ -118,8 +118,10 @@ def generate_slide_dataset(
     scan: ScanConfig,
     seed: int,
     out_dir: Path,
+    parallel: ParallelConfig | None = None,
 ) -> dict[str, Any]:
-    """data/ch3_slides/{samples.npz, manifest.json}; returns the manifest."""
+    """data/ch3_slides/{samples.npz, manifest.json}; returns the manifest. `parallel`: the
+    backend the piles are simulated on (None: worker processes)."""
     jobs = [
         {
             "index": i,
@@ -132,7 +134,7 @@ def generate_slide_dataset(
         }
         for i in range(data.n_piles)
     ]
-    parts = map_in_workers("ch3 slide data", label_pile, jobs, data.workers)
+    parts = map_in_workers("ch3 slide data", label_pile, jobs, data.workers, parallel)
     merged = {
         k: np.concatenate([p[k] for p in parts])
         for k in ("crops", "label", "candidate", "piece", "pile")

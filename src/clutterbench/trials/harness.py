@@ -3,9 +3,10 @@
 A condition is a list of episode jobs and an episode function (a module-level function, so
 worker processes can import it). Each worker process keeps one renderer and runs torch on one
 thread, so an episode's bits do not depend on how many workers run: the same params and seed
-give byte-identical records whatever `trials.workers` is. Results come back in episode
-order; the parent writes `records.jsonl` (one JSON record per episode) and `episodes.mcap`
-(every episode on one timeline, openable in Foxglove: docs/foxglove.md), both atomically.
+give byte-identical records whatever `trials.workers` is, in worker processes or on Ray
+(params.yaml `parallel`, clutterbench.parallel). Results come back in episode order; the
+parent writes `records.jsonl` (one JSON record per episode) and `episodes.mcap` (every
+episode on one timeline, openable in Foxglove: docs/foxglove.md), both atomically.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 
 from clutterbench.logs.mcap_episode import EpisodeWriter
 from clutterbench.observation import CameraModel
-from clutterbench.parallel import map_in_workers
+from clutterbench.parallel import ParallelConfig, map_in_workers
 
 EPISODE_GAP_S = 1.0
 """Simulated seconds left empty between two episodes on the condition's MCAP timeline."""
@@ -124,10 +125,15 @@ EpisodeFn = Callable[[dict[str, Any]], EpisodeResult]
 
 
 def run_episodes(
-    label: str, fn: EpisodeFn, jobs: Sequence[dict[str, Any]], workers: int
+    label: str,
+    fn: EpisodeFn,
+    jobs: Sequence[dict[str, Any]],
+    workers: int,
+    parallel: ParallelConfig | None = None,
 ) -> list[EpisodeResult]:
-    """Run `fn` on every job (in worker processes when workers > 1), results in job order."""
-    return map_in_workers(label, fn, jobs, workers)
+    """Run `fn` on every job (in worker processes when workers > 1, or on Ray: `parallel`,
+    params.yaml's section; None: processes), results in job order."""
+    return map_in_workers(label, fn, jobs, workers, parallel)
 
 
 def write_condition(
