@@ -125,7 +125,7 @@ def test_the_episode_ends_at_its_first_failed_step():
 
 def test_the_episode_succeeds_only_when_it_ended_with_the_target_out():
     ok = judge_episode([_step(2, True), _step(0, True)], "target_out", target=0)
-    assert ok["success"] and ok["target_out"] and ok["judged_steps"] == 2
+    assert ok["success"] and ok["target_extracted"] and ok["judged_steps"] == 2
     bad = judge_episode([_step(2, True), _step(1, False)], "collapse", target=0)
     assert not bad["success"] and not bad["success_held"]
     # the target came out cleanly while held; its release disturbed the pile
