@@ -22,6 +22,7 @@ from clutterbench.planning.extraction import (
 from clutterbench.planning.support import SupportParams
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch6_oracle import SearchOracle
+from clutterbench.trials.config import PLANNERS as BUILT_IN
 from clutterbench.trials.config import Ch6TrialParams
 from clutterbench.trials.harness import load_predictor
 from clutterbench.trials.scenes import policy_rng
@@ -199,14 +200,7 @@ def _pfd_hold(job: dict[str, Any], spec: SceneSpec):
     return _physics_from_depth(job, spec, holding=True)
 
 
-CP_PLANNERS = (
-    "multi_step",
-    "bimanual",
-    "multi_step_truth",
-    "bimanual_truth",
-    "multi_step_pull_truth",
-    "bimanual_pull_truth",
-)
+CP_PLANNERS = tuple(p for p in BUILT_IN if p.startswith(("multi_step", "bimanual")))
 """The planners of Algorithm 1 (a support rule, cp_max); `*_truth` read physics-truth maps
 (`*_pull_truth`: of the trials' pull, the others of deletion)."""
 
