@@ -77,10 +77,12 @@ def compare(ours: Path, theirs: Path) -> list[str]:
     a, b = read_conditions(ours), read_conditions(theirs)
     shared = [c for c in a if c in b]
     targets = artifact_targets()
+    same_run = ours.resolve() == theirs.resolve()
     lines = [
-        "# Two runs compared",
+        "# Two runs compared" if not same_run else "# One run against the benchmark scenes",
         "",
-        f"ours: `{ours}`; theirs: `{theirs}`; benchmark scenes: this checkout's data/benchmark/.",
+        f"ours: `{ours}`; theirs: `{theirs}`; benchmark scenes: this checkout's data/benchmark/."
+        + (" (One run given twice: read its own columns and the last one.)" if same_run else ""),
         "",
         "| condition | stream | ours: collapse-free | theirs | ours: strict | theirs | "
         "targets differ | ours: start = benchmark |",

@@ -1,0 +1,45 @@
+"""dev/compare_runs.py: two runs' trials side by side, from their records alone."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from clutterbench.dev import compare_runs
+from clutterbench.errors import ClutterbenchError
+
+
+def _run(root: Path, condition: str, rows: list[dict]) -> None:
+    d = root / compare_runs.TRIALS / condition
+    d.mkdir(parents=True)
+    (d / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+
+
+def _rec(e: int, target: int, ok: bool, **kw) -> dict:
+    base = {"episode": e, "target": target, "success": ok, "strict_success": ok}
+    return base | {"stream": "s", "planner": "physics_from_depth"} | kw
+
+
+def test_targets_repairs_and_rates_side_by_side(tmp_path, monkeypatch):
+    monkeypatch.setattr(compare_runs, "artifact_targets", lambda: {("s", 0): 3, ("s", 1): 9})
+    _run(
+        tmp_path / "a",
+        "pfd",
+        [
+            _rec(0, 3, True, estimate_dropped=[1, 0], estimate_outside=[1, 0], perception_failed=0),
+            _rec(1, 4, False, estimate_dropped=[2], estimate_outside=[0], perception_failed=1),
+        ],
+    )
+    _run(tmp_path / "b", "pfd", [_rec(0, 3, True), _rec(1, 5, True)])
+    text = "\n".join(compare_runs.compare(tmp_path / "a", tmp_path / "b"))
+    assert "| pfd | s | 1/2 (50.0%) | 2/2 (100.0%) |" in text
+    assert "| 1/2 | 1/2 targets |" in text  # episode 1's target differs; one equals the artifact's
+    assert "| pfd | ours | 3 | 3 | 1 | 1 |" in text  # decisions, dropped, outside, failed
+    assert "| pfd | theirs | (records before the repair's counts)" in text
+
+
+def test_a_directory_without_trials_is_one_line(tmp_path):
+    with pytest.raises(ClutterbenchError, match="no trials reports"):
+        compare_runs.compare(tmp_path, tmp_path)
