@@ -298,7 +298,9 @@ def connect_ray(parallel: ParallelConfig, workers: int) -> bool:
     }
     if parallel.address in LOCAL:
         # a local instance: its workers inherit this process's environment and import the
-        # package from this venv, as spawned workers do
+        # package from this venv, as spawned workers do, and run at this process's priority
+        # as they do (Ray's default renices its workers to 15: on a busy machine they starve)
+        os.environ.setdefault("RAY_worker_niceness", "0")
         ray.init(address="local", num_cpus=workers, **options)
         return True
     address = parallel.address

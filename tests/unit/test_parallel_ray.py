@@ -8,7 +8,6 @@ process already holds as it is); the first two tests run before it starts."""
 
 from __future__ import annotations
 
-import logging
 import os
 import signal
 import time
@@ -19,7 +18,7 @@ import pytest
 from clutterbench.data.config import DatasetConfig, GenerateConfig
 from clutterbench.data.generate import generate_dataset
 from clutterbench.errors import ClutterbenchError
-from clutterbench.parallel import ParallelConfig, map_in_workers
+from clutterbench.parallel import ParallelConfig, connect_ray, map_in_workers
 from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
 
 ray = pytest.importorskip("ray", reason="the ray backend needs ray (make setup installs it)")
@@ -56,7 +55,8 @@ def test_a_local_instance_of_workers_cpus_is_started_and_shut_down():
 
 @pytest.fixture(scope="module")
 def local_ray():
-    ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level=logging.WARNING)
+    """One local instance for the module, as the backend starts one (connect_ray)."""
+    assert connect_ray(ParallelConfig(backend="ray"), 2)
     yield
     ray.shutdown()
 
