@@ -37,15 +37,19 @@ def evaluate(params: dict, base: BaseConfig) -> None:
         split(run.val_dataset, "val"),
         cfg,
         f"evaluate.runs.{name}.val_dataset",
+        run.head,
     )
     metrics = result.metrics
     out = Path(f"reports/evaluate/{name}")
     about = {"model": run.model, "dataset": run.dataset, "split": run.split}
+    if run.head != "deletion":  # deletion runs' metrics stay as they were before heads
+        about["head"] = run.head
     about |= {"network_precision": precision}
     write_json(out / "metrics.json", about | {"val_dataset": run.val_dataset, **metrics})
     write_sweep_csv(out / "sweep.csv", result.sweep)
     write_sweep_csv(out / "val_sweep.csv", result.val_sweep)
-    title = f"{run.model} on {run.dataset} ({run.split}): IoU {metrics['iou']:.3f}"
+    head = "" if run.head == "deletion" else f", {run.head} head"
+    title = f"{run.model}{head} on {run.dataset} ({run.split}): IoU {metrics['iou']:.3f}"
     collapse_figure(result.samples, title, out / "figure.png")
     scores = ", ".join(f"{k} {metrics[k]:.3f}" for k in ("pixel_accuracy", "iou", "precision"))
     chosen = metrics["val_chosen_threshold"]

@@ -11,6 +11,7 @@ from clutterbench.data.config import DatasetConfig, GenerateConfig
 from clutterbench.data.generate import generate_dataset
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json, write_text
+from clutterbench.models.checkpoint import checkpoint_heads, load_checkpoint
 from clutterbench.parallel import ParallelConfig
 from clutterbench.planning.support import oracle_heatmaps
 from clutterbench.precision import inference_from_params
@@ -22,6 +23,7 @@ from clutterbench.trials.config import SupportEvalConfig, TrialsConfig
 from clutterbench.trials.physics_model import SUPPORT_METHOD, SUPPORT_RULE, PhysicsDepthSupport
 from clutterbench.trials.scenes import stream_key
 from clutterbench.trials.support_eval import (
+    PULL_PREFIX,
     all_scenes,
     choose_all,
     contact_edge_rate,
@@ -47,6 +49,14 @@ def support(params: dict, base: BaseConfig) -> None:
     model = Path(f"models/{cfg.model}/best.pt")
     precision = inference_from_params(params)
     predictor = CollapsePredictor.from_checkpoint(model, image_size=sim.camera.image_size)
+    # A CP with a pull head gets its own rows, thresholds chosen and scored on pull truth.
+    pull = "pull" in checkpoint_heads(load_checkpoint(model))
+    pull_predictor = (
+        CollapsePredictor.from_checkpoint(model, image_size=sim.camera.image_size, head="pull")
+        if pull
+        else None
+    )
+    ch6 = load_section(TrialsConfig, "trials", params).ch6
 
     # 1. thresholds on validation scenes
     val = split_scenes(
@@ -57,17 +67,27 @@ def support(params: dict, base: BaseConfig) -> None:
         cfg.moved_threshold_m,
         cfg.min_pixels,
         sim.camera,
+        pull,
     )
-    cp_ev, oracle_ev = [], []
+    cp_ev, oracle_ev, pull_cp_ev, pull_oracle_ev = [], [], [], []
     with progress_bar("support: val heatmaps", total=len(val)) as advance:
         for sc in val:
             cp_ev.append(evidence(sc, predicted_heatmaps(sc, predictor)))
             oracle_ev.append(evidence(sc, oracle_heatmaps(sc.moved, sc.masks)))
+            if pull_predictor is not None:
+                pv = sc.pull_view()
+                pull_cp_ev.append(evidence(pv, predicted_heatmaps(pv, pull_predictor)))
+                pull_oracle_ev.append(evidence(pv, oracle_heatmaps(pv.moved, pv.masks)))
             advance(1)
     sweep = sweep_all(cp_ev, oracle_ev, cfg)
+    if pull:
+        pull_sweep = sweep_all(pull_cp_ev, pull_oracle_ev, cfg, PULL_PREFIX)
+        sweep = pd.concat([sweep, pull_sweep], ignore_index=True)
     write_text(OUT / "val_sweep.csv", sweep.to_csv(index=False))
     chosen = choose_all(sweep)
     p_edge = contact_edge_rate(val, chosen["coverage"])
+    deletion = {m: p for m, p in chosen.items() if not m.startswith(PULL_PREFIX)}
+    pull_chosen = {m: p for m, p in chosen.items() if m.startswith(PULL_PREFIX)}
 
     # 2. test scenes from their own stream, with every removal simulated
     test_ds = DatasetConfig(
@@ -76,21 +96,32 @@ def support(params: dict, base: BaseConfig) -> None:
         catalogue=cfg.test.catalogue,
         n_objects=cfg.test.n_objects,
         moved_threshold_m=cfg.moved_threshold_m,
+        pull_outcomes=pull,  # the pull truth: the trials' own pull of every box
     )
     shards = GenerateConfig(shard_size=10, workers=cfg.workers, max_attempts=cfg.max_attempts)
     key = stream_key("support")
-    generate_dataset(key, test_ds, shards, sim, base.seed, SCENES / "scenes", parallel=parallel)
+    trial_pull = (ch6.pull_increment_m, ch6.grasp_lift_m) if pull else None
+    generate_dataset(
+        key, test_ds, shards, sim, base.seed, SCENES / "scenes", trial_pull, parallel=parallel
+    )
 
-    rows, truth, panels = [], {}, []
+    rows, truth, pull_truth, panels = [], {}, {}, []
     rng = np.random.default_rng([base.seed, 62])
-    settle_s = load_section(TrialsConfig, "trials", params).ch6.physics_depth_settle_s
-    physics_depth = PhysicsDepthSupport(cfg, sim, chosen[SUPPORT_RULE], settle_s)
+    physics_depth = PhysicsDepthSupport(cfg, sim, chosen[SUPPORT_RULE], ch6.physics_depth_settle_s)
+    scenes_in = all_scenes(
+        SCENES, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera, pull
+    )
     with progress_bar("support: test scenes", total=cfg.test_scenes) as advance:
-        for sc in all_scenes(SCENES, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera):
+        for sc in scenes_in:
             heat = predicted_heatmaps(sc, predictor)
-            scene_rows, edges = evaluate_scene(sc, heat, chosen, p_edge, rng)
+            scene_rows, edges = evaluate_scene(sc, heat, deletion, p_edge, rng)
             rows += scene_rows + [physics_depth_row(physics_depth, sc, base.seed)]
             truth[str(sc.index)] = sorted(map(list, sc.true_edges))
+            if pull_predictor is not None:  # no random row: rng draws stay the deletion rows'
+                pv = sc.pull_view()
+                pull_heat = predicted_heatmaps(pv, pull_predictor)
+                rows += evaluate_scene(pv, pull_heat, pull_chosen, None, rng)[0]
+                pull_truth[str(sc.index)] = sorted(map(list, pv.true_edges))
             if len(panels) < cfg.figure_scenes:
                 panels.append(
                     SupportPanel(
@@ -103,7 +134,10 @@ def support(params: dict, base: BaseConfig) -> None:
                     )
                 )
             advance(1)
-    write_json(SCENES / "truth.json", {"edges": truth, "moved_threshold_m": cfg.moved_threshold_m})
+    truths = {"edges": truth, "moved_threshold_m": cfg.moved_threshold_m}
+    if pull:
+        truths["pull_edges"] = pull_truth  # pulling X moves Y (or off the shelf), X, Y touch
+    write_json(SCENES / "truth.json", truths)
     scenes = pd.DataFrame(rows)
     write_text(OUT / "scenes.csv", scenes.to_csv(index=False))
     thresholds = {m: as_dict(p) for m, p in chosen.items()} | {"random": {"p_edge": p_edge}}

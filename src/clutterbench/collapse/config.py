@@ -8,7 +8,7 @@ from typing import Any, Literal
 
 from clutterbench.collapse.losses import FocalConfig
 from clutterbench.config import bounded
-from clutterbench.data.labels import OUTPUT_CHANNELS
+from clutterbench.data.labels import LABEL_KINDS, OUTPUT_CHANNELS
 from clutterbench.errors import ClutterbenchError
 from clutterbench.models import ARCHS, parse_net_config
 from clutterbench.precision import check_precision, resolve_precision
@@ -49,11 +49,55 @@ class TrainModelConfig:
     """A training batch takes the targets of a scene together, at most this many in a row,
     so that a network that encodes the depth image apart from the masks (collapse_map)
     encodes it once for them all; more scenes per batch with a smaller value."""
+    labels: tuple[str, ...] = ("deletion",)
+    """What its collapse maps mean, one sigmoid output channel (head) each, in this order,
+    on one shared network (data.labels.LABEL_KINDS): deletion (the boxes that move when
+    the target is lifted out: the thesis' labels), pull (the boxes that move or leave the
+    shelf when the trials pull it out; the dataset needs pull_outcomes: true). More than
+    deletion: the collapse_map arch with one input mask and bce or focal loss, summed over
+    heads."""
+
+
+HEADS_ARCH = "collapse_map"
+"""The arch whose collapse maps may have several heads (train.models.<m>.labels)."""
+
+
+def check_heads(m: TrainModelConfig, key: str) -> None:
+    """One-line errors when `labels` names an unknown kind, one twice, or heads that the
+    network, its masks or its loss cannot have."""
+    unknown = [k for k in m.labels if k not in LABEL_KINDS]
+    if unknown or not m.labels:
+        raise ClutterbenchError(
+            f"{key}.labels: {unknown[0] if unknown else 'none'} is no label kind "
+            f"(known: {', '.join(LABEL_KINDS)})"
+        )
+    if len(set(m.labels)) < len(m.labels):
+        raise ClutterbenchError(f"{key}.labels: {list(m.labels)} names a kind twice")
+    if m.labels == ("deletion",):
+        return
+    if m.arch != HEADS_ARCH or m.net.n_masks != 1:
+        raise ClutterbenchError(
+            f"{key}.labels: {list(m.labels)} needs arch {HEADS_ARCH} with one input mask "
+            f"(net.n_masks 1), not {m.arch} with {m.net.n_masks}"
+        )
+    if m.loss == "ce":
+        raise ClutterbenchError(
+            f"{key}.loss: ce does not fit labels {list(m.labels)} (bce or focal)"
+        )
+    if m.net.n_classes != len(m.labels):
+        raise ClutterbenchError(
+            f"{key}.net.n_classes: labels {list(m.labels)} give {len(m.labels)} sigmoid "
+            f"channels, not {m.net.n_classes}"
+        )
 
 
 def check_labels(m: TrainModelConfig, key: str) -> None:
-    """One-line errors when the network's masks, classes and loss do not fit together."""
+    """One-line errors when the network's masks, classes, label kinds and loss do not fit
+    together."""
+    check_heads(m, key)
     n_masks, n_classes = m.net.n_masks, m.net.n_classes
+    if m.labels != ("deletion",):
+        return  # one sigmoid channel per head (check_heads)
     if n_masks not in OUTPUT_CHANNELS:
         raise ClutterbenchError(
             f"{key}.net.n_masks: no samples give {n_masks} masks (known: "
@@ -93,7 +137,10 @@ class TrainConfig:
                     f"train.models.{name}.arch: {m.arch!r} is not one of {', '.join(ARCHS)}"
                 )
             if isinstance(m.net, Mapping):
-                net = parse_net_config(m.arch, m.net, f"train.models.{name}.net")
+                raw = dict(m.net)
+                if len(m.labels) > 1 and "n_classes" not in raw:  # one channel per head
+                    raw["n_classes"] = len(m.labels)
+                net = parse_net_config(m.arch, raw, f"train.models.{name}.net")
                 object.__setattr__(m, "net", net)
             check_labels(m, f"train.models.{name}")
 
@@ -118,6 +165,14 @@ class EvalRunConfig:
     threshold: float | None = bounded(None, gt=0.0, le=1.0)
     """This run's pixel threshold, where its table states another than evaluate.threshold
     (thesis Table 4.2: 0.4); null: evaluate.threshold."""
+    head: str = "deletion"
+    """The model's head evaluated, on labels of that kind (data.labels.LABEL_KINDS) of both
+    `dataset` and `val_dataset`: deletion (every network), or pull (a network trained with
+    train.models.<m>.labels naming it; the datasets need pull_outcomes: true)."""
+
+    def __post_init__(self) -> None:
+        if self.head not in LABEL_KINDS:
+            raise ValueError(f"head: {self.head!r} is not one of {', '.join(LABEL_KINDS)}")
 
 
 @dataclasses.dataclass(frozen=True)

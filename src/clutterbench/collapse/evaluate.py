@@ -24,7 +24,7 @@ from clutterbench.collapse.predict import CollapsePredictor, forward_probs
 from clutterbench.data.dataset import GroupedLoader, PairDataset, open_pairs
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_text
-from clutterbench.models.checkpoint import check_compatible, load_checkpoint
+from clutterbench.models.checkpoint import check_compatible, head_channel, load_checkpoint
 from clutterbench.progress import progress_bar
 
 ProbSource = Callable[[dict[str, torch.Tensor]], torch.Tensor]
@@ -46,9 +46,12 @@ class SplitRef:
     threshold_m: float
     """A box counts as moved above this displacement (generate.datasets.<d>)."""
 
-    def load(self, gen_dir: Path, n_masks: int = 1) -> PairDataset:
-        """The samples of a network with `n_masks` input masks (1: targets, 2: pulls)."""
-        ds = open_pairs(n_masks, gen_dir, self.split_file, self.split, self.threshold_m)
+    def load(self, gen_dir: Path, n_masks: int = 1, head: str = "deletion") -> PairDataset:
+        """The samples of a network with `n_masks` input masks (1: targets, 2: pulls),
+        labelled for its head `head` (data.labels.LABEL_KINDS)."""
+        ds = open_pairs(
+            n_masks, gen_dir, self.split_file, self.split, self.threshold_m, labels=(head,)
+        )
         if len(ds) == 0:
             raise ClutterbenchError(
                 f"{self.split_file}: the '{self.split}' split holds no (scene, target) pairs"
@@ -90,6 +93,7 @@ def network_probs(predictor: CollapsePredictor) -> ProbSource:
             predictor.bf16,
             predictor.channels_last,
             batch["scene_of"],
+            predictor.channel,
         )
 
     return probs
@@ -173,16 +177,18 @@ def evaluate_checkpoint(
     val: SplitRef,
     cfg: EvaluateConfig,
     val_key: str = "val_dataset",
+    head: str = "deletion",
 ) -> EvalResult:
-    """Rebuild the network from its checkpoint alone and evaluate it (see evaluate_sets) on
-    the samples its inputs take (its n_masks)."""
+    """Rebuild the network from its checkpoint alone and evaluate its head `head` (see
+    evaluate_sets) on the samples its inputs take (its n_masks), labelled for that head."""
     ckpt = load_checkpoint(ckpt_path)
+    channel = head_channel(ckpt, ckpt_path, head)
     n_masks = ckpt.net.n_masks
-    test_ds, val_ds = test.load(gen_dir, n_masks), val.load(gen_dir, n_masks)
+    test_ds, val_ds = test.load(gen_dir, n_masks, head), val.load(gen_dir, n_masks, head)
     for ds in (test_ds, val_ds):
         check_compatible(ckpt, ckpt_path, int(ds.scenes["depth_m"].shape[-1]))
     check_val_split(test, val, ckpt.meta.get("dataset"), val_key)
-    predictor = CollapsePredictor(ckpt.model())
+    predictor = CollapsePredictor(ckpt.model(), channel=channel, head=head)
     desc = f"evaluate {ckpt_path.parent.name}"
     return evaluate_sets(test_ds, val_ds, network_probs(predictor), cfg, desc)
 

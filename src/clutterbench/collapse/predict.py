@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from clutterbench.models.checkpoint import check_compatible, load_checkpoint
+from clutterbench.models.checkpoint import check_compatible, head_channel, load_checkpoint
 from clutterbench.models.common import fold_batchnorm
 from clutterbench.precision import inference_precision, resolve_precision
 
@@ -53,16 +53,22 @@ def forward_probs(
     bf16: bool = True,
     channels_last: bool = True,
     scene_of: torch.Tensor | None = None,
+    channel: int | None = None,
 ) -> torch.Tensor:
     """Depth (m) and masks as `forward_logits` -> (P, 1, H, W) float32 collapse
-    probabilities."""
-    return collapse_probs(forward_logits(model, depth_m, target, bf16, channels_last, scene_of))
+    probabilities (of output channel `channel` of a multi-head network: `collapse_probs`)."""
+    logits = forward_logits(model, depth_m, target, bf16, channels_last, scene_of)
+    return collapse_probs(logits, channel)
 
 
-def collapse_probs(logits: torch.Tensor) -> torch.Tensor:
+def collapse_probs(logits: torch.Tensor, channel: int | None = None) -> torch.Tensor:
     """(B, K, H, W) logits -> (B, 1, H, W) float32 collapse probability: the sigmoid of a
-    single channel, or the softmax probability of the last class (C of thesis Fig. 4.4)."""
+    single channel, or the softmax probability of the last class (C of thesis Fig. 4.4);
+    with `channel`, the sigmoid of that channel (one head of a network with one sigmoid
+    channel per label kind, train.models.<m>.labels)."""
     logits = logits.float()
+    if channel is not None:
+        return torch.sigmoid(logits[:, channel : channel + 1])
     if logits.shape[1] == 1:
         return torch.sigmoid(logits)
     return torch.softmax(logits, dim=1)[:, -1:]
@@ -72,7 +78,9 @@ class CollapsePredictor:
     """A trained collapse network ready for inference (eval mode, no grad).
 
     `precision` auto / fp32 / bf16 (clutterbench.precision); None takes the process's
-    inference precision (params' inference.precision as set by the stage, else auto)."""
+    inference precision (params' inference.precision as set by the stage, else auto).
+    `channel`: the output channel of the head it answers for, on a network with several
+    (`from_checkpoint(head=...)`); None: the network's one collapse output."""
 
     def __init__(
         self,
@@ -82,6 +90,8 @@ class CollapsePredictor:
         channels_last: bool = True,
         encode_once: bool = True,
         fold_bn: bool = True,
+        channel: int | None = None,
+        head: str = "deletion",
     ):
         self.model = fold_batchnorm(model) if fold_bn else model.eval()
         if channels_last:
@@ -93,18 +103,23 @@ class CollapsePredictor:
         self.bf16 = self.precision == "bf16"
         self.batch_size, self.channels_last = batch_size, channels_last
         self.encode_once = encode_once
+        self.channel, self.head = channel, head
+        """The head's output channel (None: the one collapse output) and its label kind."""
         self.seconds = 0.0
         """Wall time spent in `scene_logits` so far (the collapse prediction's share)."""
 
     @classmethod
     def from_checkpoint(
-        cls, path: Path, image_size: int | None = None, **kwargs: object
+        cls, path: Path, image_size: int | None = None, head: str = "deletion", **kwargs: object
     ) -> CollapsePredictor:
-        """Rebuild the network from the checkpoint alone; refuse it for other image sizes."""
+        """Rebuild the network from the checkpoint alone, answering for its head `head`
+        (deletion or pull: models.checkpoint.checkpoint_heads); refuse it for other image
+        sizes, and where it has no such head."""
         ckpt = load_checkpoint(Path(path))
         if image_size is not None:
             check_compatible(ckpt, Path(path), image_size)
-        return cls(ckpt.model(), **kwargs)  # type: ignore[arg-type]
+        channel = head_channel(ckpt, Path(path), head)
+        return cls(ckpt.model(), channel=channel, head=head, **kwargs)  # type: ignore[arg-type]
 
     @property
     def input_size(self) -> int:
@@ -146,7 +161,8 @@ def scene_logits(
         scene_of = torch.zeros(len(chunk), dtype=torch.int64)
         with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
             out.append(model.decode(feats, chunk.contiguous(memory_format=memory), scene_of))
-    logits = torch.cat(out) if out else torch.zeros((0, 1, *depth_m.shape))
+    channels = int(getattr(getattr(model, "cfg", None), "n_classes", 1))
+    logits = torch.cat(out) if out else torch.zeros((0, channels, *depth_m.shape))
     predictor.seconds += time.perf_counter() - started
     return logits
 
@@ -156,8 +172,9 @@ def predict_collapse(
 ) -> np.ndarray:
     """Heatmaps (K, H, W) float32 in [0, 1] for one depth image (H, W) float32 metres and
     K binary target masks (K, H, W) (or K mask sets (K, n_masks, H, W), e.g. extraction and
-    support): the collapse probability of each candidate action."""
+    support): the collapse probability of each candidate action (by the predictor's head)."""
     masks = np.asarray(target_masks)
     if masks.ndim == 3:
         masks = masks[:, None]
-    return collapse_probs(scene_logits(predictor, depth_m, masks))[:, 0].numpy()
+    logits = scene_logits(predictor, depth_m, masks)
+    return collapse_probs(logits, predictor.channel)[:, 0].numpy()

@@ -33,7 +33,7 @@ from clutterbench.io import write_json
 from clutterbench.logs.csv_log import CsvLog
 from clutterbench.logs.mcap_episode import EpisodeWriter
 from clutterbench.models import build_model
-from clutterbench.models.checkpoint import save_checkpoint
+from clutterbench.models.checkpoint import DEFAULT_HEADS, save_checkpoint
 from clutterbench.progress import progress_bar
 
 DEVICE_ENV = "CLUTTERBENCH_TRAIN_DEVICE"
@@ -55,7 +55,18 @@ LOG_COLUMNS = (
 )
 """val_iou / precision / recall at train.val_threshold; val_iou_best: the best IoU over the
 evaluate sweep's thresholds (at val_best_threshold), steadier from epoch to epoch where a
-focal loss keeps probabilities low."""
+focal loss keeps probabilities low. A network with several heads (train.models.<m>.labels)
+logs the summed loss as val_loss, its first head's scores unsuffixed, and every head's
+loss and scores again with the head's name (HEAD_SCORES)."""
+HEAD_SCORES = ("loss", "pixel_accuracy", "iou", "precision", "recall", "iou_best", "best_threshold")
+"""Per-head validation columns of a multi-head network: val_<score>_<head>."""
+
+
+def log_columns(heads: tuple[str, ...]) -> tuple[str, ...]:
+    """The CSV log's columns: LOG_COLUMNS, and with several heads each head's own."""
+    if len(heads) == 1:
+        return LOG_COLUMNS
+    return LOG_COLUMNS + tuple(f"val_{k}_{h}" for h in heads for k in HEAD_SCORES)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,11 +91,24 @@ Loss = Callable[[torch.Tensor, dict[str, torch.Tensor]], torch.Tensor]
 
 
 def loss_fn(cfg: TrainConfig, mcfg: TrainModelConfig) -> Loss:
+    """The model's loss; with several heads (labels) the sum over heads of the loss of each
+    output channel on its own labels (batch["collapse"] has a channel per head)."""
     if mcfg.loss == "ce":
         return lambda logits, batch: ce_loss(logits, batch["classes"])
     if mcfg.loss == "focal":
-        return lambda logits, batch: focal_loss(logits, batch["collapse"], cfg.focal)
-    return lambda logits, batch: bce_loss(logits, batch["collapse"])
+        one: Loss = lambda logits, batch: focal_loss(logits, batch["collapse"], cfg.focal)  # noqa: E731
+    else:
+        one = lambda logits, batch: bce_loss(logits, batch["collapse"])  # noqa: E731
+    if len(mcfg.labels) == 1:
+        return one
+    return lambda logits, batch: sum(
+        one(logits[:, k : k + 1], _head_batch(batch, k)) for k in range(len(mcfg.labels))
+    )
+
+
+def _head_batch(batch: dict[str, torch.Tensor], k: int) -> dict[str, torch.Tensor]:
+    """The batch with head k's labels only (channel k of collapse)."""
+    return batch | {"collapse": batch["collapse"][:, k : k + 1]}
 
 
 def image_size(ds: PairDataset) -> int:
@@ -115,21 +139,46 @@ def to_device(batch: dict[str, torch.Tensor], device: torch.device) -> dict[str,
 
 
 def evaluate_loss(
-    model: nn.Module, loader: GroupedLoader, loss: Loss, cfg: TrainConfig, threshold: float
+    model: nn.Module,
+    loader: GroupedLoader,
+    loss: Loss,
+    cfg: TrainConfig,
+    threshold: float,
+    heads: tuple[str, ...] = ("deletion",),
+    head_loss: Loss | None = None,
 ) -> tuple[float, dict[str, float]]:
-    """Mean loss and pixel scores of the collapse class over `loader` (eval mode, no grad)."""
+    """Mean loss and pixel scores of the collapse class over `loader` (eval mode, no grad).
+    With several `heads`: the summed loss, the first head's scores, and each head's loss
+    (`head_loss` on its channel) and scores suffixed _<head>."""
     model.eval()
     device = next(model.parameters()).device
-    counts, total, n = PixelCounts(threshold), 0.0, 0
+    multi = len(heads) > 1
+    counts = [PixelCounts(threshold) for _ in heads]
+    totals, total, n = [0.0] * len(heads), 0.0, 0
     with torch.no_grad():
         for batch in loader:
             batch = to_device(batch, device)
             logits = batch_logits(model, batch, cfg)
             total += float(loss(logits, batch)) * len(logits)
             n += len(logits)
-            counts.update(collapse_probs(logits).cpu(), batch["collapse"].cpu())
-    best = best_iou_row(counts.sweep())
-    scores = counts.summary() | {"iou_best": best["iou"], "best_threshold": best["threshold"]}
+            if not multi:
+                counts[0].update(collapse_probs(logits).cpu(), batch["collapse"].cpu())
+                continue
+            assert head_loss is not None, "a multi-head network needs the loss of one head"
+            for k in range(len(heads)):
+                head = _head_batch(batch, k)
+                totals[k] += float(head_loss(logits[:, k : k + 1], head)) * len(logits)
+                counts[k].update(collapse_probs(logits, k).cpu(), head["collapse"].cpu())
+    per_head = []
+    for c in counts:
+        best = best_iou_row(c.sweep())
+        per_head.append(
+            c.summary() | {"iou_best": best["iou"], "best_threshold": best["threshold"]}
+        )
+    scores = dict(per_head[0])
+    if multi:
+        for head, t, sc in zip(heads, totals, per_head):
+            scores |= {f"loss_{head}": t / max(n, 1)} | {f"{k}_{head}": v for k, v in sc.items()}
     return total / max(n, 1), scores
 
 
@@ -141,11 +190,19 @@ def train_model(
     seed = model_seed(base_seed, name)
     torch.manual_seed(seed)
     noise = cfg.noise if mcfg.noise else None
-    n_masks = mcfg.net.n_masks
+    n_masks, heads = mcfg.net.n_masks, tuple(mcfg.labels)
     train_ds = open_pairs(
-        n_masks, paths.gen_dir, paths.split_file, "train", threshold_m, noise, mcfg.flip, seed
+        n_masks,
+        paths.gen_dir,
+        paths.split_file,
+        "train",
+        threshold_m,
+        noise,
+        mcfg.flip,
+        seed,
+        labels=heads,
     )
-    val_ds = open_pairs(n_masks, paths.gen_dir, paths.split_file, "val", threshold_m)
+    val_ds = open_pairs(n_masks, paths.gen_dir, paths.split_file, "val", threshold_m, labels=heads)
     for split, ds in (("train", train_ds), ("val", val_ds)):
         if len(ds) == 0:
             raise ClutterbenchError(f"train@{name}: dataset '{mcfg.dataset}' has no {split} pairs")
@@ -163,6 +220,7 @@ def train_model(
     params = [p for p in model.parameters() if p.requires_grad]
     opt = torch.optim.Adam(params, lr=mcfg.lr)
     loss = loss_fn(cfg, mcfg)
+    head_loss = loss_fn(cfg, dataclasses.replace(mcfg, labels=heads[:1])) if heads[1:] else None
     schedule = (
         torch.optim.lr_scheduler.CosineAnnealingLR(opt, mcfg.epochs, eta_min=mcfg.lr / 100)
         if mcfg.lr_schedule == "cosine"
@@ -174,38 +232,48 @@ def train_model(
         train_ds, sampler=train_ds.group_sampler(mcfg.batch_size, mcfg.scene_group, seed)
     )
     val_loader = GroupedLoader(val_ds, batch_size=max(mcfg.batch_size, 32))
-    log = CsvLog(paths.report_dir / "log.csv", LOG_COLUMNS)
+    log = CsvLog(paths.report_dir / "log.csv", log_columns(heads))
     sample = val_ds[len(val_ds) // 2]  # the heatmap followed epoch by epoch in the MCAP
     best = {"epoch": 0, "val_loss": float("inf")}
     stale, started, epoch_s = 0, time.perf_counter(), []
+    train_meta = as_dict(dataclasses.replace(mcfg, net={}))
+    if heads == DEFAULT_HEADS:  # deletion-only checkpoints stay byte for byte as before heads
+        del train_meta["labels"]
     meta = {
         "name": name,
         "dataset": mcfg.dataset,
         "moved_threshold_m": threshold_m,
         "image_size": size,
-        "train": as_dict(dataclasses.replace(mcfg, net={})),
+        "train": train_meta,
         "seed": seed,
         "precision": precision,
     }
+    if heads != DEFAULT_HEADS:
+        meta["heads"] = list(heads)  # output channel k predicts labels of kind heads[k]
     with EpisodeWriter(paths.model_dir / "train.mcap", {"model": name, **meta}) as mcap:
         mcap.write_depth(0.0, sample["depth_m"][0].numpy())
         for mask, topic in zip(sample["target"], ("/val/target", "/val/support")):
             mcap.write_mono8(0.0, topic, _to_mono8(mask))
-        mcap.write_mono8(0.0, "/val/truth", _to_mono8(sample["collapse"][0]))
+        for k, topic in enumerate(_head_topics(heads)):
+            mcap.write_mono8(0.0, f"{topic}/truth", _to_mono8(sample["collapse"][k]))
         for epoch in range(1, mcfg.epochs + 1):
             t0 = time.perf_counter()
             train_loss = _train_epoch(model, train_loader, opt, loss, cfg, f"{name} {epoch}")
             if schedule is not None:
                 schedule.step()
-            val_loss, scores = evaluate_loss(model, val_loader, loss, cfg, cfg.val_threshold)
+            val_loss, scores = evaluate_loss(
+                model, val_loader, loss, cfg, cfg.val_threshold, heads, head_loss
+            )
             row = {"epoch": epoch, "train_loss": train_loss, "val_loss": val_loss}
             row |= {f"val_{k}": v for k, v in scores.items()}
             log.append(row)
             epoch_s.append(round(time.perf_counter() - t0, 1))
             mcap.write_json(float(epoch), "/train/epoch", row)
             depth, target = (sample[k][None].to(device) for k in ("depth_m", "target"))
-            heat = forward_probs(model, depth, target, cfg.bf16)
-            mcap.write_mono8(float(epoch), "/val/heatmap", _to_mono8(heat[0, 0].cpu()))
+            for k, topic in enumerate(_head_topics(heads)):
+                channel = k if len(heads) > 1 else None
+                heat = forward_probs(model, depth, target, cfg.bf16, channel=channel)
+                mcap.write_mono8(float(epoch), f"{topic}/heatmap", _to_mono8(heat[0, 0].cpu()))
             print(
                 f"{name} epoch {epoch}: train {train_loss:.4f} val {val_loss:.4f} "
                 f"IoU {scores['iou']:.3f}",
@@ -235,6 +303,8 @@ def train_model(
             "parameters": sum(p.numel() for p in model.parameters()),
             "precision": precision,
         }
+        if heads != DEFAULT_HEADS:
+            summary["heads"] = list(heads)
         mcap.set_outcome({"best_epoch": best["epoch"], "best_val_loss": best["val_loss"]})
     write_json(paths.report_dir / "summary.json", summary)
     timing = {"model": name, "seconds": time.perf_counter() - started, "epoch_seconds": epoch_s}
@@ -287,6 +357,12 @@ def _train_epoch(
             n += k
             advance(k)
     return total / max(n, 1)
+
+
+def _head_topics(heads: tuple[str, ...]) -> list[str]:
+    """MCAP topic prefix of each head's validation images: /val for the first (as a
+    one-head network's), /val/<head> for the others."""
+    return ["/val", *(f"/val/{h}" for h in heads[1:])]
 
 
 def _to_mono8(image: torch.Tensor) -> np.ndarray:

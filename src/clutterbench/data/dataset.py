@@ -10,7 +10,7 @@ together so that the depth image is encoded once for them (GroupedLoader, Datase
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -19,9 +19,12 @@ from torch.utils.data import Dataset, Sampler
 
 from clutterbench.data.labels import (
     CLASS_C,
+    LABEL_KINDS,
+    PULL_ARRAYS,
     ch4_class_map,
     collapse_mask,
     moved_matrix,
+    pull_moved_matrix,
     target_mask,
 )
 from clutterbench.data.shards import SceneColumns, ShardStore, load_split
@@ -206,7 +209,9 @@ def _float_tensor(a: np.ndarray) -> torch.Tensor:
 
 
 class CollapseDataset(_ShardPairs):
-    """Items are dicts of float32 tensors (1, H, W): depth_m, target, collapse.
+    """Items are dicts of float32 tensors (1, H, W): depth_m, target, and collapse (K, H, W):
+    one channel per label kind of `labels`, in that order (data.labels.LABEL_KINDS: the
+    boxes that move when the target is deleted, or when the trials pull it out).
 
     One item per (scene, target box) pair: thesis 5.2.2 / 6.2.1 sample a target per
     simulation; we use every visible box of every scene, since the removal matrix labels
@@ -216,21 +221,49 @@ class CollapseDataset(_ShardPairs):
     n_masks = 1
     arrays = ("depth_m", "instance", "removal_m")
 
+    def __init__(self, gen_dir: Path, *args, labels: Sequence[str] = ("deletion",), **kwargs):
+        super().__init__(gen_dir, *args, **kwargs)
+        self.labels = tuple(labels)
+        unknown = [k for k in self.labels if k not in LABEL_KINDS]
+        if unknown or not self.labels or len(set(self.labels)) < len(self.labels):
+            raise ClutterbenchError(
+                f"labels {list(self.labels)}: each of {', '.join(LABEL_KINDS)} at most once"
+            )
+        if "pull" in self.labels and not set(PULL_ARRAYS) <= set(self.store.array_names()):
+            name = self.store.dataset
+            raise ClutterbenchError(
+                f"dataset '{name}' holds no pull labels (pullout_*); generate it with "
+                f"generate.datasets.{name}.pull_outcomes: true"
+            )
+        if self.labels != ("deletion",):
+            need = {"deletion": ("removal_m",), "pull": PULL_ARRAYS}
+            self.arrays = ("depth_m", "instance", *(a for k in self.labels for a in need[k]))
+
+    def _moved(self, row: Callable[[str], np.ndarray], n: int, kind: str) -> np.ndarray:
+        """(n, n) bool moved matrix of one scene under label kind `kind`; row(key) is the
+        scene's array `key`."""
+        if kind == "pull":
+            disp, left = (row(k)[:n, :n] for k in PULL_ARRAYS)
+            return pull_moved_matrix(disp, left, self.threshold_m)
+        return moved_matrix(row("removal_m")[:n, :n], self.threshold_m)
+
     def _sample(
         self, shard: dict[str, np.ndarray], r: int, n: int, sample: np.ndarray
     ) -> dict[str, np.ndarray]:
         x = int(sample[0])
         instance = shard["instance"][r]
-        moved = moved_matrix(shard["removal_m"][r, :n, :n], self.threshold_m)[x]
-        return {
-            "target": target_mask(instance, x)[None],
-            "collapse": collapse_mask(instance, moved)[None],
-        }
+        maps = [
+            collapse_mask(instance, self._moved(lambda k: shard[k][r], n, kind)[x])
+            for kind in self.labels
+        ]
+        return {"target": target_mask(instance, x)[None], "collapse": np.stack(maps)}
 
     def pair_collapses(self, i: int) -> bool:
+        """Whether some box moves in sample `i` under any of its label kinds."""
         s, x = (int(v) for v in self.pairs[i])
         n = int(self.index.n_objects[s])
-        return bool(moved_matrix(self.scenes["removal_m"][s, :n, :n], self.threshold_m)[x].any())
+        row = lambda k: self.scenes[k][s]  # noqa: E731
+        return any(bool(self._moved(row, n, kind)[x].any()) for kind in self.labels)
 
 
 def extract_support_pairs(visible: np.ndarray) -> np.ndarray:
@@ -295,12 +328,16 @@ DATASETS: dict[int, type[CollapseDataset] | type[PullPairDataset]] = {
 """Number of network input masks -> the dataset that feeds such a network."""
 
 
-def open_pairs(n_masks: int, *args, **kwargs) -> PairDataset:
+def open_pairs(n_masks: int, *args, labels: Sequence[str] = ("deletion",), **kwargs) -> PairDataset:
     """The dataset for a network with `n_masks` input masks (arguments as CollapseDataset):
-    (scene, target) pairs labelled by removal, or (scene, extract, support) labelled by
-    pulling (thesis ch. 4)."""
+    (scene, target) pairs labelled by removal and / or the trials' pull (`labels`, one
+    channel each), or (scene, extract, support) labelled by pulling (thesis ch. 4)."""
     if n_masks not in DATASETS:
         raise ClutterbenchError(f"no dataset feeds {n_masks} masks (known: {sorted(DATASETS)})")
+    if n_masks == CollapseDataset.n_masks:
+        return CollapseDataset(*args, labels=labels, **kwargs)
+    if tuple(labels) != ("deletion",):
+        raise ClutterbenchError(f"labels {list(labels)}: {n_masks}-mask samples have their own")
     return DATASETS[n_masks](*args, **kwargs)
 
 

@@ -12,6 +12,13 @@ OUTPUT_CHANNELS = {1: (1,), 2: (1, len(PULL_CLASSES))}
 """Network input masks -> the output channels their labels can train: one target mask ->
 a collapse map (1); extraction + support masks (pull labels) -> a collapse map (1) or the
 four classes of thesis Fig. 4.4."""
+LABEL_KINDS = ("deletion", "pull")
+"""What a collapse map of box x marks (issue 50): `deletion`, the boxes that move when x is
+lifted out and the rest settles (the removal matrix, the thesis' labels); `pull`, the boxes
+that move or leave the shelf when the trials' executor pulls x out (the pullout_* arrays of a
+dataset generated with pull_outcomes: true)."""
+PULL_ARRAYS = ("pullout_displacement_m", "pullout_left_shelf")
+"""The shard arrays the pull labels are read from."""
 
 
 def moved_matrix(removal_m: np.ndarray, threshold_m: float) -> np.ndarray:
@@ -23,6 +30,21 @@ def moved_matrix(removal_m: np.ndarray, threshold_m: float) -> np.ndarray:
     assert removal_m.ndim == 2 and removal_m.shape[0] == removal_m.shape[1]
     with np.errstate(invalid="ignore"):
         return np.nan_to_num(removal_m, nan=0.0) > threshold_m
+
+
+def pull_moved_matrix(
+    displacement_m: np.ndarray, left_shelf: np.ndarray, threshold_m: float
+) -> np.ndarray:
+    """M[x, y] = box y moved more than `threshold_m` or left the shelf when the trials'
+    executor pulled x out (x == y: False). The definition of the truth maps of the pull
+    (trials/truth_maps.py), so a pull label and a pull-truth map mean the same thing; a NaN
+    displacement is no move."""
+    assert displacement_m.ndim == 2 and displacement_m.shape[0] == displacement_m.shape[1]
+    assert left_shelf.shape == displacement_m.shape and left_shelf.dtype == bool
+    with np.errstate(invalid="ignore"):
+        moved = (np.nan_to_num(displacement_m, nan=0.0) > threshold_m) | left_shelf
+    np.fill_diagonal(moved, False)
+    return moved
 
 
 def target_mask(instance: np.ndarray, target: int) -> np.ndarray:

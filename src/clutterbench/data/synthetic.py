@@ -28,8 +28,10 @@ def synthetic_scenes(
     n_objects: tuple[int, int],
     families: Mapping[str, float],
     pulls: bool = False,
+    pull_outcomes: bool = False,
 ) -> dict[str, np.ndarray]:
-    """Per-scene arrays of one shard (every key a generated shard has, but config_hash)."""
+    """Per-scene arrays of one shard (every key a generated shard has, but config_hash);
+    `pull_outcomes`: also random pullout_* arrays (generate.datasets.<d>.pull_outcomes)."""
     s, n_max = len(scene_indices), n_objects[1]
     names = list(families)
     weights = np.array([families[f] for f in names], dtype=np.float64)
@@ -68,7 +70,31 @@ def synthetic_scenes(
     }
     if pulls:
         arrays["pull_m"] = synthetic_pulls(rng, n, n_max)
+    if pull_outcomes:
+        arrays |= synthetic_pull_outcomes(rng, n, n_max)
     return arrays
+
+
+def synthetic_pull_outcomes(
+    rng: np.random.Generator, n: np.ndarray, n_max: int
+) -> dict[str, np.ndarray]:
+    """pullout_* arrays (S, n_max, n_max) as generate lays them out: row x = pulling box x;
+    NaN (False) on the diagonal and beyond each scene's boxes; a tenth of the boxes leave
+    the shelf."""
+    s = len(n)
+    out = {
+        k: np.full((s, n_max, n_max), np.nan, np.float64)
+        for k in ("pullout_displacement_m", "pullout_drop_m", "pullout_tilt_deg")
+    }
+    left = np.zeros((s, n_max, n_max), bool)
+    for k, nk in enumerate(n):
+        off = ~np.eye(nk, dtype=bool)
+        disp = rng.exponential(0.005, size=(nk, nk))
+        out["pullout_displacement_m"][k, :nk, :nk] = np.where(off, disp, np.nan)
+        out["pullout_drop_m"][k, :nk, :nk] = np.where(off, disp / 2, np.nan)
+        out["pullout_tilt_deg"][k, :nk, :nk] = np.where(off, 1000 * disp, np.nan)
+        left[k, :nk, :nk] = off & (rng.random((nk, nk)) < 0.1)
+    return out | {"pullout_left_shelf": left}
 
 
 def synthetic_pulls(rng: np.random.Generator, n: np.ndarray, n_max: int) -> np.ndarray:
@@ -97,6 +123,7 @@ def write_synthetic_dataset(
     seed: int = 0,
     config_hash: str = "synthetic",
     pulls: bool = False,
+    pull_outcomes: bool = False,
 ) -> dict[str, Any]:
     """Write gen_dir/name/{shard-NNNNN.npz, manifest.json}; returns the manifest."""
     families = families or {"random": 1.0}
@@ -106,7 +133,7 @@ def write_synthetic_dataset(
     for k, lo in enumerate(range(0, n_scenes, shard_size)):
         rng = np.random.default_rng([seed, k])  # each shard alone regenerable, like generate
         indices = list(range(lo, min(lo + shard_size, n_scenes)))
-        arrays = synthetic_scenes(rng, indices, size, n_objects, families, pulls)
+        arrays = synthetic_scenes(rng, indices, size, n_objects, families, pulls, pull_outcomes)
         shards.append(f"shard-{k:05d}.npz")
         save_npz(out / shards[-1], {**arrays, "config_hash": np.array(config_hash)})
         for f in arrays["family"]:

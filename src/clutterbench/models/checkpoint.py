@@ -49,6 +49,28 @@ def load_checkpoint(path: Path) -> Checkpoint:
     return Checkpoint(payload["arch"], net, payload["state_dict"], payload["meta"])
 
 
+DEFAULT_HEADS = ("deletion",)
+"""The heads of a checkpoint that records none: every network trained before heads."""
+
+
+def checkpoint_heads(ckpt: Checkpoint) -> tuple[str, ...]:
+    """What each sigmoid output channel of the network predicts (train.models.<m>.labels),
+    in channel order; a checkpoint without a record is a deletion network."""
+    return tuple(ckpt.meta.get("heads", DEFAULT_HEADS))
+
+
+def head_channel(ckpt: Checkpoint, path: Path, head: str) -> int | None:
+    """The output channel of head `head` (None: the network's one collapse output, read as
+    ever: a sigmoid, or the last class of a softmax); one line when it has no such head."""
+    heads = checkpoint_heads(ckpt)
+    if head not in heads:
+        raise ClutterbenchError(
+            f"checkpoint {path} has no '{head}' head (it has {', '.join(heads)}); train it "
+            f"with train.models.<model>.labels naming {head}"
+        )
+    return heads.index(head) if len(heads) > 1 else None
+
+
 def check_compatible(ckpt: Checkpoint, path: Path, image_size: int) -> None:
     """One clear error when a checkpoint cannot run on these images."""
     if ckpt.net.input_size != image_size:

@@ -160,10 +160,12 @@ def collapse_table(
             )
         model = run_models[run]
         settings = model_settings(sources.model_dir, sources.train_dir, model)
+        head = ours.get("head", "deletion")  # evaluate runs of other heads record theirs
         ours = ours | {
             "run": run,
             "network": f"{model}: {settings['arch']}, {settings['loss']} loss, "
-            f"trained on {settings['dataset']}",
+            f"trained on {settings['dataset']}"
+            + (f"; its {head} head, on {head} labels" if head != "deletion" else ""),
             "epochs_run": settings["epochs_run"],
             "differs": settings_differences(settings, thesis_settings(figures, table, row)),
         }
@@ -209,6 +211,19 @@ def _notes(
         if spec.get("eval_threshold") is not None
         else "the thesis states none for this table"
     )
+    heads = sorted({m.get("head", "deletion") for m in ours.values()} - {"deletion"})
+    head_note = (
+        [
+            f"{', '.join(heads)} head rows: the network's output channel trained on labels of "
+            "the trials' pull (train.models.<m>.labels; a box is collapse when it moves beyond "
+            "the label threshold or leaves the shelf as the trials' executor pulls the target "
+            "out, data.labels.pull_moved_matrix), scored on the same scenes' pull labels, its "
+            "threshold chosen on pull labels of the val split; the other rows: deletion labels "
+            "(the target lifted out). The thesis has no such row."
+        ]
+        if heads
+        else []
+    )
     return [
         f"{scale} scale. test set ({thesis_size}): {test_sets}.",
         f"pixel acc., IoU, precision, recall: a pixel counts as collapse when its probability "
@@ -220,6 +235,7 @@ def _notes(
         "thesis: our settings against the thesis' (settings in reports/thesis_figures.yaml); "
         "epochs run: until early stopping (reports/train/<model>/summary.json).",
         "files: reports/evaluate/<run>/figure.png, sweep.csv (test), val_sweep.csv.",
+        *head_note,
     ]
 
 

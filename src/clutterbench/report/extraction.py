@@ -43,6 +43,8 @@ METHODS = {
     "bimanual_truth": "multi-step + bimanual hold on physics-truth maps (perception ceiling)",
     "multi_step_pull_truth": "multi-step on physics-truth maps of the trials' pull",
     "bimanual_pull_truth": "multi-step + bimanual hold on physics-truth maps of the pull",
+    "multi_step_pull": "multi-step on the CP's pull head (maps of the trials' pull)",
+    "bimanual_pull": "multi-step + bimanual hold on the CP's pull head",
     "oracle": "search oracle, one arm (ceiling)",
     "oracle_hold": "search oracle, may hold one box (ceiling)",
     "random": "random (floor)",
@@ -56,6 +58,7 @@ MATCHING_ORACLE = {
     "bimanual": "oracle_hold",
     "bimanual_truth": "oracle_hold",
     "bimanual_pull_truth": "oracle_hold",
+    "bimanual_pull": "oracle_hold",
     "oracle_hold": "oracle_hold",
     "physics_from_depth_hold": "oracle_hold",
 }
@@ -422,17 +425,31 @@ def rule_note(
     """The support rule the CP planners ran with (their records' `rule`), its Table 6.2 row
     and the thresholds the support stage chose for it on validation scenes."""
     from clutterbench.report.support import thresholds_text
+    from clutterbench.trials.config import support_method
 
-    rules = sorted({str(r["rule"]) for recs in used.values() for r in recs if r.get("rule")})
-    if not rules:
+    methods = sorted(
+        {
+            support_method(str(r.get("planner")), str(r["rule"]))
+            for recs in used.values()
+            for r in recs
+            if r.get("rule")
+        }
+    )
+    if not methods:
         return []
     parts = [
-        f"{rule} (Table 6.2 row '{labels.get(rule, rule)}'; {thresholds_text(chosen.get(rule))})"
-        for rule in rules
+        f"{m} (Table 6.2 row '{labels.get(m, m)}'; {thresholds_text(chosen.get(m))})"
+        for m in methods
     ]
     return [
         "support rule of the CP planners (multi-step, bimanual), thresholds chosen on "
-        f"validation scenes: {'; '.join(parts)}."
+        f"validation scenes: {'; '.join(parts)}"
+        + (
+            "; pull_<rule>: the same rule on the CP's pull head, its thresholds chosen "
+            "against the pull truth (the *_pull planners)."
+            if any(m.startswith("pull_") for m in methods)
+            else "."
+        )
     ]
 
 

@@ -17,6 +17,8 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.report.tables import Column, comparison_frame, thesis_row, write_table
 
 TABLE = "table_6_2"
+PULL_PREFIX = "pull_"
+"""Methods on the CP's pull head, scored against the pull truth (trials/support_eval.py)."""
 THESIS_METHOD = "iou"
 """The rule the thesis evaluated (6.2.2: IoU of object and collapse area); its Table 6.2
 mean sits beside this row only."""
@@ -164,19 +166,37 @@ def _notes(scenes: pd.DataFrame, figures: Mapping[str, Any], scale: str) -> list
     mix = ", ".join(f"{family} {n}" for family, n in counts.items())
     lo, hi = int(per_scene["n_objects"].min()), int(per_scene["n_objects"].max())
     thesis_scenes = sum(1 for r in figures[TABLE].get("rows", []) if r.get("row") != "mean")
+    return (
+        [
+            f"{scale} scale. ours: {len(per_scene)} simulated test scenes ({mix}), {lo}-{hi} "
+            f"objects each; thesis: {thesis_scenes} real scenes, hand-annotated "
+            f"({figures[TABLE].get('source', 'thesis')}).",
+            "ground truth from physics: X supports Y when removing X moves Y beyond the threshold "
+            "AND X and Y touch in the settled scene (the thesis drops relations between objects "
+            "not in contact, 6.2.2).",
+            "mean precision / recall: per-scene eqs. 6.3 and 6.4 averaged over the scenes where "
+            "they are defined (precision: at least one inferred edge; recall: at least one true "
+            "edge), as the thesis' mean; pooled: edge counts summed over scenes first.",
+            f"thesis mean beside the thesis' own rule (method '{THESIS_METHOD}'). thresholds: "
+            "chosen on validation scenes, never on test scenes.",
+        ]
+        + _pull_notes(scenes)
+        + _estimate_notes(scenes)
+    )
+
+
+def _pull_notes(scenes: pd.DataFrame) -> list[str]:
+    """What the pull rows (methods pull_*: the CP's pull head) are measured against."""
+    if not scenes["method"].astype(str).str.startswith(PULL_PREFIX).any():
+        return []
     return [
-        f"{scale} scale. ours: {len(per_scene)} simulated test scenes ({mix}), {lo}-{hi} "
-        f"objects each; thesis: {thesis_scenes} real scenes, hand-annotated "
-        f"({figures[TABLE].get('source', 'thesis')}).",
-        "ground truth from physics: X supports Y when removing X moves Y beyond the threshold "
-        "AND X and Y touch in the settled scene (the thesis drops relations between objects "
-        "not in contact, 6.2.2).",
-        "mean precision / recall: per-scene eqs. 6.3 and 6.4 averaged over the scenes where "
-        "they are defined (precision: at least one inferred edge; recall: at least one true "
-        "edge), as the thesis' mean; pooled: edge counts summed over scenes first.",
-        f"thesis mean beside the thesis' own rule (method '{THESIS_METHOD}'). thresholds: "
-        "chosen on validation scenes, never on test scenes.",
-    ] + _estimate_notes(scenes)
+        "pull_* rows: the collapse predictor's pull head (maps of pulling each box out with "
+        "the trials' executor, train.models.<m>.labels), its thresholds chosen on the same "
+        "validation scenes against the pull truth, scored against the pull truth of the same "
+        "test scenes: X supports Y when the trials' pull of X out of the settled scene moves Y "
+        "beyond the threshold or off the shelf AND X and Y touch (data/support/truth.json "
+        "pull_edges). The other rows: the deletion truth above."
+    ]
 
 
 def _estimate_notes(scenes: pd.DataFrame) -> list[str]:

@@ -39,7 +39,12 @@ from clutterbench.trials.ch6_planners import (  # noqa: F401  (register_planner,
     register_planner,
     truth_maps_of,
 )
-from clutterbench.trials.config import Ch6TrialParams, SceneStreamConfig
+from clutterbench.trials.config import (
+    PULL_HEAD_PLANNERS,
+    Ch6TrialParams,
+    SceneStreamConfig,
+    support_method,
+)
 from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
 from clutterbench.trials.judge import disturbance
@@ -302,7 +307,11 @@ class Extraction:
             "collapse_maps": None
             if job["planner"] not in CP_PLANNERS
             else (
-                "predicted"
+                (
+                    "predicted by the pull head"
+                    if job["planner"] in PULL_HEAD_PLANNERS
+                    else "predicted"
+                )
                 if truth is None
                 else ("physics truth of the pull" if truth.pull else "physics truth")
             ),
@@ -361,7 +370,7 @@ def condition_jobs(
             f"trials.conditions.{name}: planner {cond.planner} reads physics-truth maps, which "
             "run on the kinematic executor only (executor: kinematic)"
         )
-    support = chosen_support(thresholds, cond.rule)
+    support = chosen_support(thresholds, support_method(cond.planner, cond.rule))
     cp_max = trials.ch6.cp_max if trials.ch6.cp_max is not None else support.score_threshold
     jobs = ch6_jobs(
         name,

@@ -69,8 +69,11 @@ def chosen_support(thresholds: Path, rule: str) -> SupportParams:
     try:
         return SupportParams(**chosen["chosen"][rule])
     except (KeyError, TypeError) as exc:
+        # pull_<rule>: chosen only where the support model has a pull head
+        hint = " with a support.model that has a pull head" if rule.startswith("pull_") else ""
         raise ClutterbenchError(
-            f"{thresholds}: no usable thresholds for rule '{rule}' ({exc}); rerun the support stage"
+            f"{thresholds}: no usable thresholds for rule '{rule}' ({exc}); rerun the support "
+            f"stage{hint}"
         ) from None
 
 
@@ -122,10 +125,12 @@ def _cpg_planner(
     """Algorithm 1 with the collapse predictor, or (`spec` given) with physics-truth maps of
     that scene through the same interface (`pull`: maps of the trials' pull, else of
     deleting the box, and the bimanual plan clears the held box's load first, issue 50): the
-    same planner, rule and thresholds."""
+    same planner and rule. `pull` without `spec`: the collapse predictor's pull head, with
+    the thresholds chosen for it (the job's `support`, trials.config.support_method)."""
     params: Ch6TrialParams = job["params"]
     if spec is None:
-        predictor = load_predictor(job["model_path"], job["camera"].image_size)
+        head = "pull" if pull else "deletion"
+        predictor = load_predictor(job["model_path"], job["camera"].image_size, head)
     else:
         action = (params.pull_increment_m, params.grasp_lift_m) if pull else None
         predictor = TruthCollapseMaps(spec, job["physics"], params.moved_threshold_m, action)
@@ -169,6 +174,16 @@ def _bimanual_pull_truth(job: dict[str, Any], spec: SceneSpec):
     return _cpg_planner(job, bimanual=True, spec=spec, pull=True)
 
 
+@register_planner("multi_step_pull")
+def _multi_step_pull(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=False, pull=True)
+
+
+@register_planner("bimanual_pull")
+def _bimanual_pull(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=True, pull=True)
+
+
 def _physics_from_depth(job: dict[str, Any], spec: SceneSpec, holding: bool):
     """The physics-from-depth planner (planning/physics_depth.py): boxes fitted to each
     observation, searched in SAPIEN by the oracle's code on that estimate. Of the episode's
@@ -202,7 +217,8 @@ def _pfd_hold(job: dict[str, Any], spec: SceneSpec):
 
 CP_PLANNERS = tuple(p for p in BUILT_IN if p.startswith(("multi_step", "bimanual")))
 """The planners of Algorithm 1 (a support rule, cp_max); `*_truth` read physics-truth maps
-(`*_pull_truth`: of the trials' pull, the others of deletion)."""
+(`*_pull_truth`: of the trials' pull, the others of deletion); `*_pull` the collapse
+predictor's pull head, the others its deletion head."""
 
 
 def reads_truth_maps(name: str) -> bool:

@@ -23,6 +23,8 @@ PLANNERS = (
     "bimanual_truth",
     "multi_step_pull_truth",
     "bimanual_pull_truth",
+    "multi_step_pull",
+    "bimanual_pull",
     "oracle",
     "oracle_hold",
     "random",
@@ -34,10 +36,23 @@ target at once, nothing held; the thesis' single-step method (its previous work,
 the target while holding the support of least risk); Algorithm 1 with one arm; Algorithm 1
 with the bimanual option (Fig. 6.7); the same two fed physics-truth collapse maps instead of
 the predictor's (the perception ceiling, trials/truth_maps.py), of deletion (the labels'
-meaning) and of the trials' own pull; the search oracles with one
+meaning) and of the trials' own pull; the same two on the collapse predictor's pull head
+(`*_pull`: maps of the trials' pull, learnt from pull labels); the search oracles with one
 arm and with a holding arm; a uniformly random visible box each step; the search on boxes
 fitted to each observation instead of the true scene, one arm and holding
 (planning/physics_depth.py)."""
+
+
+PULL_HEAD_PLANNERS = ("multi_step_pull", "bimanual_pull")
+"""The CP planners that read the collapse predictor's pull head (train.models.<m>.labels),
+with the support thresholds the support stage chose for that head (`pull_<rule>`)."""
+
+
+def support_method(planner: str, rule: str) -> str:
+    """The support stage's method (reports/support/thresholds.json `chosen`) whose thresholds
+    a CP planner runs with: its rule, chosen on the deletion maps, or on the pull head's maps
+    (`pull_<rule>`) for the pull-head planners."""
+    return f"pull_{rule}" if planner in PULL_HEAD_PLANNERS else rule
 
 
 @dataclasses.dataclass(frozen=True)

@@ -32,13 +32,17 @@ OUTCOME_TOPIC = "/trial/outcome"
 _PREDICTORS: dict[str, Any] = {}
 
 
-def load_predictor(path: Path, image_size: int):
-    """The collapse predictor, loaded once per worker process; returns predict(depth, masks)."""
+def load_predictor(path: Path, image_size: int, head: str = "deletion"):
+    """The collapse predictor answering for head `head` of the network (deletion or pull,
+    models.checkpoint.checkpoint_heads), loaded once per worker process; returns
+    predict(depth, masks)."""
     from clutterbench.collapse.predict import CollapsePredictor
 
-    key = str(path)
+    key = str(path) if head == "deletion" else f"{path}#{head}"
     if key not in _PREDICTORS:
-        _PREDICTORS[key] = CollapsePredictor.from_checkpoint(Path(path), image_size=image_size)
+        _PREDICTORS[key] = CollapsePredictor.from_checkpoint(
+            Path(path), image_size=image_size, head=head
+        )
     return _PREDICTORS[key]
 
 

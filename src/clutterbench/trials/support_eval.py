@@ -9,6 +9,12 @@ Truth: SUPP(X, Y) when removing X moves Y beyond the threshold AND X and Y touch
 settled scene (PhysX contacts). Objects are the boxes a robot sees (>= min_pixels visible);
 as the thesis, we "ignore the case where O_HYP does not correspond to O_GT", so a relation
 with a hidden box is in neither graph.
+
+Pull truth (a collapse predictor with a pull head, issue 50): the same with "removing X" read
+as "the trials' executor pulling X out" (Y moves beyond the threshold or leaves the shelf:
+data.labels.pull_moved_matrix, the pull labels' and pull-truth maps' definition), from the
+pullout_* arrays of datasets generated with pull_outcomes: true; its methods are named
+`pull_<method>` and are chosen and scored on pull truth only.
 """
 
 from __future__ import annotations
@@ -21,7 +27,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from clutterbench.data.labels import PULL_ARRAYS, pull_moved_matrix
 from clutterbench.data.shards import ShardStore, iter_shards, load_split
+from clutterbench.errors import ClutterbenchError
 from clutterbench.planning.support import (
     RULES,
     SceneEvidence,
@@ -37,6 +45,8 @@ from clutterbench.planning.support import (
 from clutterbench.sim.config import CameraConfig
 
 SCENE_KEYS = ("scene_index", "n_objects", "family", "depth_m", "instance", "removal_m", "contact")
+PULL_PREFIX = "pull_"
+"""Methods on the pull head's maps, chosen and scored against the pull truth."""
 PredictFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
@@ -58,6 +68,15 @@ class Scene:
     n_objects: int
     gaps_m: np.ndarray | None = None
     """(K, K) `surface_gaps` of the visible objects (None: not computed)."""
+    moved_pull: np.ndarray | None = None
+    """(K, K) bool: ids[b] moved beyond the threshold or left the shelf when the trials
+    pulled ids[a] out (None: not read)."""
+
+    def pull_view(self) -> Scene:
+        """This scene with the pull's moved matrix in place of the deletion's, so its
+        `true_edges` are the pull truth."""
+        assert self.moved_pull is not None, "scene read without its pull outcomes"
+        return dataclasses.replace(self, moved=self.moved_pull, moved_pull=None)
 
     @property
     def true_edges(self) -> set[tuple[int, int]]:
@@ -84,7 +103,9 @@ def scene_from_arrays(
     threshold_m: float,
     min_pixels: int,
     camera: CameraConfig | None = None,
+    pull: bool = False,
 ) -> Scene:
+    """One scene of a shard's arrays; `pull`: with the pull truth too (pullout_* arrays)."""
     n = int(arrays["n_objects"][row])
     instance = arrays["instance"][row]
     counts = np.bincount(instance.ravel(), minlength=256)[1 : n + 1]
@@ -96,6 +117,10 @@ def scene_from_arrays(
     moved = np.nan_to_num(removal, nan=0.0) > threshold_m
     np.fill_diagonal(moved, False)
     depth_m = arrays["depth_m"][row].astype(np.float32)
+    moved_pull = None
+    if pull:
+        disp, left = (arrays[k][row][:n, :n] for k in PULL_ARRAYS)
+        moved_pull = pull_moved_matrix(disp, left, threshold_m)[np.ix_(ids, ids)]
     return Scene(
         index=int(arrays["scene_index"][row]),
         family=str(arrays["family"][row]),
@@ -106,7 +131,21 @@ def scene_from_arrays(
         contact=arrays["contact"][row][np.ix_(ids, ids)],
         n_objects=n,
         gaps_m=None if camera is None else surface_gaps(camera_points(depth_m, camera), masks),
+        moved_pull=moved_pull,
     )
+
+
+def scene_keys(store: ShardStore, pull: bool) -> tuple[str, ...]:
+    """The arrays a scene is read from; with `pull`, one line when the dataset lacks them."""
+    if not pull:
+        return SCENE_KEYS
+    if not set(PULL_ARRAYS) <= set(store.array_names()):
+        raise ClutterbenchError(
+            f"dataset '{store.dataset}' holds no pull outcomes (pullout_*), which the pull "
+            f"head's support thresholds need; generate it with generate.datasets."
+            f"{store.dataset}.pull_outcomes: true"
+        )
+    return SCENE_KEYS + PULL_ARRAYS
 
 
 def split_scenes(
@@ -117,18 +156,22 @@ def split_scenes(
     threshold_m: float,
     min_pixels: int,
     camera: CameraConfig | None = None,
+    pull: bool = False,
 ) -> list[Scene]:
-    """The first `limit` scenes of a split, in split order."""
+    """The first `limit` scenes of a split, in split order (`pull`: with their pull truth)."""
     record = load_split(split_file, gen_dir)
     wanted = [int(i) for i in record[which]][:limit]
     order = {s: i for i, s in enumerate(wanted)}
     store = ShardStore(gen_dir, record["dataset"], cache_shards=1)
+    keys = scene_keys(store, pull)
     found: dict[int, Scene] = {}
     for shard in range(store.n_shards):
-        arrays = store.load(shard, SCENE_KEYS)
+        arrays = store.load(shard, keys)
         for row, s in enumerate(arrays["scene_index"]):
             if int(s) in order:
-                found[int(s)] = scene_from_arrays(arrays, row, threshold_m, min_pixels, camera)
+                found[int(s)] = scene_from_arrays(
+                    arrays, row, threshold_m, min_pixels, camera, pull
+                )
     return [found[s] for s in wanted if s in found]
 
 
@@ -138,10 +181,13 @@ def all_scenes(
     threshold_m: float,
     min_pixels: int,
     camera: CameraConfig | None = None,
+    pull: bool = False,
 ) -> Iterator[Scene]:
-    for arrays in iter_shards(gen_dir, dataset, SCENE_KEYS):
+    """Every scene of a generated dataset (`pull`: with their pull truth)."""
+    keys = scene_keys(ShardStore(gen_dir, dataset, cache_shards=1), pull)
+    for arrays in iter_shards(gen_dir, dataset, keys):
         for row in range(len(arrays["scene_index"])):
-            yield scene_from_arrays(arrays, row, threshold_m, min_pixels, camera)
+            yield scene_from_arrays(arrays, row, threshold_m, min_pixels, camera, pull)
 
 
 def evidence(scene: Scene, heatmaps: np.ndarray) -> SceneEvidence:
@@ -155,9 +201,13 @@ def predicted_heatmaps(scene: Scene, predict: PredictFn) -> np.ndarray:
 
 
 def sweep_all(
-    cp_evidence: Sequence[SceneEvidence], oracle_evidence: Sequence[SceneEvidence], grid: Any
+    cp_evidence: Sequence[SceneEvidence],
+    oracle_evidence: Sequence[SceneEvidence],
+    grid: Any,
+    prefix: str = "",
 ) -> pd.DataFrame:
-    """Every rule on the CP's heatmaps and on the oracle collapse map, one frame."""
+    """Every rule on the CP's heatmaps and on the oracle collapse map, one frame; methods
+    named `prefix` + rule (PULL_PREFIX: the pull head's, on pull truth)."""
     frames = []
     for source, scenes in (("cp", cp_evidence), ("oracle", oracle_evidence)):
         for rule in RULES:
@@ -170,7 +220,7 @@ def sweep_all(
                 grid.adjacency_ious,
                 grid.max_gaps_m,
             )
-            df.insert(0, "method", rule if source == "cp" else f"oracle_{rule}")
+            df.insert(0, "method", prefix + (rule if source == "cp" else f"oracle_{rule}"))
             frames.append(df)
     return pd.concat(frames, ignore_index=True)
 
@@ -187,7 +237,7 @@ def choose_all(sweep: pd.DataFrame) -> dict[str, SupportParams]:
     chosen: dict[str, SupportParams] = {}
     for method in dict.fromkeys(sweep["method"]):
         rows = ranked["method"] == method
-        rule = method.removeprefix("oracle_")
+        rule = method.removeprefix(PULL_PREFIX).removeprefix("oracle_")
         # `method`: exactly the thesis' rule (no surface-gap test); `<method>_gap`: the same
         # rule with the surface-gap test on pseudo-direct contact (ours), where swept.
         if (rows & no_gap).any():
@@ -240,22 +290,27 @@ def evaluate_scene(
     scene: Scene,
     heatmaps: np.ndarray,
     chosen: dict[str, SupportParams],
-    p_edge: float,
+    p_edge: float | None,
     rng: np.random.Generator,
 ) -> tuple[list[dict[str, Any]], dict[str, set[tuple[int, int]]]]:
-    """Rows of scenes.csv for one test scene (one per method) and each method's edges."""
+    """Rows of scenes.csv for one test scene (one per method) and each method's edges;
+    `p_edge` None: no random row (and no draw from `rng`)."""
     truth = scene.true_edges
     oracle = oracle_heatmaps(scene.moved, scene.masks) if scene.ids else heatmaps
     edges: dict[str, set[tuple[int, int]]] = {}
     for method, params in chosen.items():
-        maps = oracle if method.startswith("oracle_") else heatmaps
+        is_oracle = method.removeprefix(PULL_PREFIX).startswith("oracle_")
+        maps = oracle if is_oracle else heatmaps
         found = (
             infer_support(maps, scene.masks, scene.ids, params, scene.gaps_m)
             if len(scene.ids) > 1
             else []
         )
         edges[method] = {(e.supporter, e.supported) for e in found}
-    edges["random"] = random_edges(scene, chosen["coverage"], p_edge, rng) if scene.ids else set()
+    if p_edge is not None:
+        edges["random"] = (
+            random_edges(scene, chosen["coverage"], p_edge, rng) if scene.ids else set()
+        )
     rows = []
     for method, pred in edges.items():
         precision, recall = edge_precision_recall(pred, truth)
