@@ -27,7 +27,12 @@ from clutterbench.trials.ch6 import (
     run_extraction,
 )
 from clutterbench.trials.config import PLANNERS as PLANNER_NAMES
-from clutterbench.trials.config import ConditionConfig, SceneStreamConfig, TrialsConfig
+from clutterbench.trials.config import (
+    PULL_HEAD_PLANNERS,
+    ConditionConfig,
+    SceneStreamConfig,
+    TrialsConfig,
+)
 from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import run_episodes, write_mcap
 from clutterbench.trials.protocol import judge_pull
@@ -364,15 +369,34 @@ def tiny_cp(tmp_path_factory) -> Path:
     return path
 
 
+@pytest.fixture(scope="module")
+def tiny_cp_heads(tmp_path_factory) -> Path:
+    """A collapse predictor with a deletion and a pull head (train.models.<m>.labels)."""
+    torch.manual_seed(0)
+    cfg = CollapseMapConfig(
+        input_size=64,
+        encoder=VGGConfig(width=0.125),
+        decoder_channels=(32, 16, 16, 8, 8),
+        n_classes=2,
+    )
+    path = tmp_path_factory.mktemp("cp_heads") / "best.pt"
+    meta = {"epoch": 0, "heads": ["deletion", "pull"]}
+    save_checkpoint(path, "collapse_map", build_model("collapse_map", cfg), meta)
+    return path
+
+
 def _jobs(planner: str, cp: Path, episodes: int = 2) -> list[dict]:
     return _job(planner, episodes, cp)
 
 
 @pytest.mark.parametrize("planner", PLANNER_NAMES)
-def test_every_planner_gives_a_judged_record(planner, tiny_cp, tiny_ch4):
-    job = _jobs(planner, tiny_cp, 1)[0] | {"ch4_model_path": tiny_ch4}
+def test_every_planner_gives_a_judged_record(planner, tiny_cp, tiny_cp_heads, tiny_ch4):
+    cp = tiny_cp_heads if planner in PULL_HEAD_PLANNERS else tiny_cp
+    job = _jobs(planner, cp, 1)[0] | {"ch4_model_path": tiny_ch4}
     rec = run_ch6_episode(job).record
     assert rec["planner"] == planner and rec["steps"]
+    if planner in PULL_HEAD_PLANNERS:  # the record says which head its maps came from
+        assert rec["collapse_maps"] == "predicted by the pull head"
     assert rec["success"] == (rec["end"] == "target_out")
     for s in rec["steps"]:
         expected = (s["extracted"] and s["collapse_free"]) if s["judged"] else None

@@ -228,3 +228,36 @@ def test_the_decomposition_has_a_pull_chain_beside_the_deletion_chain():
     assert pull["perception"] == pytest.approx(20.0)  # pull truth - pull CP
     assert pull["pull_truth_condition"] == "multi_step_pull_truth" and pull["truth_pct"] is None
     assert "meaning" not in pull and rows["multi_step"]["meaning"] == pytest.approx(30.0)
+
+
+def test_support_scenes_carry_the_pull_truth_and_pull_rows_draw_no_random_edges():
+    from clutterbench.planning.support import SupportParams
+    from clutterbench.trials.support_eval import evaluate_scene, scene_from_arrays
+
+    instance = np.zeros((1, 16, 16), np.uint8)
+    instance[0, 8:16, 0:6], instance[0, 8:16, 6:12], instance[0, 0:8, 0:12] = 1, 2, 3
+    nan = np.nan
+    arrays = {
+        "scene_index": np.array([7]),
+        "n_objects": np.array([3]),
+        "family": np.array(["stacked"]),
+        "depth_m": np.full((1, 16, 16), 0.6, np.float32),
+        "instance": instance,
+        "removal_m": np.array([[[nan, 0.0, 0.02], [0.0, nan, 0.0], [0.0, 0.0, nan]]]),
+        "contact": np.ones((1, 3, 3), bool),
+        # pulling box 1 drags box 2 (it rests on it) and pushes box 0 off the shelf
+        "pullout_displacement_m": np.array([[[nan, 0.0, 0.02], [nan, nan, 0.03], [0, 0, nan]]]),
+        "pullout_left_shelf": np.array([[[0, 0, 0], [1, 0, 0], [0, 0, 0]]], bool),
+    }
+    scene = scene_from_arrays(arrays, 0, THRESHOLD, 5, pull=True)
+    assert scene.true_edges == {(0, 2)}  # deletion: only removing box 0 moves box 2
+    pull = scene.pull_view()
+    assert pull.true_edges == {(0, 2), (1, 0), (1, 2)}
+    assert scene_from_arrays(arrays, 0, THRESHOLD, 5).moved_pull is None
+    params = SupportParams("coverage", 0.5, 0.1, 2, 0.0)
+    rng = np.random.default_rng(0)
+    state = rng.bit_generator.state
+    heat = np.zeros((3, 16, 16), np.float32)
+    rows, edges = evaluate_scene(pull, heat, {"pull_oracle_coverage": params}, None, rng)
+    assert [r["method"] for r in rows] == ["pull_oracle_coverage"] and "random" not in edges
+    assert rows[0]["n_true"] == 3 and rng.bit_generator.state == state
