@@ -111,6 +111,15 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
         assert ours["IoU at val-chosen threshold"].between(0, 1).all()
         assert ours["val-chosen threshold"].between(0, 0.99).all()
         assert ours["differs from thesis"].str.contains(r"64 px \(thesis").all()
+    # Table 6.1's row of the CP's pull head, on pull labels (issue 50)
+    t61 = pd.read_csv(a / "reports/tables/table_6_1.csv")
+    pull_row = t61[t61["network"].astype(str).str.contains("pull head")]
+    assert len(pull_row) == 1 and pull_row["IoU"].between(0, 1).all()
+    pull_metrics = json.loads(
+        (a / "reports/evaluate/cp_focal_pull_ch6_test/metrics.json").read_text()
+    )
+    assert pull_metrics["head"] == "pull"
+    assert load_checkpoint(a / "models/cp_focal/best.pt").meta["heads"] == ["deletion", "pull"]
     for run_dir in (a / "reports/evaluate").iterdir():
         assert json.loads((run_dir / "metrics.json").read_text())["network_precision"] == auto
         assert (run_dir / "figure.png").stat().st_size > 1000
@@ -164,10 +173,17 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     # under both criteria; planning (+ what the map predicts, where a pull-truth row ran) +
     # perception = the gap
     dec = pd.read_csv(a / "reports/tables/table_6_3_decomposition.csv")
-    assert len(dec) == 2 * 4 and set(dec["key"]) == {"success", "strict_success"}
+    assert len(dec) == 2 * 8 and set(dec["key"]) == {"success", "strict_success"}
     parts = dec["planning"] + dec["meaning"].fillna(0.0) + dec["perception"]
     assert ((parts - dec["gap"]).abs() < 1e-9).all()
-    assert dec["meaning"].notna().all()  # every CP row has its pull-truth row
+    pull_chain = dec["planner"].isin(["multi_step_pull", "bimanual_pull"])
+    assert pull_chain.sum() == 2 * 4  # the pull head's chain: oracle -> pull truth -> pull CP
+    assert dec[~pull_chain]["meaning"].notna().all()  # every CP row has its pull-truth row
+    assert dec[pull_chain]["meaning"].isna().all()
+    for name, cond in trials.conditions.items():
+        if cond.planner in ("multi_step_pull", "bimanual_pull"):  # maps of the pull head
+            recs = read_records(a / "reports/trials" / name / "records.jsonl")
+            assert {r["collapse_maps"] for r in recs} == {"predicted by the pull head"}, name
     # the physics-from-depth planner's estimates: one row per stream, and the figure
     est = pd.read_csv(a / "reports/tables/box_estimation.csv")
     assert set(est["stream"]) == {"ch6_3_5", "ch6_10", "ch6_3_10"}
@@ -175,6 +191,11 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     assert (a / "reports/trials/box_estimation.png").stat().st_size > 1000
     t62 = pd.read_csv(a / "reports/tables/table_6_2.csv")
     assert t62.astype(str).apply(lambda c: c.str.contains("physics from depth")).any().any()
+    assert t62.iloc[:, 0].str.contains("CP pull head").sum() == 1  # against the pull truth
+    assert (
+        "pull_coverage_gap"
+        in json.loads((a / "reports/support/thresholds.json").read_text())["chosen"]
+    )
     t42 = pd.read_csv(a / "reports/tables/table_4_2.csv")
     assert len(t42) == 4
     # chapter 3: every variant's games, one row per slide, one MCAP per variant, Fig. 3.15
@@ -278,7 +299,7 @@ def test_generate_resumes_from_finished_shards(root, tmp_path):
     gen = load_section(GenerateConfig, "generate", params)
     gen = GenerateConfig(shard_size=2, workers=1, max_attempts=30, datasets=gen.datasets)
     sim = load_section(SimConfig, "sim", params)
-    ds = gen.datasets["ch6"]
+    ds = dataclasses.replace(gen.datasets["ch6"], pull_outcomes=False)  # resuming, not labels
     out = tmp_path / "ch6"
     generate_dataset("ch6", ds, gen, sim, 0, out)
     first = digest_tree(out)
