@@ -32,7 +32,10 @@ def test_tiny_epoch_reports_its_peak(root, tmp_path):
     params["base"]["scale"] = "tiny"
     cfg = load_section(TrainConfig, "train", params)
     mcfg = cfg.models["cp_focal"]
-    write_synthetic_dataset(tmp_path / "gen", "toy", 8, 4, mcfg.net.input_size, (2, 4))
+    # cp_focal also learns pull labels (labels: [deletion, pull]): the data has pull outcomes
+    write_synthetic_dataset(
+        tmp_path / "gen", "toy", 8, 4, mcfg.net.input_size, (2, 4), pull_outcomes=True
+    )
     split_dataset("toy", Fractions(0.75, 0.25, 0.0), 0, tmp_path / "gen", tmp_path / "split")
     run = epoch_peak_rss(tmp_path / "gen", tmp_path / "split/toy.json", cfg, mcfg, 0.005, 2, 1)
     assert run["train_pairs"] > 0 and run["val_pairs"] > 0

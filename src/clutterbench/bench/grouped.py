@@ -112,7 +112,14 @@ def bench_training(params: dict[str, Any], name: str, batches: int) -> dict[str,
     out: dict[str, float] = {}
     for path in ("per_pair", "grouped"):
         ds = open_pairs(
-            mcfg.net.n_masks, Path("data/generate"), split, "train", threshold, noise, mcfg.flip
+            mcfg.net.n_masks,
+            Path("data/generate"),
+            split,
+            "train",
+            threshold,
+            noise,
+            mcfg.flip,
+            labels=mcfg.labels,  # one label channel per head, as train.py trains it
         )
         torch.manual_seed(seed)
         model = build_model(mcfg.arch, mcfg.net).train()

@@ -61,8 +61,11 @@ def epoch_peak_rss(
     torch.manual_seed(0)
     t0 = time.perf_counter()
     noise = cfg.noise if mcfg.noise else None
-    train_ds = CollapseDataset(gen_dir, split_file, "train", threshold_m, noise, mcfg.flip, 0)
-    val_ds = CollapseDataset(gen_dir, split_file, "val", threshold_m)
+    labels = mcfg.labels  # one label channel per head, as train.py reads them
+    train_ds = CollapseDataset(
+        gen_dir, split_file, "train", threshold_m, noise, mcfg.flip, 0, labels=labels
+    )
+    val_ds = CollapseDataset(gen_dir, split_file, "val", threshold_m, labels=labels)
     index_s = time.perf_counter() - t0
     model = build_model(mcfg.arch, mcfg.net).train()
     if cfg.channels_last:

@@ -42,13 +42,19 @@ MEASURED = tuple(p for p in PRECISIONS if p != "auto")
 def _inputs(
     n: int, size: int, n_masks: int = 1, n_classes: int = 1
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """depth, masks and labels: a 0/1 collapse map (n_classes 1) or class indices."""
+    """depth, masks and labels: a 0/1 collapse map per sigmoid channel (one mask: a head per
+    channel) or class indices (two masks, several classes: thesis ch. 4)."""
     g = torch.Generator().manual_seed(0)
     depth = 0.5 + 0.3 * torch.rand(n, 1, size, size, generator=g)
     target = (torch.rand(n, n_masks, size, size, generator=g) > 0.95).float()
-    if n_classes > 1:
+    if softmax_classes(n_masks, n_classes):
         return depth, target, torch.randint(0, n_classes, (n, size, size), generator=g)
-    return depth, target, (torch.rand(n, 1, size, size, generator=g) > 0.9).float()
+    return depth, target, (torch.rand(n, n_classes, size, size, generator=g) > 0.9).float()
+
+
+def softmax_classes(n_masks: int, n_classes: int) -> bool:
+    """Whether the outputs are softmax classes (ch. 4), not sigmoid collapse maps."""
+    return n_masks > 1 and n_classes > 1
 
 
 def time_train_step(
@@ -68,7 +74,8 @@ def time_train_step(
         t0 = time.perf_counter()
         with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
             logits = model(depth, target)
-        loss = bce_loss(logits, truth) if net.n_classes == 1 else ce_loss(logits, truth)
+        ce = softmax_classes(net.n_masks, net.n_classes)
+        loss = ce_loss(logits, truth) if ce else bce_loss(logits, truth)
         opt.zero_grad()
         loss.backward()
         opt.step()

@@ -69,7 +69,9 @@ def probe_pairs_per_s(
     mcfg = dataclasses.replace(cfg.models[model], net=net)
     seed = model_seed(0, model)
     torch.manual_seed(seed)
-    ds = open_pairs(net.n_masks, paths.gen_dir, paths.split_file, "train", threshold_m)
+    ds = open_pairs(
+        net.n_masks, paths.gen_dir, paths.split_file, "train", threshold_m, labels=mcfg.labels
+    )
     loader = GroupedLoader(ds, sampler=ds.group_sampler(mcfg.batch_size, mcfg.scene_group, seed))
     module = build_model(mcfg.arch, net)
     if cfg.channels_last:
