@@ -261,3 +261,18 @@ def test_support_scenes_carry_the_pull_truth_and_pull_rows_draw_no_random_edges(
     rows, edges = evaluate_scene(pull, heat, {"pull_oracle_coverage": params}, None, rng)
     assert [r["method"] for r in rows] == ["pull_oracle_coverage"] and "random" not in edges
     assert rows[0]["n_true"] == 3 and rng.bit_generator.state == state
+
+
+def test_an_evaluate_run_names_a_known_head():
+    from clutterbench.collapse.config import EvaluateConfig
+
+    run = {"model": "m", "dataset": "d", "val_dataset": "d"}
+    cfg = parse(EvaluateConfig, {"threshold": 0.5, "runs": {"r": run | {"head": "pull"}}}, "e")
+    assert (
+        cfg.runs["r"].head == "pull"
+        and parse(EvaluateConfig, {"threshold": 0.5, "runs": {"r": run}}, "e").runs["r"].head
+        == "deletion"
+    )
+    with pytest.raises(ClutterbenchError, match=r"e\.runs\.r: head: 'push'") as err:
+        parse(EvaluateConfig, {"threshold": 0.5, "runs": {"r": run | {"head": "push"}}}, "e")
+    assert "\n" not in str(err.value)
