@@ -53,7 +53,7 @@ lint: setup
 	ruff format --check src stages tests
 
 test: lint
-	python -m pytest -q tests
+	python -m pytest -q --durations=25 tests
 
 bench: setup
 	python -m clutterbench.bench
