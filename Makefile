@@ -19,7 +19,7 @@ TORCH_PIP_ARGS := $(if $(TORCH_INDEX_URL),--index-url $(TORCH_INDEX_URL))
 TORCH_CHOICE := $(if $(filter-out torch==2.13.0,$(TORCH_SPEC))$(TORCH_INDEX_URL),echo '$(TORCH_SPEC) $(TORCH_INDEX_URL)';)
 STAMP := $(VENV)/.installed-$(shell ($(TORCH_CHOICE) cat requirements.lock pyproject.toml) 2>/dev/null | sha1sum | cut -c1-12)
 
-.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner dev-perturbed-fit benchmark-scenes clean-venv shell
+.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner dev-perturbed-fit dev-ch6-pull benchmark-scenes clean-venv shell
 
 setup: system venv .dvc/config
 
@@ -53,7 +53,7 @@ lint: setup
 	ruff format --check src stages tests
 
 test: lint
-	python -m pytest -q tests
+	python -m pytest -q --durations=25 tests
 
 bench: setup
 	python -m clutterbench.bench
@@ -94,6 +94,12 @@ dev-ch5-planner: setup
 # network needed) -> reports/dev/perturbed_fit.{json,md}
 dev-perturbed-fit: setup
 	python -m clutterbench.dev.perturbed_fit
+
+# What the ch. 6 pull planners do after an abort (issue 50): trials.ch6.abort_response block vs
+# learn for each planner of dev.ch6_pull.planners and both oracles on dev scenes of the 3-10
+# stream (reads the support stage's thresholds) -> reports/dev/ch6_pull.{json,md}
+dev-ch6-pull: setup
+	python -m clutterbench.dev.ch6_pull
 
 # The benchmark scenes (data/benchmark/: every table's test-stream starts and targets, the
 # same bytes on every CPU), regenerated for the tiny and default profiles. Never run by a

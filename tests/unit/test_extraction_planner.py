@@ -57,3 +57,58 @@ def test_the_next_candidate_is_taken_when_one_is_rejected():
     decision = lenient.decide(obs, 0, frozenset())
     assert decision.pull == 1 and decision.state["rejected"] == []
     assert decision.state["cp"] <= 0.9
+
+
+def _dragging_predictor(boxes: dict[int, np.ndarray], phase: dict[str, bool]):
+    """At the decision nothing collapses; mid-pull (phase["mid"]) pulling box 0 threatens
+    all of box 1 (the pull drags it, which the decision's map missed)."""
+
+    def predict(depth, masks):
+        out = np.zeros(masks.shape, np.float32)
+        for k, m in enumerate(masks.astype(bool)):
+            if phase["mid"] and (m & boxes[0]).any():
+                out[k] = boxes[1]
+        return out
+
+    return predict
+
+
+@pytest.mark.parametrize("bimanual", [False, True])
+def test_after_an_abort_the_feared_box_is_removed_or_held_not_given_up(bimanual):
+    obs, boxes = _scene(extra_leaf=False)
+    phase = {"mid": False}
+    kwargs = dict(cp_max=0.5, min_pixels=1, bimanual=bimanual)
+    learner = CollapseGraphPlanner(
+        _dragging_predictor(boxes, phase), PARAMS, learn_from_aborts=True, **kwargs
+    )
+    blocker = CollapseGraphPlanner(_dragging_predictor(boxes, phase), PARAMS, **kwargs)
+    mid = Observation(obs.depth_m.copy(), obs.instance.copy(), obs.camera)
+    for planner in (learner, blocker):
+        phase["mid"] = False
+        assert planner.decide(obs, 0, frozenset()).pull == 0  # the target is a leaf
+        phase["mid"] = True  # the monitor, mid-pull: box 1 is feared for -> abort
+        assert planner.collapse_score(mid, 0) > 0.5
+        phase["mid"] = False
+    # Algorithm 1 skips the aborted target: nothing is left, the planner gives up
+    with pytest.raises(ValueError):
+        blocker.decide(obs, 0, frozenset({0}))
+    decision = learner.decide(obs, 0, frozenset({0}))
+    assert decision.state["learned"] == [[0, 1, 1.0]]
+    if bimanual:  # Fig. 6.7 (d) on the learned edge: hold box 1, pull the target
+        assert (decision.pull, decision.hold) == (0, 1)
+    else:  # box 1 now rests on the target in the graph: it goes first
+        assert (decision.pull, decision.hold) == (1, None)
+
+
+def test_a_learned_edge_leaves_with_its_box():
+    obs, boxes = _scene(extra_leaf=False)
+    phase = {"mid": True}
+    planner = CollapseGraphPlanner(
+        _dragging_predictor(boxes, phase), PARAMS, 0.5, 1, learn_from_aborts=True
+    )
+    planner.collapse_score(obs, 0)
+    phase["mid"] = False
+    assert planner.decide(obs, 0, frozenset({0})).pull == 1
+    # box 1 is out: its edge is gone, the target is a leaf again
+    gone = Observation(obs.depth_m, np.where(obs.instance == 2, 0, obs.instance), obs.camera)
+    assert planner.decide(gone, 0, frozenset()).pull == 0

@@ -89,6 +89,47 @@ class Ch5PlannerConfig:
             raise ValueError("ch5_planner.perceptions: no perception to run the planner with")
 
 
+CH6_VARIED = ("abort_response",)
+"""The trials.ch6 fields a ch. 6 pull-planner variant may set."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Ch6PullConfig:
+    """The ch. 6 pull-planner recheck (`python -m clutterbench.dev.ch6_pull`, issue 50)."""
+
+    streams: tuple[str, ...] = ()
+    """Dev streams of the ch. 6 trial families (keys of dev.streams; params.yaml names them)."""
+    variants: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
+    """Name -> trials.ch6 fields it sets (CH6_VARIED); every variant is compared with the first."""
+    planners: tuple[str, ...] = ("multi_step_pull_truth", "bimanual_pull_truth")
+    """ch. 6 planners run under every variant (names in trials.ch6.PLANNERS)."""
+    episodes: int = bounded(100, ge=1)
+    """Episodes per variant, planner and stream."""
+    oracle: bool = True
+    """Also both search oracles on the same scenes (they read no variant): the ceilings."""
+
+    def __post_init__(self) -> None:
+        from clutterbench.trials.config import Ch6TrialParams
+
+        if len(self.variants) < 2:
+            raise ValueError("ch6_pull.variants: need two or more variants to compare")
+        for name, over in self.variants.items():
+            if not isinstance(over, Mapping):
+                raise ValueError(f"ch6_pull.variants.{name}: a mapping of trials.ch6 fields")
+            for key in over:
+                if key not in CH6_VARIED:
+                    raise ValueError(
+                        f"ch6_pull.variants.{name}.{key}: a variant sets only "
+                        f"{', '.join(CH6_VARIED)}"
+                    )
+            try:
+                parse(Ch6TrialParams, dict(over), f"variants.{name}")
+            except ClutterbenchError as exc:
+                raise ValueError(str(exc)) from None
+        if not self.planners:
+            raise ValueError("ch6_pull.planners: no planner to run")
+
+
 @dataclasses.dataclass(frozen=True)
 class PerturbedFitConfig:
     """The perturbed-fit recheck (`python -m clutterbench.dev.perturbed_fit`, issue 53)."""
@@ -121,6 +162,10 @@ class DevConfig:
     """The ch. 5 planner recheck (how a blocker is carried)."""
     perturbed_fit: PerturbedFitConfig = PerturbedFitConfig()
     """The perturbed-fit recheck (no box fit raises out of a stage)."""
+    ch6_pull: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(variants={"block": {}, "learn": {}})
+    )
+    """The ch. 6 pull-planner recheck (what an abort teaches the graph)."""
 
     def __post_init__(self) -> None:
         for name in self.streams:
@@ -130,6 +175,7 @@ class DevConfig:
             ("ch4_piles", self.ch4_piles.streams),
             ("ch5_planner", self.ch5_planner.streams),
             ("perturbed_fit", self.perturbed_fit.streams),
+            ("ch6_pull", self.ch6_pull.streams),
         ):
             for name in names:
                 if name not in self.streams:

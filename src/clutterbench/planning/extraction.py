@@ -70,11 +70,22 @@ class CollapseGraphPlanner:
         min_pixels: int,
         bimanual: bool = False,
         clear_hold_load: bool = False,
+        learn_from_aborts: bool = False,
     ):
         self.predict, self.params, self.cp_max = predict, params, cp_max
         self.min_pixels, self.bimanual = min_pixels, bimanual
         self.clear_hold_load = clear_hold_load
         """Bimanual: remove what the box to be held carries before the held pull (cpg)."""
+        self.learn_from_aborts = learn_from_aborts
+        """Issue 50 (not the thesis): a collapse score over cp_max names the box it fears for
+        (the contact box of the largest share); that box is then treated as carried by the
+        box being pulled (an edge of the CPG for the rest of the episode), so the plan
+        removes it first or, bimanual, holds it, instead of skipping the pulled box until
+        the graph has nothing left (Algorithm 1 blocks the box and re-plans)."""
+        self.learned: dict[tuple[int, int], float] = {}
+        """(supporter, supported) -> collapse score: the edges the aborts taught."""
+        self._threat: tuple[int, int, float] | None = None
+        """(box, the box its score feared for, score) of the last check over cp_max."""
         self._maps: tuple[Observation, list[int], np.ndarray] | None = None
         """The last observation's heatmaps of every visible object (from support_edges):
         the decision's collapse scores and the pull's first abort check read the same
@@ -101,20 +112,31 @@ class CollapseGraphPlanner:
         blocked here and the plan redrawn, so the pull executed never aborts before any
         motion. Raises ValueError when every candidate is blocked (the planner gives up)."""
         edges = self.support_edges(obs)
-        graph = build_cpg(edges, target)
+        now = set(blocked)
+        threat, self._threat = self._threat, None
+        if self.learn_from_aborts and threat is not None and threat[0] in now:
+            # the last pull aborted; what its score feared for explains it: the box is free
+            # again, now carrying that one (removed first, or held by the other arm)
+            if self._learn(threat):
+                now.discard(threat[0])
+        visible = set(visible_objects(obs, self.min_pixels)[0])
+        graph = build_cpg([*edges, *self._learned_edges(visible)], target)
         if self.bimanual:
             plan_fn = functools.partial(bimanual_plan, clear_hold_load=self.clear_hold_load)
         else:
             plan_fn = single_arm_plan
         rejected: list[list[float]] = []
-        now = set(blocked)
         while True:
             plan = plan_fn(graph, target, frozenset(now))
             cp = self.collapse_score(obs, plan.pull, plan.hold)
             if cp <= self.cp_max:
                 break
             rejected.append([plan.pull, -1 if plan.hold is None else plan.hold, round(cp, 4)])
-            now.add(plan.pull)
+            threat, self._threat = self._threat, None
+            if self.learn_from_aborts and threat is not None and self._learn(threat):
+                graph = build_cpg([*edges, *self._learned_edges(visible)], target)
+            else:  # nothing new to learn: skip the box (Algorithm 1)
+                now.add(plan.pull)
         state = {
             "edges": _edges_json(edges),
             "order": extraction_order(graph, target),
@@ -123,7 +145,27 @@ class CollapseGraphPlanner:
             "cp": round(cp, 4),
             "steps_to_target": plan.steps_to_target,
         }
+        if self.learn_from_aborts:
+            state["learned"] = [[a, b, round(v, 4)] for (a, b), v in sorted(self.learned.items())]
         return Decision(plan.pull, plan.hold, state)
+
+    def _learn(self, threat: tuple[int, int, float]) -> bool:
+        """Record that `threat`'s box carries the box its score feared for -> whether that
+        edge is new (an edge learned twice is skipped as Algorithm 1 does, so a decision
+        always ends)."""
+        box, other, score = threat
+        if (box, other) in self.learned:
+            return False
+        self.learned[(box, other)] = score
+        return True
+
+    def _learned_edges(self, visible: set[int]) -> list[SupportEdge]:
+        """The learned edges between boxes still seen (a box gone takes its edges along)."""
+        return [
+            SupportEdge(a, b, score)
+            for (a, b), score in sorted(self.learned.items())
+            if a in visible and b in visible
+        ]
 
     def collapse_score(self, obs: Observation, box: int, hold: int | None = None) -> float:
         """Thesis eq. (6.2) during a pull: R_C predicted for removing `box` now, against the
@@ -139,12 +181,16 @@ class CollapseGraphPlanner:
             heat = self.predict(obs.depth_m, masks[k : k + 1].astype(np.uint8))[0]
         area_c = heat > self.params.prob_threshold
         contact = support_contact(masks, self.params, self._gaps(obs, masks))[k]
-        scores = [
-            float(np.logical_and(area_c, masks[j]).sum() / masks[j].sum())
+        scores = {
+            ids[j]: float(np.logical_and(area_c, masks[j]).sum() / masks[j].sum())
             for j in range(len(ids))
             if j != k and contact[j] and ids[j] != hold
-        ]
-        return max(scores, default=0.0)
+        }
+        cp = max(scores.values(), default=0.0)
+        if cp > self.cp_max:  # the box it fears for (ties: the smallest id)
+            feared = min(scores, key=lambda j: (-scores[j], j))
+            self._threat = (box, feared, cp)
+        return cp
 
 
 class TargetFirstPlanner:

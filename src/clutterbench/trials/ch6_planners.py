@@ -124,9 +124,10 @@ def _cpg_planner(
 ):
     """Algorithm 1 with the collapse predictor, or (`spec` given) with physics-truth maps of
     that scene through the same interface (`pull`: maps of the trials' pull, else of
-    deleting the box, and the bimanual plan clears the held box's load first, issue 50): the
-    same planner and rule. `pull` without `spec`: the collapse predictor's pull head, with
-    the thresholds chosen for it (the job's `support`, trials.config.support_method)."""
+    deleting the box; the bimanual plan clears the held box's load first and an abort teaches
+    the graph what it feared for, trials.ch6.abort_response; issue 50): the same planner and
+    rule. `pull` without `spec`: the collapse predictor's pull head, with the thresholds
+    chosen for it (the job's `support`, trials.config.support_method)."""
     params: Ch6TrialParams = job["params"]
     if spec is None:
         head = "pull" if pull else "deletion"
@@ -141,6 +142,7 @@ def _cpg_planner(
         params.min_pixels,
         bimanual=bimanual,
         clear_hold_load=pull,  # the pull planners clear the held box's load first
+        learn_from_aborts=pull and params.abort_response == "learn",
     )
 
 

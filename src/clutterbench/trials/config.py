@@ -180,6 +180,11 @@ class Ch6TrialParams:
     previous method, extract while supporting (Table 6.3's single-step rows)."""
     ch4_pixel_threshold: float = bounded(0.4, gt=0.0, le=1.0)
     """Its pixel threshold of the risk index (thesis 4.4.1)."""
+    abort_response: Literal["block", "learn"] = "learn"
+    """What the planners on maps of the pull (`*_pull*`, issue 50) do after a collapse score
+    over cp_max: block skips the box until a step succeeds (Algorithm 1, what the deletion
+    planners do); learn also takes the box the score feared for as carried by it, so the
+    plan removes that box first or, bimanual, holds it (planning/extraction.py)."""
 
 
 CH4_PLANNERS = ("risk", "random", "oracle")

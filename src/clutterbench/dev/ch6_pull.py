@@ -1,0 +1,263 @@
+"""Recheck on dev streams: what the ch. 6 planners on maps of the pull do after an abort.
+
+    python -m clutterbench.dev.ch6_pull     # make dev-ch6-pull
+
+A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
+rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull
+(`*_pull*`, issue 50) do next: `block` skips the box until a step succeeds (Algorithm 1;
+an episode whose every candidate is skipped gives up), `learn` takes the box the score
+feared for as carried by the box being pulled (an edge of the collapse prediction graph for
+the rest of the episode), so the plan removes that box first or, bimanual, holds it
+(planning/extraction.py). This recheck runs each planner of dev.ch6_pull.planners under each
+variant of dev.ch6_pull.variants on the dev streams of dev.ch6_pull.streams (own seeds, never
+a table's scenes), and both search oracles on the same scenes; every variant meets the same
+scenes and targets, so each is compared with the first, planner by planner and episode by
+episode (McNemar's exact test).
+
+Reads the support stage's chosen thresholds (reports/support/thresholds.json) and, for the
+planners that read the collapse predictor, models/<trials.ch6.model> (dvc repro trials'
+upstream first). Writes reports/dev/ch6_pull.{json,md}; not a dvc stage.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from clutterbench.config import BaseConfig, as_dict, load_section
+from clutterbench.dev.command import OUT, run_command, save
+from clutterbench.dev.config import DevConfig, check_dev_streams
+from clutterbench.dev.stats import (
+    ALPHA,
+    CRITERIA,
+    below_oracle_text,
+    paired,
+    paired_cells,
+    plain,
+    rate_text,
+)
+from clutterbench.errors import ClutterbenchError
+
+THRESHOLDS = Path("reports/support/thresholds.json")
+ORACLE_VARIANT = "-"
+"""The oracles read no variant: they run once per stream under this name."""
+
+
+def condition_label(variant: str, planner: str) -> str:
+    return f"{variant}:{planner}"
+
+
+def oracle_of(planner: str) -> str:
+    """The search oracle of a planner's action set: holding (bimanual) or one arm."""
+    return "oracle_hold" if planner.startswith("bimanual") else "oracle"
+
+
+def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """Every (stream, variant, planner) episode's job, condition "<variant>:<planner>/<stream>",
+    with trials.ch6 as params set it but for the variant's overrides, and both oracles'."""
+    from clutterbench.sim.config import SimConfig
+    from clutterbench.trials.ch6 import ch6_jobs, chosen_support, load_planners
+    from clutterbench.trials.config import ConditionConfig, TrialsConfig
+
+    base = load_section(BaseConfig, "base", params)
+    trials = load_section(TrialsConfig, "trials", params)
+    sim = load_section(SimConfig, "sim", params)
+    cfg = dev.ch6_pull
+    load_planners(trials.planner_modules, cfg.planners)
+    for model in {trials.ch6.model, trials.ch6.ch4_model}:
+        if not Path(f"models/{model}/best.pt").exists():
+            raise ClutterbenchError(f"models/{model}/best.pt missing; run train@{model}")
+    arms = [(v, p) for v in cfg.variants for p in cfg.planners]
+    arms += [(ORACLE_VARIANT, o) for o in ("oracle", "oracle_hold")] * cfg.oracle
+    rule = ConditionConfig.__dataclass_fields__["rule"].default
+    support = chosen_support(THRESHOLDS, rule)
+    jobs = []
+    for stream in cfg.streams:
+        for variant, planner in arms:
+            over = cfg.variants.get(variant, {})
+            ch6 = dataclasses.replace(trials.ch6, **over)
+            cp_max = ch6.cp_max if ch6.cp_max is not None else support.score_threshold
+            jobs += ch6_jobs(
+                f"{condition_label(variant, planner)}/{stream}",
+                ConditionConfig(planner, stream, cfg.episodes, rule),
+                dataclasses.replace(trials, ch6=ch6),
+                dev.streams[stream],
+                base.seed,
+                sim.physics,
+                sim.camera,
+                support,
+                cp_max,
+                Path(f"models/{trials.ch6.model}/best.pt"),
+            )
+    return jobs
+
+
+def summary_rows(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """One row per condition: success and strict success (Wilson 95%), the episodes that gave
+    up, and the points below the oracle of the planner's action set on the same stream."""
+    from clutterbench.trials.stats import aggregate
+
+    rows = []
+    for r in aggregate(records).to_dict("records"):
+        label, stream = r["condition"].split("/")
+        variant, planner = label.split(":")
+        mine = [x for x in records if x["condition"] == r["condition"]]
+        row = {"condition": r["condition"], "stream": stream, "variant": variant}
+        row["planner"] = planner
+        for key in CRITERIA:
+            row |= {f"{key}_{f}": plain(r[f"{key}_{f}"]) for f in ("k", "n", "rate", "lo", "hi")}
+        row["gave_up"] = sum(x["end"] == "gave_up" for x in mine)
+        rows.append(row)
+    oracles = {(r["stream"], r["planner"]): r for r in rows if r["variant"] == ORACLE_VARIANT}
+    for row in rows:
+        top = oracles.get((row["stream"], oracle_of(row["planner"])))
+        for key in CRITERIA:
+            gap = 100 * (top[f"{key}_rate"] - row[f"{key}_rate"]) if top else None
+            row[f"{key}_below_oracle_points"] = None if row["variant"] == ORACLE_VARIANT else gap
+    return rows
+
+
+def comparisons(
+    records: Sequence[Mapping[str, Any]],
+    variants: Sequence[str],
+    planners: Sequence[str],
+    streams: Sequence[str],
+) -> list[dict[str, Any]]:
+    """Each variant against the first of `variants`, per stream, planner and criterion; paired."""
+    return [
+        paired(records, condition_label(v, p), condition_label(variants[0], p), stream, key)
+        | {"arm": p, "name": v, "other": variants[0]}
+        for stream in streams
+        for p in planners
+        for v in variants[1:]
+        for key in CRITERIA
+    ]
+
+
+def what_it_shows(comps: Sequence[Mapping[str, Any]]) -> str:
+    """The paired differences beyond chance (Bonferroni), and per variant and planner the
+    episodes it wins and loses against the first variant, summed over streams."""
+    level = ALPHA / max(len(comps), 1)
+    sig = [c for c in comps if c["p"] < level]
+    total: dict[tuple[str, str, str], list[Mapping[str, Any]]] = {}
+    for c in comps:
+        total.setdefault((c["name"], c["arm"], c["criterion"]), []).append(c)
+    pooled = "; ".join(
+        f"{name} against {cs[0]['other']} ({arm}), {CRITERIA[key]}: "
+        f"{sum(c['only_piles'] for c in cs)} episodes won only by it, "
+        f"{sum(c['only_against'] for c in cs)} lost only by it"
+        for (name, arm, key), cs in total.items()
+    )
+    if not sig:
+        return (
+            f"No paired difference beyond chance (McNemar, Bonferroni level {level:.3g} over "
+            f"{len(comps)}). Summed over streams: {pooled}."
+        )
+    cells = "; ".join(
+        f"{c['name']} {c['difference_points']:+.1f} points {CRITERIA[c['criterion']]}, "
+        f"{c['arm']} on {c['stream']} (p = {c['p']:.2g})"
+        for c in sig
+    )
+    return f"Beyond chance (McNemar, Bonferroni level {level:.3g}): {cells}. Summed: {pooled}."
+
+
+def markdown(result: Mapping[str, Any]) -> str:
+    c = result["config"]
+    variants = "; ".join(
+        f"`{name}`: " + (", ".join(f"{k} {v}" for k, v in over.items()) or "params' own")
+        for name, over in c["variants"].items()
+    )
+    lines = [
+        f"# Dev recheck: what the ch. 6 pull planners do after an abort ({result['scale']} scale)",
+        "",
+        f"The planners {', '.join(c['planners'])} under each variant of `trials.ch6` "
+        f"({variants}), and both search oracles, on dev streams (own seeds, never a table's "
+        f"scenes), {c['episodes']} episodes each; the params' own: "
+        f"{result['current'] or 'none of them'}.",
+        "",
+        "| stream | variant | planner | success | strict success | gave up "
+        "| below its oracle: success / strict (points) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in result["rows"]:
+        lines.append(
+            f"| {r['stream']} | {r['variant']} | {r['planner']} | "
+            f"{rate_text(r, 'success')} | {rate_text(r, 'strict_success')} | "
+            f"{r['gave_up']} | {below_oracle_text(r)} |"
+        )
+    lines += [
+        "",
+        "## Paired, episode by episode",
+        "",
+        "| stream | planner | criterion | compared | won only by it | won only by the other "
+        "| difference (points) | McNemar p |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for p in result["comparisons"]:
+        lines.append(
+            f"| {p['stream']} | {p['arm']} | {CRITERIA[p['criterion']]} | "
+            f"{p['name']} vs {p['other']} | {paired_cells(p)}"
+        )
+    lines += [
+        "",
+        f"**What it shows.** {result['shows']}",
+        "",
+        "- success: collapse-free (the thesis' trial notion, trials/criteria.py); strict: also "
+        "no other box moved beyond trials.ch6.moved_threshold_m. The oracles search with the "
+        "trials' own pull; a bimanual planner's oracle is oracle_hold.",
+        f"- {result['n_episodes']} episodes in {result['seconds'] / 60:.1f} min.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def current_variant(variants: Mapping[str, Mapping[str, Any]], ch6: Any) -> str | None:
+    """The variant whose every override is what params already set (None: none is)."""
+    return next(
+        (n for n, over in variants.items() if all(getattr(ch6, k) == v for k, v in over.items())),
+        None,
+    )
+
+
+def ch6_pull(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
+    """Run the recheck of dev.ch6_pull; writes out_dir/ch6_pull.{json,md}."""
+    from clutterbench.parallel import ParallelConfig
+    from clutterbench.trials.ch6 import run_ch6_episode
+    from clutterbench.trials.config import TrialsConfig
+    from clutterbench.trials.harness import run_episodes
+
+    started = time.perf_counter()
+    base = load_section(BaseConfig, "base", params)
+    dev = load_section(DevConfig, "dev", params)
+    trials = load_section(TrialsConfig, "trials", params)
+    check_dev_streams(dev, trials)
+    cfg = dev.ch6_pull
+    if not cfg.streams:
+        raise ClutterbenchError("dev.ch6_pull.streams: no dev stream to run on")
+    jobs = trial_jobs(dev, params)
+    parallel = load_section(ParallelConfig, "parallel", params)
+    results = run_episodes("dev ch6 pull", run_ch6_episode, jobs, trials.workers, parallel)
+    records = [r.record for r in results]
+    comps = comparisons(records, list(cfg.variants), cfg.planners, cfg.streams)
+    result = {
+        "scale": base.scale,
+        "seed": base.seed,
+        "config": as_dict(cfg),
+        "streams": {s: as_dict(dev.streams[s]) for s in cfg.streams},
+        "current": current_variant(cfg.variants, trials.ch6),
+        "rows": summary_rows(records),
+        "comparisons": comps,
+        "shows": what_it_shows(comps),
+        "n_episodes": len(records),
+    }
+    return save(result, started, out_dir, "ch6_pull", markdown)
+
+
+def main() -> None:
+    run_command(ch6_pull, "ch6_pull")
+
+
+if __name__ == "__main__":
+    main()

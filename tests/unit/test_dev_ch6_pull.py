@@ -1,0 +1,124 @@
+"""The ch. 6 pull-planner recheck on dev streams: its params, its jobs (each variant on dev
+streams only, its trials.ch6 fields reaching the planner; the oracles once), and the paired
+report from records."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import clutterbench.dev.ch6_pull as ch6_pull
+from clutterbench.config import load_params, load_section, parse
+from clutterbench.dev.ch6_pull import (
+    comparisons,
+    markdown,
+    summary_rows,
+    trial_jobs,
+    what_it_shows,
+)
+from clutterbench.dev.config import DevConfig
+from clutterbench.errors import ClutterbenchError
+from clutterbench.trials.ch6 import make_planner
+from clutterbench.trials.config import TrialsConfig
+
+STREAM = {"families": {"random": 1}, "n_objects": [3, 5], "catalogue": "various"}
+V = {"block": {"abort_response": "block"}, "learn": {"abort_response": "learn"}}
+
+
+def _dev(**pull):
+    return {"streams": {"dev_a": STREAM}, "ch6_pull": {"streams": ["dev_a"]} | pull}
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        (
+            {"streams": {"dev_a": STREAM}, "ch6_pull": {"streams": ["dev_b"], "variants": V}},
+            "unknown dev stream",
+        ),
+        (_dev(variants={"block": V["block"]}), "two or more variants"),
+        (_dev(variants=V | {"c": {"abort_response": "pray"}}), r"variants\.c\.abort_response"),
+        (_dev(variants=V | {"c": {"cp_max": 0.2}}), r"variants\.c\.cp_max: a variant sets"),
+        (_dev(variants=V, planners=[]), "no planner"),
+    ],
+)
+def test_bad_ch6_pull_params_are_one_line(data, message):
+    with pytest.raises(ClutterbenchError, match=message) as info:
+        parse(DevConfig, data, "dev")
+    assert "\n" not in str(info.value)
+
+
+def test_jobs_run_each_variant_on_dev_streams_and_reach_the_planner(root, tmp_path, monkeypatch):
+    params = load_params(root / "params.yaml")
+    params["base"]["scale"] = "tiny"
+    trials = load_section(TrialsConfig, "trials", params)
+    monkeypatch.chdir(tmp_path)
+    for model in (trials.ch6.model, trials.ch6.ch4_model):
+        (tmp_path / "models" / model).mkdir(parents=True)
+        (tmp_path / "models" / model / "best.pt").write_bytes(b"")
+    chosen = {"rule": "coverage", "prob_threshold": 0.5, "score_threshold": 0.3}
+    chosen |= {"bbox_margin_px": 2, "adjacency_iou": 0.0, "max_gap_m": 0.05}
+    (tmp_path / "t.json").write_text(json.dumps({"chosen": {"coverage_gap": chosen}}))
+    monkeypatch.setattr(ch6_pull, "THRESHOLDS", tmp_path / "t.json")
+    dev = load_section(DevConfig, "dev", params)
+    cfg = dev.ch6_pull
+    jobs = trial_jobs(dev, params)
+    arms = len(cfg.variants) * len(cfg.planners) + 2 * cfg.oracle
+    assert len(jobs) == len(cfg.streams) * arms * cfg.episodes
+    seen = set()
+    for job in jobs:
+        label, stream = job["condition"].split("/")
+        variant, planner = label.split(":")
+        seen.add((variant, planner))
+        assert stream in cfg.streams and stream.startswith("dev_") and job["stream"] == stream
+        assert job["stream_cfg"] == dev.streams[stream] and job["planner"] == planner
+        for key, value in cfg.variants.get(variant, {}).items():
+            assert getattr(job["params"], key) == value
+        if variant != "-" and job["index"] == 0:  # the variant reaches the planner
+            made = make_planner(job, object())  # truth maps keep the spec only
+            assert made.learn_from_aborts == (job["params"].abort_response == "learn")
+    assert {v for v, _ in seen} == set(cfg.variants) | {"-"}
+    assert {p for _, p in seen} == set(cfg.planners) | {"oracle", "oracle_hold"}
+
+
+def _record(condition: str, episode: int, success: bool) -> dict:
+    return {
+        "condition": condition,
+        "episode": episode,
+        "success": success,
+        "strict_success": success,
+        "end": "target_out" if success else "gave_up",
+    }
+
+
+def test_report_pairs_variants_and_finds_each_planners_oracle():
+    records = []
+    for e in range(10):
+        records += [
+            _record("block:bimanual_pull_truth/dev_a", e, e < 3),
+            _record("learn:bimanual_pull_truth/dev_a", e, e < 8),
+            _record("-:oracle/dev_a", e, e < 5),
+            _record("-:oracle_hold/dev_a", e, e < 9),
+        ]
+    rows = {r["condition"]: r for r in summary_rows(records)}
+    learn = rows["learn:bimanual_pull_truth/dev_a"]
+    assert learn["success_below_oracle_points"] == pytest.approx(10.0)  # oracle_hold's 90%
+    assert rows["block:bimanual_pull_truth/dev_a"]["gave_up"] == 7
+    assert rows["-:oracle_hold/dev_a"]["success_below_oracle_points"] is None
+    comps = comparisons(records, ["block", "learn"], ["bimanual_pull_truth"], ["dev_a"])
+    assert [(c["only_piles"], c["only_against"]) for c in comps] == [(5, 0), (5, 0)]
+    shows = what_it_shows(comps)
+    assert "learn against block (bimanual_pull_truth), success: 5 episodes won only by it" in shows
+    result = {
+        "scale": "tiny",
+        "config": {"planners": ["bimanual_pull_truth"], "variants": V, "episodes": 10},
+        "current": "learn",
+        "rows": list(rows.values()),
+        "comparisons": comps,
+        "shows": shows,
+        "n_episodes": len(records),
+        "seconds": 60.0,
+    }
+    text = markdown(result)
+    assert "| dev_a | learn | bimanual_pull_truth | " in text and "| 10 / 10 |" in text
