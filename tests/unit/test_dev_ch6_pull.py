@@ -59,7 +59,9 @@ def test_jobs_run_each_variant_on_dev_streams_and_reach_the_planner(root, tmp_pa
         (tmp_path / "models" / model / "best.pt").write_bytes(b"")
     chosen = {"rule": "coverage", "prob_threshold": 0.5, "score_threshold": 0.3}
     chosen |= {"bbox_margin_px": 2, "adjacency_iou": 0.0, "max_gap_m": 0.05}
-    (tmp_path / "t.json").write_text(json.dumps({"chosen": {"coverage_gap": chosen}}))
+    pulled = chosen | {"score_threshold": 0.4}
+    thresholds = {"chosen": {"coverage_gap": chosen, "pull_coverage_gap": pulled}}
+    (tmp_path / "t.json").write_text(json.dumps(thresholds))
     monkeypatch.setattr(ch6_pull, "THRESHOLDS", tmp_path / "t.json")
     dev = load_section(DevConfig, "dev", params)
     cfg = dev.ch6_pull
@@ -75,7 +77,9 @@ def test_jobs_run_each_variant_on_dev_streams_and_reach_the_planner(root, tmp_pa
         assert job["stream_cfg"] == dev.streams[stream] and job["planner"] == planner
         for key, value in cfg.variants.get(variant, {}).items():
             assert getattr(job["params"], key) == value
-        if variant != "-" and job["index"] == 0:  # the variant reaches the planner
+        pull_head = planner in ("multi_step_pull", "bimanual_pull")
+        assert job["support"].score_threshold == (0.4 if pull_head else 0.3)
+        if variant != "-" and job["index"] == 0 and not pull_head:  # the variant reaches it
             made = make_planner(job, object())  # truth maps keep the spec only
             assert made.learn_from_aborts == (job["params"].abort_response == "learn")
     assert {v for v, _ in seen} == set(cfg.variants) | {"-"}

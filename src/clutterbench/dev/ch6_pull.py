@@ -60,7 +60,7 @@ def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]
     with trials.ch6 as params set it but for the variant's overrides, and both oracles'."""
     from clutterbench.sim.config import SimConfig
     from clutterbench.trials.ch6 import ch6_jobs, chosen_support, load_planners
-    from clutterbench.trials.config import ConditionConfig, TrialsConfig
+    from clutterbench.trials.config import ConditionConfig, TrialsConfig, support_method
 
     base = load_section(BaseConfig, "base", params)
     trials = load_section(TrialsConfig, "trials", params)
@@ -73,10 +73,10 @@ def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]
     arms = [(v, p) for v in cfg.variants for p in cfg.planners]
     arms += [(ORACLE_VARIANT, o) for o in ("oracle", "oracle_hold")] * cfg.oracle
     rule = ConditionConfig.__dataclass_fields__["rule"].default
-    support = chosen_support(THRESHOLDS, rule)
     jobs = []
     for stream in cfg.streams:
         for variant, planner in arms:
+            support = chosen_support(THRESHOLDS, support_method(planner, rule))
             over = cfg.variants.get(variant, {})
             ch6 = dataclasses.replace(trials.ch6, **over)
             cp_max = ch6.cp_max if ch6.cp_max is not None else support.score_threshold
