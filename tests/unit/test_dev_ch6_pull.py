@@ -126,3 +126,18 @@ def test_report_pairs_variants_and_finds_each_planners_oracle():
     }
     text = markdown(result)
     assert "| dev_a | learn | bimanual_pull_truth | " in text and "| 10 / 10 |" in text
+
+
+def test_truth_planners_need_no_network_and_a_cp_planner_names_its_own(root, tmp_path, monkeypatch):
+    params = load_params(root / "params.yaml")
+    params["base"]["scale"] = "tiny"
+    monkeypatch.chdir(tmp_path)
+    chosen = {"rule": "coverage", "prob_threshold": 0.5, "score_threshold": 0.3}
+    chosen |= {"bbox_margin_px": 2, "adjacency_iou": 0.0, "max_gap_m": 0.05}
+    (tmp_path / "t.json").write_text(json.dumps({"chosen": {"coverage_gap": chosen}}))
+    monkeypatch.setattr(ch6_pull, "THRESHOLDS", tmp_path / "t.json")
+    params["dev"]["ch6_pull"]["planners"] = ["multi_step_pull_truth", "bimanual_pull_truth"]
+    assert trial_jobs(load_section(DevConfig, "dev", params), params)  # no models/ at all
+    params["dev"]["ch6_pull"]["planners"] = ["multi_step_pull_truth", "multi_step_pull"]
+    with pytest.raises(ClutterbenchError, match=r"best\.pt missing \(planner multi_step_pull"):
+        trial_jobs(load_section(DevConfig, "dev", params), params)

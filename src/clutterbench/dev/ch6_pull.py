@@ -14,9 +14,10 @@ a table's scenes), and both search oracles on the same scenes; every variant mee
 scenes and targets, so each is compared with the first, planner by planner and episode by
 episode (McNemar's exact test).
 
-Reads the support stage's chosen thresholds (reports/support/thresholds.json) and, for the
-planners that read the collapse predictor, models/<trials.ch6.model> (dvc repro trials'
-upstream first). Writes reports/dev/ch6_pull.{json,md}; not a dvc stage.
+Reads the support stage's chosen thresholds (reports/support/thresholds.json) and, where a
+planner reads the collapse predictor, models/<trials.ch6.model> (dvc repro trials' upstream
+first; the truth-map planners and the oracles need no network). Writes
+reports/dev/ch6_pull.{json,md}; not a dvc stage.
 """
 
 from __future__ import annotations
@@ -59,7 +60,13 @@ def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]
     """Every (stream, variant, planner) episode's job, condition "<variant>:<planner>/<stream>",
     with trials.ch6 as params set it but for the variant's overrides, and both oracles'."""
     from clutterbench.sim.config import SimConfig
-    from clutterbench.trials.ch6 import ch6_jobs, chosen_support, load_planners
+    from clutterbench.trials.ch6 import (
+        CP_PLANNERS,
+        ch6_jobs,
+        chosen_support,
+        load_planners,
+        reads_truth_maps,
+    )
     from clutterbench.trials.config import ConditionConfig, TrialsConfig, support_method
 
     base = load_section(BaseConfig, "base", params)
@@ -67,9 +74,12 @@ def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]
     sim = load_section(SimConfig, "sim", params)
     cfg = dev.ch6_pull
     load_planners(trials.planner_modules, cfg.planners)
-    for model in {trials.ch6.model, trials.ch6.ch4_model}:
-        if not Path(f"models/{model}/best.pt").exists():
-            raise ClutterbenchError(f"models/{model}/best.pt missing; run train@{model}")
+    predicted = [p for p in cfg.planners if p in CP_PLANNERS and not reads_truth_maps(p)]
+    if predicted and not Path(f"models/{trials.ch6.model}/best.pt").exists():
+        raise ClutterbenchError(
+            f"models/{trials.ch6.model}/best.pt missing (planner {predicted[0]} reads it); "
+            f"run train@{trials.ch6.model}"
+        )
     arms = [(v, p) for v in cfg.variants for p in cfg.planners]
     arms += [(ORACLE_VARIANT, o) for o in ("oracle", "oracle_hold")] * cfg.oracle
     rule = ConditionConfig.__dataclass_fields__["rule"].default
