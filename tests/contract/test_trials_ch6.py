@@ -338,6 +338,36 @@ def test_a_pull_truth_map_is_what_executing_the_whole_pull_moves(spec_path, phys
     assert maps.simulations == len(ids)
 
 
+@pytest.mark.parametrize("spec_path", [STACK3, TOWER6])
+def test_a_collapse_meaning_pull_map_marks_what_the_judge_calls_collapsed(spec_path, physics):
+    """trials.ch6.pull_map_meaning collapse: the map of pulling x marks the boxes that the
+    collapse-free criterion judges collapsed after executing that pull (dropped, tipped or
+    off the shelf), a subset of the boxes the moved-meaning map marks."""
+    from clutterbench.planning.extraction import visible_objects
+    from clutterbench.sim.render import observe
+    from clutterbench.trials.criteria import CollapseFreeConfig, box_motion, collapsed
+    from clutterbench.trials.truth_maps import TruthCollapseMaps
+
+    spec = SceneSpec.load(spec_path)
+    state = SceneState.start(spec)
+    obs = observe(world_at(spec, state, physics, render=True), CAM)
+    ids, masks = visible_objects(obs, 5)
+    pull, cf = (PARAMS.pull_increment_m, PARAMS.grasp_lift_m), CollapseFreeConfig()
+    falls = TruthCollapseMaps(spec, physics, THR, pull, cf)
+    moves = TruthCollapseMaps(spec, physics, THR, pull)
+    for maps in (falls, moves):
+        maps.at(state, obs.instance)
+    marked = 0
+    for x in ids:
+        result = execute_pull(world_at(spec, state, physics), x, None, *pull)
+        motion = box_motion(result.poses_start, result.poses_end, result.on_shelf, range(spec.n))
+        judged = [y for y, e in enumerate(motion) if y != x and collapsed(e, cf)]
+        assert list(np.flatnonzero(falls.moved_by_removing(x))) == judged, x
+        assert not (falls.moved_by_removing(x) & ~moves.moved_by_removing(x)).any(), x
+        marked += len(judged)
+    assert marked, "no pull of the scene collapses anything: the test shows nothing"
+
+
 def test_the_truth_planner_takes_the_tower_down_and_rereads_physics_mid_pull():
     """With physics-truth maps, Algorithm 1 takes a tower of six down from the top; the maps
     are simulated for every visible box at each decision and again at every monitor check

@@ -89,7 +89,7 @@ class Ch5PlannerConfig:
             raise ValueError("ch5_planner.perceptions: no perception to run the planner with")
 
 
-CH6_VARIED = ("abort_response",)
+CH6_VARIED = ("abort_response", "pull_map_meaning")
 """The trials.ch6 fields a ch. 6 pull-planner variant may set."""
 
 

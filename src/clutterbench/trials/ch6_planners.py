@@ -134,7 +134,8 @@ def _cpg_planner(
         predictor = load_predictor(job["model_path"], job["camera"].image_size, head)
     else:
         action = (params.pull_increment_m, params.grasp_lift_m) if pull else None
-        predictor = TruthCollapseMaps(spec, job["physics"], params.moved_threshold_m, action)
+        falls = job["collapse_free"] if pull and params.pull_map_meaning == "collapse" else None
+        predictor = TruthCollapseMaps(spec, job["physics"], params.moved_threshold_m, action, falls)
     return CollapseGraphPlanner(
         predictor,
         job["support"],

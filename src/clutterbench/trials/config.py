@@ -185,6 +185,11 @@ class Ch6TrialParams:
     over cp_max: block skips the box until a step succeeds (Algorithm 1, what the deletion
     planners do); learn also takes the box the score feared for as carried by it, so the
     plan removes that box first or, bimanual, holds it (planning/extraction.py)."""
+    pull_map_meaning: Literal["moved", "collapse"] = "moved"
+    """What the truth maps of the pull (`*_pull_truth`) mark: moved, every box the pull moves
+    beyond moved_threshold_m or off the shelf (the strict criterion's notion, as the pull
+    labels); collapse, only the boxes that collapse by the collapse-free criterion (off the
+    shelf, dropped or tipped beyond trials.collapse_free), the thesis' trial notion."""
 
 
 CH4_PLANNERS = ("risk", "random", "oracle")

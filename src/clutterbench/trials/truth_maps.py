@@ -31,6 +31,7 @@ from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.pull import PullResult, SceneState, execute_pull, world_at
 from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.criteria import CollapseFreeConfig, box_motion, collapsed
 
 
 class TruthCollapseMaps:
@@ -42,10 +43,14 @@ class TruthCollapseMaps:
         physics: PhysicsConfig,
         moved_threshold_m: float,
         pull: tuple[float, float] | None = None,
+        collapse: CollapseFreeConfig | None = None,
     ):
         self.spec, self.physics, self.threshold = spec, physics, moved_threshold_m
         self.pull = pull
         """(increment_m, lift_m) of the trials' pull: maps of pulling; None: of deleting."""
+        self.collapse = collapse
+        """With `pull`: mark only the boxes the pull collapses by this collapse-free
+        criterion (trials/criteria.py), not every box it moves (None)."""
         self._state: SceneState | None = None
         self._instance: np.ndarray | None = None
         self._held: tuple[int, ...] = ()
@@ -78,8 +83,14 @@ class TruthCollapseMaps:
                 moved = disp > self.threshold
             else:
                 result = pull_outcome(self.spec, state, self.physics, box, held, self.pull)
-                disp = np.nan_to_num(result.displacement_m, nan=0.0)
-                moved = (disp > self.threshold) | ~result.on_shelf
+                if self.collapse is None:
+                    disp = np.nan_to_num(result.displacement_m, nan=0.0)
+                    moved = (disp > self.threshold) | ~result.on_shelf
+                else:
+                    motion = box_motion(
+                        result.poses_start, result.poses_end, result.on_shelf, range(self.spec.n)
+                    )
+                    moved = np.array([collapsed(e, self.collapse) for e in motion])
             self.simulations += 1
             moved[[box, *held, *sorted(state.removed)]] = False
             self._cache[box] = moved
