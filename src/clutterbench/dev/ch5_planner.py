@@ -39,6 +39,7 @@ from clutterbench.dev.stats import (
     ALPHA,
     CRITERIA,
     below_oracle_text,
+    current_variant,
     paired,
     paired_cells,
     plain,
@@ -233,14 +234,6 @@ def _variants(variants: Mapping[str, Mapping[str, Any]]) -> str:
     return "; ".join(
         f"`{name}`: " + ", ".join(f"{k} {v}" for k, v in over.items())
         for name, over in variants.items()
-    )
-
-
-def current_variant(variants: Mapping[str, Mapping[str, Any]], ch5: Any) -> str | None:
-    """The variant whose every override is what params already set (None: none is)."""
-    return next(
-        (n for n, over in variants.items() if all(getattr(ch5, k) == v for k, v in over.items())),
-        None,
     )
 
 

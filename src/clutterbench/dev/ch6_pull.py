@@ -35,6 +35,7 @@ from clutterbench.dev.stats import (
     ALPHA,
     CRITERIA,
     below_oracle_text,
+    current_variant,
     paired,
     paired_cells,
     plain,
@@ -221,14 +222,6 @@ def markdown(result: Mapping[str, Any]) -> str:
         f"- {result['n_episodes']} episodes in {result['seconds'] / 60:.1f} min.",
     ]
     return "\n".join(lines) + "\n"
-
-
-def current_variant(variants: Mapping[str, Mapping[str, Any]], ch6: Any) -> str | None:
-    """The variant whose every override is what params already set (None: none is)."""
-    return next(
-        (n for n, over in variants.items() if all(getattr(ch6, k) == v for k, v in over.items())),
-        None,
-    )
 
 
 def ch6_pull(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:

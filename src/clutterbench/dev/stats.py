@@ -75,3 +75,16 @@ def paired_cells(p: Mapping[str, Any]) -> str:
     return (
         f"{p['only_piles']} | {p['only_against']} | {p['difference_points']:+.1f} | {p['p']:.3f} |"
     )
+
+
+def current_variant(variants: Mapping[str, Mapping[str, Any]], params: Any) -> str | None:
+    """The variant whose every override is what `params` (a trials section) already set
+    (None: none is)."""
+    return next(
+        (
+            n
+            for n, over in variants.items()
+            if all(getattr(params, k) == v for k, v in over.items())
+        ),
+        None,
+    )
