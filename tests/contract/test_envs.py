@@ -463,6 +463,29 @@ def tiny_cp(tmp_path_factory) -> Path:
     return path
 
 
+@pytest.fixture(scope="module")
+def tiny_cp_heads(tmp_path_factory) -> Path:
+    """An untrained collapse predictor with a deletion and a pull head (issue 50)."""
+    import torch
+
+    from clutterbench.models import build_model
+    from clutterbench.models.checkpoint import save_checkpoint
+    from clutterbench.models.collapse_map import CollapseMapConfig
+    from clutterbench.models.vgg import VGGConfig
+
+    torch.manual_seed(0)
+    cfg = CollapseMapConfig(
+        input_size=64,
+        encoder=VGGConfig(width=0.125),
+        decoder_channels=(32, 16, 16, 8, 8),
+        n_classes=2,
+    )
+    path = tmp_path_factory.mktemp("cp_heads") / "best.pt"
+    meta = {"epoch": 0, "heads": ["deletion", "pull"]}
+    save_checkpoint(path, "collapse_map", build_model("collapse_map", cfg), meta)
+    return path
+
+
 class _AbortAfterFirstIncrement:
     """Pull the target; its collapse score is 0 on the observation it decided on and 1 on
     every later one, so each pull aborts after one increment (the monitor's path)."""
@@ -503,12 +526,17 @@ def _same_records(got, want):
     ]
 
 
-@pytest.mark.parametrize("prob_threshold", [0.5, 0.4])
-def test_the_multi_step_planner_as_an_agent_gives_the_trials_records(tiny_cp, prob_threshold):
-    """evaluate-agent's loop with the project's multi-step planner wrapped as an agent writes,
-    on the tiny profile, exactly the records the trials stage writes for that planner (the
-    same scenes, targets, decisions and outcomes, bit for bit; collapses at 0.5, give-ups at
-    0.4)."""
+@pytest.mark.parametrize(
+    ("planner", "prob_threshold"),
+    [("multi_step", 0.5), ("multi_step", 0.4), ("multi_step_pull", 0.5), ("bimanual_pull", 0.4)],
+)
+def test_a_cp_planner_as_an_agent_gives_the_trials_records(
+    planner, prob_threshold, tiny_cp, tiny_cp_heads
+):
+    """evaluate-agent's loop with the project's CP planners wrapped as agents writes, on the
+    tiny profile, exactly the records the trials stage writes for that planner (the same
+    scenes, targets, decisions and outcomes, bit for bit; collapses at 0.5, give-ups at 0.4);
+    the *_pull agents on a two-head network's pull head, as the trials stage's *_pull rows."""
     from clutterbench.envs.agents import PlannerAgent
     from clutterbench.envs.evaluate import run_agent
     from clutterbench.parallel import worker_init
@@ -516,12 +544,11 @@ def test_the_multi_step_planner_as_an_agent_gives_the_trials_records(tiny_cp, pr
 
     worker_init(1)
     support = SupportParams("coverage", prob_threshold, 0.3, 2, 0.0)
-    env = gym.make(PLAN_ENV_ID, scale="tiny", name="multi_step")
-    agent = PlannerAgent(
-        env, "multi_step", rule="coverage", support=support, cp_max=0.5, model_path=tiny_cp
-    )
+    cp = tiny_cp_heads if planner.endswith("_pull") else tiny_cp
+    env = gym.make(PLAN_ENV_ID, scale="tiny", name=planner)
+    agent = PlannerAgent(env, planner, rule="coverage", support=support, cp_max=0.5, model_path=cp)
     got = [r.record for r in run_agent(env, agent, range(3))]
-    want = _trials_records(env, "multi_step", 3, support, 0.5, tiny_cp)
+    want = _trials_records(env, planner, 3, support, 0.5, cp)
     _same_records(got, want)
     assert {r["end"] for r in got} >= {"target_out"}
     env.close()

@@ -17,7 +17,11 @@ import numpy as np
 from clutterbench.envs.plan import NO_BOX, as_observation
 from clutterbench.errors import ClutterbenchError
 
-OBSERVATION_PLANNERS = ("pull_target", "single_step", "multi_step", "bimanual", "random")
+CP_AGENTS = ("multi_step", "bimanual", "multi_step_pull", "bimanual_pull")
+"""The agents on the collapse predictor: its deletion head, or its pull head (`*_pull`, issue
+50) with the support thresholds chosen for that head (trials.config.support_method)."""
+
+OBSERVATION_PLANNERS = ("pull_target", "single_step", *CP_AGENTS, "random")
 """The built-in planners that read only what the robot sees (the oracles and the *_truth
 planners read the world, so they cannot be agents)."""
 
@@ -41,6 +45,7 @@ class PlannerAgent:
         """`support`, `cp_max`, `model_path`, `ch4_model_path`: instead of the project's
         (the support stage's thresholds, trials.ch6.cp_max, models/<trials.ch6.model>/...)."""
         from clutterbench.trials.ch6_planners import chosen_support
+        from clutterbench.trials.config import support_method
 
         if planner not in OBSERVATION_PLANNERS:
             raise ClutterbenchError(
@@ -53,9 +58,10 @@ class PlannerAgent:
         ch6 = src.trials.ch6
         job = self.env.job(0) | {"planner": planner, "rule": rule}
         self.cp_max = np.inf
-        if planner in ("multi_step", "bimanual"):
+        if planner in CP_AGENTS:
             if support is None:
-                support = chosen_support(root / "reports/support/thresholds.json", rule)
+                thresholds = root / "reports/support/thresholds.json"
+                support = chosen_support(thresholds, support_method(planner, rule))
             if cp_max is None:
                 cp_max = ch6.cp_max if ch6.cp_max is not None else support.score_threshold
             self.cp_max = cp_max
