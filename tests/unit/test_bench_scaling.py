@@ -73,3 +73,23 @@ def test_paper_cost_is_jobs_times_measured_cost(bench):
     assert any("not measured by this bench" in line for line in lines)
     target = trials_target(bench)
     assert target["episodes"] == stage_jobs("default")["trials"] and target["fraction"] > 0
+
+
+def test_the_trials_workload_is_the_stages_mix_of_network_free_planners():
+    """The bench's trials jobs cycle through every default condition whose planner needs no
+    network (the search oracles, the truth-map planners, physics from depth, random,
+    pull_target), so its per-episode cost weighs them as the stage does."""
+    from clutterbench.bench.scaling import NETWORK_PLANNERS, _params, mix_conditions, workload_jobs
+    from clutterbench.config import load_section
+    from clutterbench.trials.config import TrialsConfig
+
+    trials = load_section(TrialsConfig, "trials", _params("default"))
+    names = mix_conditions(trials)
+    planners = {trials.conditions[n].planner for n in names}
+    assert {"oracle", "oracle_hold", "multi_step_pull_truth", "physics_from_depth"} <= planners
+    assert not planners & set(NETWORK_PLANNERS)
+    _, jobs, units = workload_jobs("trials", "default", 0, 0, len(names) + 2)
+    assert units == len(jobs) == len(names) + 2
+    got = [j["planner"] for j in jobs]
+    want = [trials.conditions[n].planner for n in names]
+    assert got == want + want[:2]  # round-robin over the conditions, in params order

@@ -4,14 +4,15 @@ measurements -> reports/bench/paper_cost.{json,md} (docs/scaling.md).
 
 Two workloads, each run whole on every backend x workers, each case in a fresh process (as a
 stage runs it): a generation shard set (`generate`: shards of the ch6 dataset's scenes,
-data.generate.shard_arrays) and a trials condition (`trials`: ch. 6 pull_target episodes on
-the ch6_3_10 stream, no network needed). Every job times itself in its worker; a case's wall
-time includes starting its workers (a pool, or a local Ray instance and its workers) and
-shutting them down. Measures per case: jobs per second, overhead per job (wall time not
-spent in jobs, the jobs' time spread over the workers; starting the workers and their
-renderers included, a local Ray instance's own start and stop not: that is given apart),
-parallel efficiency (1-worker wall / (2 x 2-worker wall)) and whether every case gave the
-same bytes.
+data.generate.shard_arrays) and the trials stage's mix (`trials`: ch. 6 episodes of every
+default condition whose planner needs no trained network, round-robin, so the search oracles,
+the truth-map planners and physics from depth weigh as in the stage; mix_conditions). Every
+job times itself in its worker; a case's wall time includes starting its workers (a pool, or
+a local Ray instance and its workers) and shutting them down. Measures per case: jobs per
+second, overhead per job (wall time not spent in jobs, the jobs' time spread over the
+workers; starting the workers and their renderers included, a local Ray instance's own start
+and stop not: that is given apart), parallel efficiency (1-worker wall / (2 x 2-worker wall))
+and whether every case gave the same bytes.
 
     python -m clutterbench.bench.scaling [--scale default] [--shards 8] [--shard-size 5]
                                          [--episodes 16]
@@ -72,6 +73,16 @@ def _params(scale: str) -> dict[str, Any]:
     return {**params, "base": {**params["base"], "scale": scale}}
 
 
+NETWORK_PLANNERS = ("single_step", "multi_step", "bimanual", "multi_step_pull", "bimanual_pull")
+"""The ch. 6 planners that read a trained network: left out of the bench's trials mix (the
+bench runs before, or without, any training)."""
+
+
+def mix_conditions(trials: Any) -> list[str]:
+    """The trials stage's conditions whose planner needs no trained network, in params order."""
+    return [k for k, c in trials.conditions.items() if c.planner not in NETWORK_PLANNERS]
+
+
 def workload_jobs(
     workload: str, scale: str, shards: int, shard_size: int, episodes: int
 ) -> tuple[Any, list[dict[str, Any]], int]:
@@ -107,20 +118,30 @@ def workload_jobs(
     from clutterbench.trials.ch6 import ch6_jobs, run_ch6_episode
     from clutterbench.trials.config import ConditionConfig
 
-    cond = ConditionConfig(planner="pull_target", stream="ch6_3_10", episodes=episodes)
-    support = SupportParams("coverage", 0.5, 0.3, 2, 0.0)  # pull_target reads no support
-    jobs = ch6_jobs(
-        "bench",
-        cond,
-        trials,
-        trials.streams[cond.stream],
-        SEED,
-        sim.physics,
-        sim.camera,
-        support,
-        0.5,
-        Path("models/none/best.pt"),  # pull_target loads no network
-    )
+    names = mix_conditions(trials)
+    if not names:
+        raise ClutterbenchError("bench trials: no ch. 6 condition without a network to run")
+    support = SupportParams("coverage", 0.5, 0.3, 2, 0.0)  # the truth planners' graph rule
+    per = -(-episodes // len(names))
+    by_condition = []
+    for name in names:
+        cond = trials.conditions[name]
+        cond = ConditionConfig(planner=cond.planner, stream=cond.stream, episodes=per)
+        by_condition.append(
+            ch6_jobs(
+                f"bench_{name}",
+                cond,
+                trials,
+                trials.streams[cond.stream],
+                SEED,
+                sim.physics,
+                sim.camera,
+                support,
+                0.5,
+                Path("models/none/best.pt"),  # no planner of the mix loads a network
+            )
+        )
+    jobs = [js[i] for i in range(per) for js in by_condition][:episodes]  # round-robin
     return run_ch6_episode, jobs, episodes
 
 
@@ -297,7 +318,7 @@ def stage_jobs(scale: str) -> dict[str, int]:
 COSTED = {
     "generate": ("generate", "scenes (every dataset)", "a ch6 dataset scene"),
     "support": ("generate", "test scenes", "a ch6 dataset scene"),
-    "trials": ("trials", "episodes (every ch. 6 condition)", "a pull_target episode"),
+    "trials": ("trials", "episodes (every ch. 6 condition)", "an episode of the stage's mix"),
 }
 """Stages costed from a bench workload: (workload, what a job is, what its cost is)."""
 
