@@ -26,9 +26,9 @@ def camera() -> CameraConfig:
     return CameraConfig(image_size=64)
 
 
-@pytest.fixture(scope="session")
-def tiny_ch4(tmp_path_factory) -> Path:
-    """An untrained 4-class ch. 4 network (2 masks in): the planners' plumbing, not skill."""
+def _untrained(tmp_path_factory, name: str, meta: dict | None = None, **net) -> Path:
+    """An untrained collapse-map network (64 px, seed 0) saved as a checkpoint: the planners'
+    plumbing, not skill."""
     import torch
 
     from clutterbench.models import build_model
@@ -38,12 +38,27 @@ def tiny_ch4(tmp_path_factory) -> Path:
 
     torch.manual_seed(0)
     cfg = CollapseMapConfig(
-        input_size=64,
-        encoder=VGGConfig(width=0.125),
-        decoder_channels=(32, 16, 16, 8, 8),
-        n_masks=2,
-        n_classes=4,
+        input_size=64, encoder=VGGConfig(width=0.125), decoder_channels=(32, 16, 16, 8, 8), **net
     )
-    path = tmp_path_factory.mktemp("ch4") / "best.pt"
-    save_checkpoint(path, "collapse_map", build_model("collapse_map", cfg), {"epoch": 0})
+    path = tmp_path_factory.mktemp(name) / "best.pt"
+    save_checkpoint(path, "collapse_map", build_model("collapse_map", cfg), meta or {"epoch": 0})
     return path
+
+
+@pytest.fixture(scope="session")
+def tiny_ch4(tmp_path_factory) -> Path:
+    """An untrained 4-class ch. 4 network (2 masks in)."""
+    return _untrained(tmp_path_factory, "ch4", n_masks=2, n_classes=4)
+
+
+@pytest.fixture(scope="session")
+def tiny_cp(tmp_path_factory) -> Path:
+    """An untrained collapse predictor (one deletion head)."""
+    return _untrained(tmp_path_factory, "cp")
+
+
+@pytest.fixture(scope="session")
+def tiny_cp_heads(tmp_path_factory) -> Path:
+    """An untrained collapse predictor with a deletion and a pull head (issue 50)."""
+    meta = {"epoch": 0, "heads": ["deletion", "pull"]}
+    return _untrained(tmp_path_factory, "cp_heads", meta, n_classes=2)

@@ -444,48 +444,6 @@ def test_the_plan_env_passes_gymnasiums_check_env():
     e.close()
 
 
-@pytest.fixture(scope="module")
-def tiny_cp(tmp_path_factory) -> Path:
-    """An untrained collapse predictor (64 px): the plumbing, not skill."""
-    import torch
-
-    from clutterbench.models import build_model
-    from clutterbench.models.checkpoint import save_checkpoint
-    from clutterbench.models.collapse_map import CollapseMapConfig
-    from clutterbench.models.vgg import VGGConfig
-
-    torch.manual_seed(0)
-    cfg = CollapseMapConfig(
-        input_size=64, encoder=VGGConfig(width=0.125), decoder_channels=(32, 16, 16, 8, 8)
-    )
-    path = tmp_path_factory.mktemp("cp") / "best.pt"
-    save_checkpoint(path, "collapse_map", build_model("collapse_map", cfg), {"epoch": 0})
-    return path
-
-
-@pytest.fixture(scope="module")
-def tiny_cp_heads(tmp_path_factory) -> Path:
-    """An untrained collapse predictor with a deletion and a pull head (issue 50)."""
-    import torch
-
-    from clutterbench.models import build_model
-    from clutterbench.models.checkpoint import save_checkpoint
-    from clutterbench.models.collapse_map import CollapseMapConfig
-    from clutterbench.models.vgg import VGGConfig
-
-    torch.manual_seed(0)
-    cfg = CollapseMapConfig(
-        input_size=64,
-        encoder=VGGConfig(width=0.125),
-        decoder_channels=(32, 16, 16, 8, 8),
-        n_classes=2,
-    )
-    path = tmp_path_factory.mktemp("cp_heads") / "best.pt"
-    meta = {"epoch": 0, "heads": ["deletion", "pull"]}
-    save_checkpoint(path, "collapse_map", build_model("collapse_map", cfg), meta)
-    return path
-
-
 class _AbortAfterFirstIncrement:
     """Pull the target; its collapse score is 0 on the observation it decided on and 1 on
     every later one, so each pull aborts after one increment (the monitor's path)."""

@@ -6,13 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
 
 from clutterbench.logs.mcap_episode import read_episode
-from clutterbench.models import build_model
-from clutterbench.models.checkpoint import save_checkpoint
-from clutterbench.models.collapse_map import CollapseMapConfig
-from clutterbench.models.vgg import VGGConfig
 from clutterbench.planning.extraction import Decision
 from clutterbench.planning.support import SupportParams
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
@@ -386,33 +381,6 @@ def test_the_truth_planner_takes_the_tower_down_and_rereads_physics_mid_pull():
 
 def test_the_registry_covers_every_planner_name():
     assert set(PLANNER_NAMES) <= set(PLANNERS)
-
-
-@pytest.fixture(scope="module")
-def tiny_cp(tmp_path_factory) -> Path:
-    torch.manual_seed(0)
-    cfg = CollapseMapConfig(
-        input_size=64, encoder=VGGConfig(width=0.125), decoder_channels=(32, 16, 16, 8, 8)
-    )
-    path = tmp_path_factory.mktemp("cp") / "best.pt"
-    save_checkpoint(path, "collapse_map", build_model("collapse_map", cfg), {"epoch": 0})
-    return path
-
-
-@pytest.fixture(scope="module")
-def tiny_cp_heads(tmp_path_factory) -> Path:
-    """A collapse predictor with a deletion and a pull head (train.models.<m>.labels)."""
-    torch.manual_seed(0)
-    cfg = CollapseMapConfig(
-        input_size=64,
-        encoder=VGGConfig(width=0.125),
-        decoder_channels=(32, 16, 16, 8, 8),
-        n_classes=2,
-    )
-    path = tmp_path_factory.mktemp("cp_heads") / "best.pt"
-    meta = {"epoch": 0, "heads": ["deletion", "pull"]}
-    save_checkpoint(path, "collapse_map", build_model("collapse_map", cfg), meta)
-    return path
 
 
 def _jobs(planner: str, cp: Path, episodes: int = 2) -> list[dict]:
