@@ -52,3 +52,17 @@ def test_tiny_epoch_reports_its_peak(root, tmp_path):
         **run,
     }
     assert f"| toy | 8 | {run['train_pairs']} |" in "\n".join(memory_markdown([row]))
+
+
+def test_the_memory_part_writes_the_labels_its_model_learns(root):
+    """bench_train_memory's synthetic ch6 carries what the generate stage writes for ch6 (the
+    pull head's pullout_* arrays), so the measured epoch runs (it raised once they were missing)."""
+    from clutterbench.bench.memory import bench_train_memory
+
+    params = load_params(root / "params.yaml")
+    (row,) = bench_train_memory(params, scale="tiny", factors=(1,), train_batches=1)
+    assert (
+        row["model"] == "cp_focal"
+        and row["scenes"] == params["generate"]["datasets"]["ch6"]["n_scenes"]["tiny"]
+    )
+    assert row["train_pairs"] > 0 and row["peak_rss_mb"] >= 100

@@ -94,26 +94,39 @@ def _in_fresh_process(fn, *args) -> dict[str, Any]:
         return pool.submit(fn, *args).result()
 
 
-def bench_train_memory(params: dict[str, Any]) -> list[dict[str, Any]]:
-    """Peak RSS of a default-scale cp_focal epoch on ch6-shaped data of growing size."""
+def bench_train_memory(
+    params: dict[str, Any],
+    scale: str = "default",
+    factors: tuple[int, ...] = SCENE_FACTORS,
+    train_batches: int = TRAIN_BATCHES,
+) -> list[dict[str, Any]]:
+    """Peak RSS of a cp_focal epoch (at `scale`) on ch6-shaped data of growing size: the
+    `factors` times the scale's n_scenes, with the arrays generate writes for that dataset."""
     # Imported here: the measured process imports this module, and should hold only what
     # training holds (synthetic data pulls in the simulator).
     from clutterbench.data.synthetic import write_synthetic_dataset
 
-    params = {**params, "base": {**params.get("base", {}), "scale": "default"}}
+    params = {**params, "base": {**params.get("base", {}), "scale": scale}}
     gen = load_section(GenerateConfig, "generate", params)
     size = load_section(SimConfig, "sim", params).camera.image_size
     cfg = load_section(TrainConfig, "train", params)
     fractions = load_section(SplitConfig, "split", params).datasets[DATASET]
     ds, mcfg = gen.datasets[DATASET], cfg.models[MODEL]
     rows = []
-    for factor in SCENE_FACTORS:
+    for factor in factors:
         n_scenes = ds.n_scenes * factor
         with tempfile.TemporaryDirectory() as tmp:
             root = Path(tmp)
             t0 = time.perf_counter()
             write_synthetic_dataset(
-                root / "gen", DATASET, n_scenes, gen.shard_size, size, ds.n_objects, ds.families
+                root / "gen",
+                DATASET,
+                n_scenes,
+                gen.shard_size,
+                size,
+                ds.n_objects,
+                ds.families,
+                pull_outcomes=ds.pull_outcomes,  # as generate writes it: the pull head's labels
             )
             split_dataset(DATASET, fractions, 0, root / "gen", root / "split")
             write_s = time.perf_counter() - t0
@@ -126,7 +139,7 @@ def bench_train_memory(params: dict[str, Any]) -> list[dict[str, Any]]:
                 cfg,
                 mcfg,
                 ds.moved_threshold_m,
-                TRAIN_BATCHES,
+                train_batches,
             )
         rows.append(
             {
@@ -136,7 +149,7 @@ def bench_train_memory(params: dict[str, Any]) -> list[dict[str, Any]]:
                 "shard_size": gen.shard_size,
                 "model": MODEL,
                 "batch_size": mcfg.batch_size,
-                "train_batches": TRAIN_BATCHES,
+                "train_batches": train_batches,
                 # What a load-everything loader held: every scene decompressed.
                 "decompressed_dataset_mb": round(per_scene * n_scenes / 2**20, 1),
                 "write_seconds": round(write_s, 1),
