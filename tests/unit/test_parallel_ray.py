@@ -1,7 +1,7 @@
 """parallel's Ray backend (issue 52): the processes backend's results in the same order, the
-same bytes from real simulation jobs (scene shards, ch. 6 episodes), a worker killed
-mid-run rerun by Ray with the same bytes out, a job that raises one line naming it, an
-unreachable cluster one line before any job starts.
+same bytes from real simulation jobs (scene shards, ch. 3 slide data, ch. 6 episodes), a
+worker killed mid-run rerun by Ray with the same bytes out, a job that raises one line naming
+it, an unreachable cluster one line before any job starts.
 
 One local Ray instance of 2 CPUs serves the module (map_in_workers uses an instance this
 process already holds as it is); the first two tests run before it starts."""
@@ -90,6 +90,34 @@ def test_scene_shards_are_byte_identical_on_either_backend(local_ray, tmp_path):
     processes = _shards(tmp_path / "processes", None)
     assert sorted(processes) == ["manifest.json", "shard-00000.npz", "shard-00001.npz"]
     assert _shards(tmp_path / "ray", RAY) == processes
+
+
+def _slides(out: Path, parallel: ParallelConfig | None) -> dict[str, bytes]:
+    """The slides stage's data (ch. 3) at the tiny profile, 2 piles, on one backend."""
+    import dataclasses
+
+    from clutterbench.config import load_params, load_section
+    from clutterbench.data.slide_crops import ScanConfig
+    from clutterbench.data.slides import SlideDataConfig, generate_slide_dataset
+    from clutterbench.sim.pile_config import PileCameraConfig, PileConfig, SlideConfig
+
+    params = load_params(Path(__file__).parents[2] / "params.yaml")
+    params["base"]["scale"] = "tiny"
+
+    def section(cls, name):
+        return load_section(cls, f"yamakuzushi.{name}", params)
+
+    data = dataclasses.replace(section(SlideDataConfig, "data"), n_piles=2, workers=2)
+    args = [section(c, n) for c, n in ((PileConfig, "pile"), (SlideConfig, "slide"))]
+    args += [section(PileCameraConfig, "camera"), section(ScanConfig, "scan")]
+    generate_slide_dataset(data, *args, 0, out, parallel)
+    return {p.name: p.read_bytes() for p in sorted(out.iterdir())}
+
+
+def test_slide_data_is_byte_identical_on_either_backend(local_ray, tmp_path):
+    processes = _slides(tmp_path / "processes", None)
+    assert "samples.npz" in processes
+    assert _slides(tmp_path / "ray", RAY) == processes
 
 
 @pytest.fixture(scope="module")
