@@ -93,3 +93,23 @@ def test_the_trials_workload_is_the_stages_mix_of_network_free_planners():
     got = [j["planner"] for j in jobs]
     want = [trials.conditions[n].planner for n in names]
     assert got == want + want[:2]  # round-robin over the conditions, in params order
+
+
+def test_the_ch4_and_slides_workloads_are_the_stages_jobs():
+    """trials_ch4: the stage's random and oracle conditions round-robin (the risk planner reads
+    a network); slides: one pile per job, as the slides stage fans them out."""
+    from clutterbench.bench.scaling import CH4_NETWORK_FREE, _params, workload_jobs
+    from clutterbench.config import load_section
+    from clutterbench.trials.config import TrialsConfig
+
+    trials = load_section(TrialsConfig, "trials", _params("default"))
+    names = [k for k, c in trials.ch4_conditions.items() if c.planner in CH4_NETWORK_FREE]
+    assert {trials.ch4_conditions[n].planner for n in names} == {"random", "oracle"}
+    _, jobs, units = workload_jobs("trials_ch4", "default", 0, 0, len(names) + 1)
+    assert units == len(jobs) == len(names) + 1
+    assert [j["cond"].planner for j in jobs] == [
+        trials.ch4_conditions[n].planner for n in names
+    ] + [trials.ch4_conditions[names[0]].planner]
+    assert all(j["model_path"] is None for j in jobs)
+    _, piles, units = workload_jobs("slides", "default", 3, 0, 0)
+    assert units == len(piles) == 3 and len({p["seed"] for p in piles}) == 3

@@ -2,11 +2,13 @@
 1 and 2 workers -> reports/bench/ray.{json,md}; `--cost`: the paper scale costed from those
 measurements -> reports/bench/paper_cost.{json,md} (docs/scaling.md).
 
-Two workloads, each run whole on every backend x workers, each case in a fresh process (as a
+Four workloads, each run whole on every backend x workers, each case in a fresh process (as a
 stage runs it): a generation shard set (`generate`: shards of the ch6 dataset's scenes,
-data.generate.shard_arrays) and the trials stage's mix (`trials`: ch. 6 episodes of every
+data.generate.shard_arrays), the trials stage's mix (`trials`: ch. 6 episodes of every
 default condition whose planner needs no trained network, round-robin, so the search oracles,
-the truth-map planners and physics from depth weigh as in the stage; mix_conditions). Every
+the truth-map planners and physics from depth weigh as in the stage; mix_conditions), the
+slides stage's piles (`slides`: `--shards` piles, data.slides.label_pile) and the trials_ch4
+stage's network-free conditions (`trials_ch4`: random and oracle trials, round-robin). Every
 job times itself in its worker; a case's wall time includes starting its workers (a pool, or
 a local Ray instance and its workers) and shutting them down. Measures per case: jobs per
 second, overhead per job (wall time not spent in jobs, the jobs' time spread over the
@@ -22,6 +24,7 @@ and whether every case gave the same bytes.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import json
 import os
@@ -41,7 +44,7 @@ from clutterbench.parallel import BACKENDS, ParallelConfig, connect_ray, map_in_
 from clutterbench.platform_info import cpu_description
 
 OUT = Path("reports/bench")
-WORKLOADS = ("generate", "trials")
+WORKLOADS = ("generate", "trials", "slides", "trials_ch4")
 CASES = [(b, w) for b in ("processes", "ray") for w in (1, 2)]
 SEED = 99  # the bench's own scenes, no stage's
 CLUSTER_NODES = (1, 4, 16)
@@ -114,6 +117,10 @@ def workload_jobs(
             for k in range(shards)
         ]
         return shard_arrays, jobs, shards * shard_size
+    if workload == "slides":
+        return _slide_jobs(params, shards)
+    if workload == "trials_ch4":
+        return _ch4_jobs(params, trials, sim, episodes)
     from clutterbench.planning.support import SupportParams
     from clutterbench.trials.ch6 import ch6_jobs, run_ch6_episode
     from clutterbench.trials.config import ConditionConfig
@@ -143,6 +150,63 @@ def workload_jobs(
         )
     jobs = [js[i] for i in range(per) for js in by_condition][:episodes]  # round-robin
     return run_ch6_episode, jobs, episodes
+
+
+def _slide_jobs(params: dict[str, Any], piles: int) -> tuple[Any, list[dict[str, Any]], int]:
+    """The slides stage's jobs (data.slides.generate_slide_dataset): one pile each."""
+    from clutterbench.data.slide_crops import ScanConfig
+    from clutterbench.data.slides import SlideDataConfig, label_pile, pile_seed
+    from clutterbench.sim.pile_config import PileCameraConfig, PileConfig, SlideConfig
+
+    def section(cls, name):
+        return load_section(cls, f"yamakuzushi.{name}", params)
+
+    data = section(SlideDataConfig, "data")
+    fixed = {
+        "pile": section(PileConfig, "pile"),
+        "slide": section(SlideConfig, "slide"),
+        "camera": section(PileCameraConfig, "camera"),
+        "scan": section(ScanConfig, "scan"),
+        "slides_per_pile": data.slides_per_pile,
+    }
+    jobs = [{"index": i, "seed": pile_seed(SEED, "ch3_data", i)} | fixed for i in range(piles)]
+    return label_pile, jobs, piles
+
+
+CH4_NETWORK_FREE = ("random", "oracle")
+"""The ch. 4 planners the bench's trials_ch4 workload runs (the risk planner reads a network)."""
+
+
+def _ch4_jobs(
+    params: dict[str, Any], trials: Any, sim: Any, episodes: int
+) -> tuple[Any, list[dict[str, Any]], int]:
+    """The trials_ch4 stage's network-free conditions, `episodes` trials round-robin."""
+    from clutterbench.trials.ch4 import ch4_jobs, run_ch4_episode
+
+    names = [k for k, c in trials.ch4_conditions.items() if c.planner in CH4_NETWORK_FREE]
+    if not names:
+        raise ClutterbenchError("bench trials_ch4: no ch. 4 condition without a network to run")
+    per = -(-episodes // len(names))
+    by_condition = []
+    for name in names:
+        cond = trials.ch4_conditions[name]
+        cond = dataclasses.replace(cond, episodes=per)
+        by_condition.append(
+            ch4_jobs(
+                f"bench_{name}",
+                cond,
+                trials.ch4,
+                trials.streams[cond.stream],
+                SEED,
+                sim.physics,
+                sim.camera,
+                trials.max_attempts,
+                False,
+                collapse_free=trials.collapse_free,
+            )
+        )
+    jobs = [js[i] for i in range(per) for js in by_condition][:episodes]  # round-robin
+    return run_ch4_episode, jobs, episodes
 
 
 def run_case(
@@ -263,7 +327,7 @@ def ray_markdown(result: dict[str, Any]) -> list[str]:
         "|---|---|---|---|---|---|---|",
     ]
     for workload, d in result["derived"].items():
-        unit = "scene" if workload == "generate" else "episode"
+        unit = {"generate": "scene", "slides": "pile"}.get(workload, "episode")
         lines.append(
             f"| {workload} | {d['unit_s']:.3f} per {unit} | {d['efficiency']['processes']:.2f} "
             f"| {d['efficiency']['ray']:.2f} | {d['ray_overhead_per_task_s']:.3f} | "
@@ -319,6 +383,8 @@ COSTED = {
     "generate": ("generate", "scenes (every dataset)", "a ch6 dataset scene"),
     "support": ("generate", "test scenes", "a ch6 dataset scene"),
     "trials": ("trials", "episodes (every ch. 6 condition)", "an episode of the stage's mix"),
+    "slides": ("slides", "piles", "a pile at the bench's slides per pile"),
+    "trials_ch4": ("trials_ch4", "trials", "a random or oracle trial"),
 }
 """Stages costed from a bench workload: (workload, what a job is, what its cost is)."""
 
@@ -331,7 +397,7 @@ def paper_cost(bench: dict[str, Any], scale: str = "paper") -> dict[str, Any]:
     rows = []
     for stage, n in jobs.items():
         row: dict[str, Any] = {"stage": stage, "jobs": n}
-        if stage in COSTED:
+        if stage in COSTED and COSTED[stage][0] in bench["derived"]:
             workload, what, cost_of = COSTED[stage]
             d = bench["derived"][workload]
             cpu_s = n * d["unit_s"]
