@@ -86,6 +86,11 @@ def mix_conditions(trials: Any) -> list[str]:
     return [k for k, c in trials.conditions.items() if c.planner not in NETWORK_PLANNERS]
 
 
+def round_robin(by_condition: list[list[dict[str, Any]]], n: int) -> list[dict[str, Any]]:
+    """The first `n` jobs taken one per condition in turn (each list as long as the first)."""
+    return [js[i] for i in range(len(by_condition[0])) for js in by_condition][:n]
+
+
 def workload_jobs(
     workload: str, scale: str, shards: int, shard_size: int, episodes: int
 ) -> tuple[Any, list[dict[str, Any]], int]:
@@ -129,7 +134,7 @@ def workload_jobs(
     if not names:
         raise ClutterbenchError("bench trials: no ch. 6 condition without a network to run")
     support = SupportParams("coverage", 0.5, 0.3, 2, 0.0)  # the truth planners' graph rule
-    per = -(-episodes // len(names))
+    per = -(-episodes // len(names))  # episodes per condition, enough for round_robin
     by_condition = []
     for name in names:
         cond = trials.conditions[name]
@@ -148,7 +153,7 @@ def workload_jobs(
                 Path("models/none/best.pt"),  # no planner of the mix loads a network
             )
         )
-    jobs = [js[i] for i in range(per) for js in by_condition][:episodes]  # round-robin
+    jobs = round_robin(by_condition, episodes)
     return run_ch6_episode, jobs, episodes
 
 
@@ -186,7 +191,7 @@ def _ch4_jobs(
     names = [k for k, c in trials.ch4_conditions.items() if c.planner in CH4_NETWORK_FREE]
     if not names:
         raise ClutterbenchError("bench trials_ch4: no ch. 4 condition without a network to run")
-    per = -(-episodes // len(names))
+    per = -(-episodes // len(names))  # episodes per condition, enough for round_robin
     by_condition = []
     for name in names:
         cond = trials.ch4_conditions[name]
@@ -205,7 +210,7 @@ def _ch4_jobs(
                 collapse_free=trials.collapse_free,
             )
         )
-    jobs = [js[i] for i in range(per) for js in by_condition][:episodes]  # round-robin
+    jobs = round_robin(by_condition, episodes)
     return run_ch4_episode, jobs, episodes
 
 
