@@ -12,6 +12,7 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json
 from clutterbench.precision import inference_from_params
 from clutterbench.stage import run_stage
+from clutterbench.trials.criteria import label_thresholds
 
 
 def evaluate(params: dict, base: BaseConfig) -> None:
@@ -28,7 +29,8 @@ def evaluate(params: dict, base: BaseConfig) -> None:
 
     def split(dataset: str, which: str) -> SplitRef:
         path = Path(f"data/split/{dataset}.json")
-        return SplitRef(dataset, path, which, gen.datasets[dataset].moved_threshold_m)
+        threshold_m = gen.datasets[dataset].moved_threshold_m
+        return SplitRef(dataset, path, which, threshold_m, label_thresholds(params))
 
     result = evaluate_checkpoint(
         Path(f"models/{run.model}/best.pt"),

@@ -20,15 +20,18 @@ from clutterbench.report.support_figure import SupportPanel, support_figure
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
 from clutterbench.trials.config import SupportEvalConfig, TrialsConfig
+from clutterbench.trials.criteria import label_thresholds
 from clutterbench.trials.physics_model import SUPPORT_METHOD, SUPPORT_RULE, PhysicsDepthSupport
 from clutterbench.trials.scenes import stream_key
 from clutterbench.trials.support_eval import (
-    PULL_PREFIX,
+    PULL_HEADS,
     all_scenes,
     choose_all,
     contact_edge_rate,
     evaluate_scene,
     evidence,
+    head_prefix,
+    method_head,
     predicted_heatmaps,
     split_scenes,
     sweep_all,
@@ -49,14 +52,14 @@ def support(params: dict, base: BaseConfig) -> None:
     model = Path(f"models/{cfg.model}/best.pt")
     precision = inference_from_params(params)
     predictor = CollapsePredictor.from_checkpoint(model, image_size=sim.camera.image_size)
-    # A CP with a pull head gets its own rows, thresholds chosen and scored on pull truth.
-    pull = "pull" in checkpoint_heads(load_checkpoint(model))
-    pull_predictor = (
-        CollapsePredictor.from_checkpoint(model, image_size=sim.camera.image_size, head="pull")
-        if pull
-        else None
-    )
+    # Each pull head of the CP gets its own rows, thresholds chosen and scored on its truth.
+    heads = [h for h in PULL_HEADS if h in checkpoint_heads(load_checkpoint(model))]
+    head_predictors = {
+        h: CollapsePredictor.from_checkpoint(model, image_size=sim.camera.image_size, head=h)
+        for h in heads
+    }
     ch6 = load_section(TrialsConfig, "trials", params).ch6
+    read = {"heads": heads, "collapse_free": label_thresholds(params)}
 
     # 1. thresholds on validation scenes
     val = split_scenes(
@@ -67,27 +70,27 @@ def support(params: dict, base: BaseConfig) -> None:
         cfg.moved_threshold_m,
         cfg.min_pixels,
         sim.camera,
-        pull,
+        **read,
     )
-    cp_ev, oracle_ev, pull_cp_ev, pull_oracle_ev = [], [], [], []
+    evidence_of: dict[str, tuple[list, list]] = {h: ([], []) for h in ("deletion", *heads)}
     with progress_bar("support: val heatmaps", total=len(val)) as advance:
         for sc in val:
-            cp_ev.append(evidence(sc, predicted_heatmaps(sc, predictor)))
-            oracle_ev.append(evidence(sc, oracle_heatmaps(sc.moved, sc.masks)))
-            if pull_predictor is not None:
-                pv = sc.pull_view()
-                pull_cp_ev.append(evidence(pv, predicted_heatmaps(pv, pull_predictor)))
-                pull_oracle_ev.append(evidence(pv, oracle_heatmaps(pv.moved, pv.masks)))
+            for head, (cp_ev, oracle_ev) in evidence_of.items():
+                view = sc.view(head)
+                cp_ev.append(
+                    evidence(view, predicted_heatmaps(view, head_predictors.get(head, predictor)))
+                )
+                oracle_ev.append(evidence(view, oracle_heatmaps(view.moved, view.masks)))
             advance(1)
-    sweep = sweep_all(cp_ev, oracle_ev, cfg)
-    if pull:
-        pull_sweep = sweep_all(pull_cp_ev, pull_oracle_ev, cfg, PULL_PREFIX)
-        sweep = pd.concat([sweep, pull_sweep], ignore_index=True)
+    sweep = pd.concat(
+        [sweep_all(cp, oracle, cfg, head_prefix(h)) for h, (cp, oracle) in evidence_of.items()],
+        ignore_index=True,
+    )
     write_text(OUT / "val_sweep.csv", sweep.to_csv(index=False))
     chosen = choose_all(sweep)
     p_edge = contact_edge_rate(val, chosen["coverage"])
-    deletion = {m: p for m, p in chosen.items() if not m.startswith(PULL_PREFIX)}
-    pull_chosen = {m: p for m, p in chosen.items() if m.startswith(PULL_PREFIX)}
+    chosen_of = {h: {m: p for m, p in chosen.items() if method_head(m)[0] == h} for h in heads}
+    deletion = {m: p for m, p in chosen.items() if method_head(m)[0] == "deletion"}
 
     # 2. test scenes from their own stream, with every removal simulated
     test_ds = DatasetConfig(
@@ -96,32 +99,33 @@ def support(params: dict, base: BaseConfig) -> None:
         catalogue=cfg.test.catalogue,
         n_objects=cfg.test.n_objects,
         moved_threshold_m=cfg.moved_threshold_m,
-        pull_outcomes=pull,  # the pull truth: the trials' own pull of every box
+        pull_outcomes=bool(heads),  # the pull truth: the trials' own pull of every box
     )
     shards = GenerateConfig(shard_size=10, workers=cfg.workers, max_attempts=cfg.max_attempts)
     key = stream_key("support")
-    trial_pull = (ch6.pull_increment_m, ch6.grasp_lift_m) if pull else None
+    trial_pull = (ch6.pull_increment_m, ch6.grasp_lift_m) if heads else None
     generate_dataset(
         key, test_ds, shards, sim, base.seed, SCENES / "scenes", trial_pull, parallel=parallel
     )
 
-    rows, truth, pull_truth, panels = [], {}, {}, []
+    rows, panels = [], []
+    truth: dict[str, dict[str, list]] = {h: {} for h in ("deletion", *heads)}
     rng = np.random.default_rng([base.seed, 62])
     physics_depth = PhysicsDepthSupport(cfg, sim, chosen[SUPPORT_RULE], ch6.physics_depth_settle_s)
     scenes_in = all_scenes(
-        SCENES, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera, pull
+        SCENES, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera, **read
     )
     with progress_bar("support: test scenes", total=cfg.test_scenes) as advance:
         for sc in scenes_in:
             heat = predicted_heatmaps(sc, predictor)
             scene_rows, edges = evaluate_scene(sc, heat, deletion, p_edge, rng)
             rows += scene_rows + [physics_depth_row(physics_depth, sc, base.seed)]
-            truth[str(sc.index)] = sorted(map(list, sc.true_edges))
-            if pull_predictor is not None:  # no random row: rng draws stay the deletion rows'
-                pv = sc.pull_view()
-                pull_heat = predicted_heatmaps(pv, pull_predictor)
-                rows += evaluate_scene(pv, pull_heat, pull_chosen, None, rng)[0]
-                pull_truth[str(sc.index)] = sorted(map(list, pv.true_edges))
+            truth["deletion"][str(sc.index)] = sorted(map(list, sc.true_edges))
+            for head in heads:  # no random row: rng draws stay the deletion rows'
+                view = sc.view(head)
+                head_heat = predicted_heatmaps(view, head_predictors[head])
+                rows += evaluate_scene(view, head_heat, chosen_of[head], None, rng)[0]
+                truth[head][str(sc.index)] = sorted(map(list, view.true_edges))
             if len(panels) < cfg.figure_scenes:
                 panels.append(
                     SupportPanel(
@@ -134,10 +138,10 @@ def support(params: dict, base: BaseConfig) -> None:
                     )
                 )
             advance(1)
-    truths = {"edges": truth, "moved_threshold_m": cfg.moved_threshold_m}
-    if pull:
-        truths["pull_edges"] = pull_truth  # pulling X moves Y (or off the shelf), X, Y touch
-    write_json(SCENES / "truth.json", truths)
+    # edges: removing X moves Y, X and Y touch; <head>_edges: the trials' pull of X marks Y
+    # under that head's label kind, X and Y touch
+    truths = {f"{head_prefix(h)}edges": edges for h, edges in truth.items()}
+    write_json(SCENES / "truth.json", truths | {"moved_threshold_m": cfg.moved_threshold_m})
     scenes = pd.DataFrame(rows)
     write_text(OUT / "scenes.csv", scenes.to_csv(index=False))
     thresholds = {m: as_dict(p) for m, p in chosen.items()} | {"random": {"p_edge": p_edge}}

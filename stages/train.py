@@ -9,6 +9,7 @@ from clutterbench.config import BaseConfig, load_section
 from clutterbench.data.config import GenerateConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.stage import run_stage
+from clutterbench.trials.criteria import label_thresholds
 
 
 def train(params: dict, base: BaseConfig) -> None:
@@ -29,7 +30,8 @@ def train(params: dict, base: BaseConfig) -> None:
         report_dir=Path(f"reports/train/{name}"),
         timing_file=Path(f"reports/timing/train_{name}.json"),
     )
-    summary = train_model(name, cfg, gen.datasets[dataset].moved_threshold_m, base.seed, paths)
+    threshold_m = gen.datasets[dataset].moved_threshold_m
+    summary = train_model(name, cfg, threshold_m, base.seed, paths, label_thresholds(params))
     print(f"{name}: best epoch {summary['best']['epoch']} of {summary['epochs_run']}")
 
 

@@ -62,3 +62,10 @@ def tiny_cp_heads(tmp_path_factory) -> Path:
     """An untrained collapse predictor with a deletion and a pull head (issue 50)."""
     meta = {"epoch": 0, "heads": ["deletion", "pull"]}
     return _untrained(tmp_path_factory, "cp_heads", meta, n_classes=2)
+
+
+@pytest.fixture(scope="session")
+def tiny_cp_three_heads(tmp_path_factory) -> Path:
+    """An untrained collapse predictor with a deletion, a pull and a pull_collapse head."""
+    meta = {"epoch": 0, "heads": ["deletion", "pull", "pull_collapse"]}
+    return _untrained(tmp_path_factory, "cp_three_heads", meta, n_classes=3)

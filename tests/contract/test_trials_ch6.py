@@ -363,6 +363,32 @@ def test_a_collapse_meaning_pull_map_marks_what_the_judge_calls_collapsed(spec_p
     assert marked, "no pull of the scene collapses anything: the test shows nothing"
 
 
+def test_collapse_meaning_pull_planners_read_the_pull_collapse_head(
+    tiny_cp_three_heads, monkeypatch
+):
+    """trials.ch6.pull_map_meaning collapse: the *_pull planners read the pull_collapse head
+    and run with the thresholds chosen for it; the record says both."""
+    import dataclasses
+
+    import clutterbench.trials.ch6_planners as planners
+
+    heads: list[str] = []
+    real = planners.load_predictor
+
+    def spy(path, image_size, head="deletion"):
+        heads.append(head)
+        return real(path, image_size, head)
+
+    monkeypatch.setattr(planners, "load_predictor", spy)
+    for meaning, head in (("collapse", "pull_collapse"), ("moved", "pull")):
+        job = _job("multi_step_pull", 1, tiny_cp_three_heads)[0]
+        job["params"] = dataclasses.replace(job["params"], pull_map_meaning=meaning)
+        rec = run_ch6_episode(job).record
+        assert heads[-1] == head
+        assert rec["collapse_maps"] == f"predicted by the {head} head"
+        assert rec["support_method"] == f"{head}_{rec['rule']}"
+
+
 def test_the_truth_planner_takes_the_tower_down_and_rereads_physics_mid_pull():
     """With physics-truth maps, Algorithm 1 takes a tower of six down from the top; the maps
     are simulated for every visible box at each decision and again at every monitor check
@@ -395,6 +421,7 @@ def test_every_planner_gives_a_judged_record(planner, tiny_cp, tiny_cp_heads, ti
     assert rec["planner"] == planner and rec["steps"]
     if planner in PULL_HEAD_PLANNERS:  # the record says which head its maps came from
         assert rec["collapse_maps"] == "predicted by the pull head"
+        assert rec["support_method"] == f"pull_{rec['rule']}"
     assert rec["success"] == (rec["end"] == "target_out")
     for s in rec["steps"]:
         expected = (s["extracted"] and s["collapse_free"]) if s["judged"] else None

@@ -119,7 +119,12 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
         (a / "reports/evaluate/cp_focal_pull_ch6_test/metrics.json").read_text()
     )
     assert pull_metrics["head"] == "pull"
-    assert load_checkpoint(a / "models/cp_focal/best.pt").meta["heads"] == ["deletion", "pull"]
+    heads = load_checkpoint(a / "models/cp_focal/best.pt").meta["heads"]
+    assert heads == ["deletion", "pull", "pull_collapse"]
+    collapse_metrics = json.loads(
+        (a / "reports/evaluate/cp_focal_pull_collapse_ch6_test/metrics.json").read_text()
+    )
+    assert collapse_metrics["head"] == "pull_collapse"
     for run_dir in (a / "reports/evaluate").iterdir():
         assert json.loads((run_dir / "metrics.json").read_text())["network_precision"] == auto
         assert (run_dir / "figure.png").stat().st_size > 1000

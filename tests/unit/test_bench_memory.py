@@ -37,7 +37,9 @@ def test_tiny_epoch_reports_its_peak(root, tmp_path):
         tmp_path / "gen", "toy", 8, 4, mcfg.net.input_size, (2, 4), pull_outcomes=True
     )
     split_dataset("toy", Fractions(0.75, 0.25, 0.0), 0, tmp_path / "gen", tmp_path / "split")
-    run = epoch_peak_rss(tmp_path / "gen", tmp_path / "split/toy.json", cfg, mcfg, 0.005, 2, 1)
+    run = epoch_peak_rss(
+        tmp_path / "gen", tmp_path / "split/toy.json", cfg, mcfg, 0.005, 2, 1, (0.01, 15.0)
+    )
     assert run["train_pairs"] > 0 and run["val_pairs"] > 0
     assert run["peak_rss_mb"] >= 100  # at least torch and the network
     row = {

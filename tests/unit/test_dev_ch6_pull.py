@@ -60,7 +60,9 @@ def test_jobs_run_each_variant_on_dev_streams_and_reach_the_planner(root, tmp_pa
     chosen = {"rule": "coverage", "prob_threshold": 0.5, "score_threshold": 0.3}
     chosen |= {"bbox_margin_px": 2, "adjacency_iou": 0.0, "max_gap_m": 0.05}
     pulled = chosen | {"score_threshold": 0.4}
+    fell = chosen | {"score_threshold": 0.5}
     thresholds = {"chosen": {"coverage_gap": chosen, "pull_coverage_gap": pulled}}
+    thresholds["chosen"]["pull_collapse_coverage_gap"] = fell
     (tmp_path / "t.json").write_text(json.dumps(thresholds))
     monkeypatch.setattr(ch6_pull, "THRESHOLDS", tmp_path / "t.json")
     dev = load_section(DevConfig, "dev", params)
@@ -78,7 +80,10 @@ def test_jobs_run_each_variant_on_dev_streams_and_reach_the_planner(root, tmp_pa
         for key, value in cfg.variants.get(variant, {}).items():
             assert getattr(job["params"], key) == value
         pull_head = planner in ("multi_step_pull", "bimanual_pull")
-        assert job["support"].score_threshold == (0.4 if pull_head else 0.3)
+        # a pull planner runs with the thresholds of its meaning's head
+        collapse = job["params"].pull_map_meaning == "collapse"
+        expect = (0.5 if collapse else 0.4) if pull_head else 0.3
+        assert job["support"].score_threshold == expect
         if variant != "-" and job["index"] == 0 and not pull_head:  # the variant reaches it
             made = make_planner(job, object())  # truth maps keep the spec only
             assert made.learn_from_aborts == (job["params"].abort_response == "learn")

@@ -16,12 +16,13 @@ from clutterbench.collapse.predict import CollapsePredictor, forward_logits
 from clutterbench.collapse.train import TrainPaths, train_model
 from clutterbench.config import parse
 from clutterbench.data.dataset import CollapseDataset, open_pairs
-from clutterbench.data.labels import collapse_mask, pull_moved_matrix
+from clutterbench.data.labels import collapse_mask, pull_collapse_matrix, pull_moved_matrix
 from clutterbench.data.split import Fractions, split_dataset
 from clutterbench.data.synthetic import write_synthetic_dataset
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import load_npz, read_json
 from clutterbench.models.checkpoint import checkpoint_heads, load_checkpoint
+from clutterbench.trials.criteria import CollapseFreeConfig, collapsed
 
 SIZE, THRESHOLD = 64, 0.005  # 64: a batch of one still has 2x2 maps at 1/32
 NET = {
@@ -49,6 +50,36 @@ def test_pull_labels_count_leaving_the_shelf_and_nan_is_no_move():
     expect = np.zeros((4, 4), bool)
     expect[0, 2] = expect[1, 2] = expect[2, 0] = True  # 0.005 is not beyond 5 mm
     assert np.array_equal(moved, expect)
+
+
+CF = CollapseFreeConfig(drop_m=0.010, tilt_deg=15.0)
+
+
+def test_pull_collapse_labels_are_what_a_trial_calls_a_collapse():
+    """Hand cases, then every entry of random outcomes against criteria.collapsed (the
+    function that judges the trials), so both mean the same thing."""
+    drop = np.array([[np.nan, 0.011, 0.010], [0.0, np.nan, -0.02], [0.0, 0.002, np.nan]])
+    tilt = np.array([[np.nan, 0.0, 15.0], [15.1, np.nan, 0.0], [np.nan, 90.0, np.nan]])
+    left = np.zeros((3, 3), bool)
+    left[1, 2] = True  # rose, no tilt, but off the shelf
+    left[2, 2] = True  # the pulled box itself never counts
+    got = pull_collapse_matrix(drop, tilt, left, (CF.drop_m, CF.tilt_deg))
+    expect = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], bool)  # 10 mm, 15 deg: not beyond
+    assert np.array_equal(got, expect)
+    rng = np.random.default_rng(0)
+    n = 12
+    drop, tilt = rng.uniform(-0.02, 0.03, (n, n)), rng.uniform(0, 40, (n, n))
+    left = rng.random((n, n)) < 0.1
+    got = pull_collapse_matrix(drop, tilt, left, (CF.drop_m, CF.tilt_deg))
+    for x in range(n):
+        for y in range(n):
+            entry = {
+                "held": False,
+                "drop_m": drop[x, y],
+                "tilt_change_deg": tilt[x, y],
+                "left_shelf": bool(left[x, y]),
+            }
+            assert got[x, y] == (x != y and collapsed(entry, CF)), (x, y)
 
 
 @pytest.fixture(scope="module")
@@ -93,6 +124,35 @@ def test_the_dataset_gives_one_channel_per_label_kind_in_order(data):
     assert any(
         not torch.equal(both[i]["collapse"][0], both[i]["collapse"][1]) for i in range(len(both))
     )
+
+
+def test_the_pull_collapse_channel_marks_what_the_pull_collapses(data):
+    three = open_ds(
+        data, labels=("deletion", "pull", "pull_collapse"), collapse_free=(CF.drop_m, CF.tilt_deg)
+    )
+    shard = load_npz(data / "gen/po/shard-00000.npz")
+    checked = 0
+    for i in range(len(three)):
+        item, s_x = three[i], three.pairs[i]
+        assert item["collapse"].shape == (3, SIZE, SIZE)
+        scene = int(three.scenes["scene_index"][int(s_x[0])])
+        if scene >= len(shard["scene_index"]):
+            continue
+        n, x = int(shard["n_objects"][scene]), int(s_x[1])
+        fell = pull_collapse_matrix(
+            *(shard[k][scene, :n, :n] for k in ("pullout_drop_m", "pullout_tilt_deg")),
+            shard["pullout_left_shelf"][scene, :n, :n],
+            (CF.drop_m, CF.tilt_deg),
+        )[x]
+        expect = collapse_mask(shard["instance"][scene], fell)
+        assert np.array_equal(item["collapse"][2].numpy(), expect)
+        checked += 1
+    assert checked > 0
+    assert any(
+        not torch.equal(three[i]["collapse"][1], three[i]["collapse"][2]) for i in range(len(three))
+    )
+    with pytest.raises(ClutterbenchError, match="trials.collapse_free"):
+        open_ds(data, labels=("pull_collapse",))
 
 
 def test_pull_labels_without_pull_outcomes_are_a_one_line_error(data):
@@ -200,8 +260,18 @@ def test_pull_planners_read_the_pull_heads_thresholds():
     for planner in ("multi_step_pull", "bimanual_pull"):
         assert planner in PLANNERS and planner in REGISTERED
         assert support_method(planner, "coverage_gap") == "pull_coverage_gap"
+        assert support_method(planner, "coverage", "collapse") == "pull_collapse_coverage"
     for planner in ("multi_step", "bimanual", "multi_step_pull_truth"):
         assert support_method(planner, "coverage_gap") == "coverage_gap"
+        assert support_method(planner, "coverage_gap", "collapse") == "coverage_gap"
+
+
+def test_a_method_name_says_its_head_and_rule():
+    from clutterbench.trials.support_eval import head_prefix, method_head
+
+    for head in ("deletion", "pull", "pull_collapse"):
+        for rule in ("coverage", "oracle_coverage_gap", "random"):
+            assert method_head(head_prefix(head) + rule) == (head, rule)
 
 
 def test_the_decomposition_has_a_pull_chain_beside_the_deletion_chain():
@@ -248,12 +318,18 @@ def test_support_scenes_carry_the_pull_truth_and_pull_rows_draw_no_random_edges(
         # pulling box 1 drags box 2 (it rests on it) and pushes box 0 off the shelf
         "pullout_displacement_m": np.array([[[nan, 0.0, 0.02], [nan, nan, 0.03], [0, 0, nan]]]),
         "pullout_left_shelf": np.array([[[0, 0, 0], [1, 0, 0], [0, 0, 0]]], bool),
+        # ... and of those, box 2 slides level (no collapse); pulling 0 tips box 2
+        "pullout_drop_m": np.array([[[nan, 0.0, 0.0], [nan, nan, 0.001], [0, 0, nan]]]),
+        "pullout_tilt_deg": np.array([[[nan, 0.0, 40.0], [nan, nan, 2.0], [0, 0, nan]]]),
     }
-    scene = scene_from_arrays(arrays, 0, THRESHOLD, 5, pull=True)
+    heads = ("pull", "pull_collapse")
+    scene = scene_from_arrays(arrays, 0, THRESHOLD, 5, heads=heads, collapse_free=(0.01, 15.0))
     assert scene.true_edges == {(0, 2)}  # deletion: only removing box 0 moves box 2
-    pull = scene.pull_view()
+    pull = scene.view("pull")
     assert pull.true_edges == {(0, 2), (1, 0), (1, 2)}
-    assert scene_from_arrays(arrays, 0, THRESHOLD, 5).moved_pull is None
+    assert scene.view("pull_collapse").true_edges == {(0, 2), (1, 0)}
+    assert scene.view("deletion") is scene
+    assert scene_from_arrays(arrays, 0, THRESHOLD, 5).moved_by == {}
     params = SupportParams("coverage", 0.5, 0.1, 2, 0.0)
     rng = np.random.default_rng(0)
     state = rng.bit_generator.state

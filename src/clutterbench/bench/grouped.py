@@ -37,6 +37,7 @@ from clutterbench.data.config import GenerateConfig
 from clutterbench.data.dataset import PairDataset, open_pairs
 from clutterbench.models import build_model
 from clutterbench.platform_info import cpu_description
+from clutterbench.trials.criteria import label_thresholds
 
 TRAIN_MODELS = ("cp_focal", "cmn_bs32", "ch4_various")
 """One network per chapter's data: ch. 6, ch. 5, ch. 4 (pairs of masks)."""
@@ -120,6 +121,7 @@ def bench_training(params: dict[str, Any], name: str, batches: int) -> dict[str,
             noise,
             mcfg.flip,
             labels=mcfg.labels,  # one label channel per head, as train.py trains it
+            collapse_free=label_thresholds(params),
         )
         torch.manual_seed(seed)
         model = build_model(mcfg.arch, mcfg.net).train()

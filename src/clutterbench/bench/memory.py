@@ -29,6 +29,7 @@ from clutterbench.io import load_npz
 from clutterbench.models import build_model
 from clutterbench.platform_info import cpu_description
 from clutterbench.sim.config import SimConfig
+from clutterbench.trials.criteria import label_thresholds
 
 DATASET = "ch6"
 MODEL = "cp_focal"
@@ -55,17 +56,20 @@ def epoch_peak_rss(
     threshold_m: float,
     train_batches: int,
     threads: int = 2,
+    collapse_free: tuple[float, float] | None = None,
 ) -> dict[str, Any]:
-    """One epoch of train.py's data path (run in a fresh process); its peak RSS."""
+    """One epoch of train.py's data path (run in a fresh process); its peak RSS
+    (`collapse_free` as train_model's)."""
     torch.set_num_threads(threads)
     torch.manual_seed(0)
     t0 = time.perf_counter()
     noise = cfg.noise if mcfg.noise else None
     labels = mcfg.labels  # one label channel per head, as train.py reads them
+    kinds = {"labels": labels, "collapse_free": collapse_free}
     train_ds = CollapseDataset(
-        gen_dir, split_file, "train", threshold_m, noise, mcfg.flip, 0, labels=labels
+        gen_dir, split_file, "train", threshold_m, noise, mcfg.flip, 0, **kinds
     )
-    val_ds = CollapseDataset(gen_dir, split_file, "val", threshold_m, labels=labels)
+    val_ds = CollapseDataset(gen_dir, split_file, "val", threshold_m, **kinds)
     index_s = time.perf_counter() - t0
     model = build_model(mcfg.arch, mcfg.net).train()
     if cfg.channels_last:
@@ -140,6 +144,8 @@ def bench_train_memory(
                 mcfg,
                 ds.moved_threshold_m,
                 train_batches,
+                2,
+                label_thresholds(params),
             )
         rows.append(
             {

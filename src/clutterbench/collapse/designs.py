@@ -41,6 +41,7 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.io import atomic_path, read_json, write_text
 from clutterbench.models import build_model, parse_net_config
 from clutterbench.stage import run_stage
+from clutterbench.trials.criteria import label_thresholds
 
 OUT = Path("reports/learning_curve")
 
@@ -63,14 +64,27 @@ def design_net(base_net: Any, arch: str, changes: Mapping[str, Any], key: str) -
 
 
 def probe_pairs_per_s(
-    cfg: TrainConfig, model: str, net: Any, paths: TrainPaths, threshold_m: float, n: int
+    cfg: TrainConfig,
+    model: str,
+    net: Any,
+    paths: TrainPaths,
+    threshold_m: float,
+    n: int,
+    collapse_free: tuple[float, float] | None = None,
 ) -> float:
-    """Training pairs per second of `net` over n - 1 timed steps (after one warm-up)."""
+    """Training pairs per second of `net` over n - 1 timed steps (after one warm-up);
+    `collapse_free` as train_model's."""
     mcfg = dataclasses.replace(cfg.models[model], net=net)
     seed = model_seed(0, model)
     torch.manual_seed(seed)
     ds = open_pairs(
-        net.n_masks, paths.gen_dir, paths.split_file, "train", threshold_m, labels=mcfg.labels
+        net.n_masks,
+        paths.gen_dir,
+        paths.split_file,
+        "train",
+        threshold_m,
+        labels=mcfg.labels,
+        collapse_free=collapse_free,
     )
     loader = GroupedLoader(ds, sampler=ds.group_sampler(mcfg.batch_size, mcfg.scene_group, seed))
     module = build_model(mcfg.arch, net)
@@ -108,6 +122,7 @@ def compare_designs(
     mcfg = cfg.models[dcfg.model]
     gen = load_section(GenerateConfig, "generate", params)
     threshold_m = gen.datasets[mcfg.dataset].moved_threshold_m
+    collapse_free = label_thresholds(params)
     split_file = data_dir / "split" / f"{mcfg.dataset}.json"
     if not split_file.exists():
         raise ClutterbenchError(f"{split_file} not found; run stage split@{mcfg.dataset} first")
@@ -122,7 +137,9 @@ def compare_designs(
                 report_dir=Path(tmp) / "report",
                 timing_file=Path(tmp) / "timing.json",
             )
-            rate = probe_pairs_per_s(cfg, dcfg.model, net, paths, threshold_m, dcfg.probe_batches)
+            rate = probe_pairs_per_s(
+                cfg, dcfg.model, net, paths, threshold_m, dcfg.probe_batches, collapse_free
+            )
             n_train = len(read_json(split_file)["train"])
             pairs = _train_pairs(mcfg, paths, threshold_m)
             epochs = max(1, round(dcfg.minutes * 60 * rate / pairs))
@@ -133,7 +150,7 @@ def compare_designs(
             )
             run = dataclasses.replace(mcfg, net=net, epochs=epochs, patience=epochs)
             run_cfg = dataclasses.replace(cfg, models={**cfg.models, dcfg.model: run})
-            summary = train_model(dcfg.model, run_cfg, threshold_m, base.seed, paths)
+            summary = train_model(dcfg.model, run_cfg, threshold_m, base.seed, paths, collapse_free)
             rows += _design_rows(name, epochs, rate, summary, paths)
     write_designs(rows, dcfg, base.scale, out_dir)
     return rows

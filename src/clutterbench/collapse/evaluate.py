@@ -45,12 +45,21 @@ class SplitRef:
     split: str
     threshold_m: float
     """A box counts as moved above this displacement (generate.datasets.<d>)."""
+    collapse_free: tuple[float, float] | None = None
+    """(drop_m, tilt_deg) of trials.collapse_free: what the pull_collapse labels call a
+    collapse (None: no such labels are read)."""
 
     def load(self, gen_dir: Path, n_masks: int = 1, head: str = "deletion") -> PairDataset:
         """The samples of a network with `n_masks` input masks (1: targets, 2: pulls),
         labelled for its head `head` (data.labels.LABEL_KINDS)."""
         ds = open_pairs(
-            n_masks, gen_dir, self.split_file, self.split, self.threshold_m, labels=(head,)
+            n_masks,
+            gen_dir,
+            self.split_file,
+            self.split,
+            self.threshold_m,
+            labels=(head,),
+            collapse_free=self.collapse_free,
         )
         if len(ds) == 0:
             raise ClutterbenchError(

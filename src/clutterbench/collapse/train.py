@@ -183,9 +183,15 @@ def evaluate_loss(
 
 
 def train_model(
-    name: str, cfg: TrainConfig, threshold_m: float, base_seed: int, paths: TrainPaths
+    name: str,
+    cfg: TrainConfig,
+    threshold_m: float,
+    base_seed: int,
+    paths: TrainPaths,
+    collapse_free: tuple[float, float] | None = None,
 ) -> dict[str, Any]:
-    """Train train.models[name]; returns the summary also written to summary.json."""
+    """Train train.models[name]; returns the summary also written to summary.json.
+    `collapse_free`: (drop_m, tilt_deg) of trials.collapse_free, for pull_collapse labels."""
     mcfg = cfg.models[name]
     seed = model_seed(base_seed, name)
     torch.manual_seed(seed)
@@ -201,8 +207,17 @@ def train_model(
         mcfg.flip,
         seed,
         labels=heads,
+        collapse_free=collapse_free,
     )
-    val_ds = open_pairs(n_masks, paths.gen_dir, paths.split_file, "val", threshold_m, labels=heads)
+    val_ds = open_pairs(
+        n_masks,
+        paths.gen_dir,
+        paths.split_file,
+        "val",
+        threshold_m,
+        labels=heads,
+        collapse_free=collapse_free,
+    )
     for split, ds in (("train", train_ds), ("val", val_ds)):
         if len(ds) == 0:
             raise ClutterbenchError(f"train@{name}: dataset '{mcfg.dataset}' has no {split} pairs")

@@ -19,12 +19,11 @@ from torch.utils.data import Dataset, Sampler
 
 from clutterbench.data.labels import (
     CLASS_C,
+    LABEL_ARRAYS,
     LABEL_KINDS,
-    PULL_ARRAYS,
     ch4_class_map,
     collapse_mask,
-    moved_matrix,
-    pull_moved_matrix,
+    label_matrix,
     target_mask,
 )
 from clutterbench.data.shards import SceneColumns, ShardStore, load_split
@@ -221,7 +220,14 @@ class CollapseDataset(_ShardPairs):
     n_masks = 1
     arrays = ("depth_m", "instance", "removal_m")
 
-    def __init__(self, gen_dir: Path, *args, labels: Sequence[str] = ("deletion",), **kwargs):
+    def __init__(
+        self,
+        gen_dir: Path,
+        *args,
+        labels: Sequence[str] = ("deletion",),
+        collapse_free: tuple[float, float] | None = None,
+        **kwargs,
+    ):
         super().__init__(gen_dir, *args, **kwargs)
         self.labels = tuple(labels)
         unknown = [k for k in self.labels if k not in LABEL_KINDS]
@@ -229,23 +235,27 @@ class CollapseDataset(_ShardPairs):
             raise ClutterbenchError(
                 f"labels {list(self.labels)}: each of {', '.join(LABEL_KINDS)} at most once"
             )
-        if "pull" in self.labels and not set(PULL_ARRAYS) <= set(self.store.array_names()):
+        if "pull_collapse" in self.labels and collapse_free is None:
+            raise ClutterbenchError(
+                "labels pull_collapse need the collapse-free thresholds (trials.collapse_free)"
+            )
+        self.collapse_free = collapse_free
+        """(drop_m, tilt_deg) of the pull_collapse labels (trials.collapse_free)."""
+        need = dict.fromkeys(a for k in self.labels for a in LABEL_ARRAYS[k])
+        pulled = {a for k in self.labels if k != "deletion" for a in LABEL_ARRAYS[k]}
+        if not pulled <= set(self.store.array_names()):
             name = self.store.dataset
             raise ClutterbenchError(
                 f"dataset '{name}' holds no pull labels (pullout_*); generate it with "
                 f"generate.datasets.{name}.pull_outcomes: true"
             )
         if self.labels != ("deletion",):
-            need = {"deletion": ("removal_m",), "pull": PULL_ARRAYS}
-            self.arrays = ("depth_m", "instance", *(a for k in self.labels for a in need[k]))
+            self.arrays = ("depth_m", "instance", *need)
 
     def _moved(self, row: Callable[[str], np.ndarray], n: int, kind: str) -> np.ndarray:
         """(n, n) bool moved matrix of one scene under label kind `kind`; row(key) is the
         scene's array `key`."""
-        if kind == "pull":
-            disp, left = (row(k)[:n, :n] for k in PULL_ARRAYS)
-            return pull_moved_matrix(disp, left, self.threshold_m)
-        return moved_matrix(row("removal_m")[:n, :n], self.threshold_m)
+        return label_matrix(kind, row, n, self.threshold_m, self.collapse_free)
 
     def _sample(
         self, shard: dict[str, np.ndarray], r: int, n: int, sample: np.ndarray
@@ -328,14 +338,20 @@ DATASETS: dict[int, type[CollapseDataset] | type[PullPairDataset]] = {
 """Number of network input masks -> the dataset that feeds such a network."""
 
 
-def open_pairs(n_masks: int, *args, labels: Sequence[str] = ("deletion",), **kwargs) -> PairDataset:
+def open_pairs(
+    n_masks: int,
+    *args,
+    labels: Sequence[str] = ("deletion",),
+    collapse_free: tuple[float, float] | None = None,
+    **kwargs,
+) -> PairDataset:
     """The dataset for a network with `n_masks` input masks (arguments as CollapseDataset):
     (scene, target) pairs labelled by removal and / or the trials' pull (`labels`, one
     channel each), or (scene, extract, support) labelled by pulling (thesis ch. 4)."""
     if n_masks not in DATASETS:
         raise ClutterbenchError(f"no dataset feeds {n_masks} masks (known: {sorted(DATASETS)})")
     if n_masks == CollapseDataset.n_masks:
-        return CollapseDataset(*args, labels=labels, **kwargs)
+        return CollapseDataset(*args, labels=labels, collapse_free=collapse_free, **kwargs)
     if tuple(labels) != ("deletion",):
         raise ClutterbenchError(f"labels {list(labels)}: {n_masks}-mask samples have their own")
     return DATASETS[n_masks](*args, **kwargs)

@@ -87,9 +87,10 @@ def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]
     jobs = []
     for stream in cfg.streams:
         for variant, planner in arms:
-            support = chosen_support(THRESHOLDS, support_method(planner, rule))
             over = cfg.variants.get(variant, {})
             ch6 = dataclasses.replace(trials.ch6, **over)
+            method = support_method(planner, rule, ch6.pull_map_meaning)
+            support = chosen_support(THRESHOLDS, method)
             cp_max = ch6.cp_max if ch6.cp_max is not None else support.score_threshold
             jobs += ch6_jobs(
                 f"{condition_label(variant, planner)}/{stream}",

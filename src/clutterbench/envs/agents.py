@@ -61,7 +61,8 @@ class PlannerAgent:
         if planner in CP_AGENTS:
             if support is None:
                 thresholds = root / "reports/support/thresholds.json"
-                support = chosen_support(thresholds, support_method(planner, rule))
+                method = support_method(planner, rule, ch6.pull_map_meaning)
+                support = chosen_support(thresholds, method)
             if cp_max is None:
                 cp_max = ch6.cp_max if ch6.cp_max is not None else support.score_threshold
             self.cp_max = cp_max

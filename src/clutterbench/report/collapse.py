@@ -215,10 +215,12 @@ def _notes(
     head_note = (
         [
             f"{', '.join(heads)} head rows: the network's output channel trained on labels of "
-            "the trials' pull (train.models.<m>.labels; a box is collapse when it moves beyond "
-            "the label threshold or leaves the shelf as the trials' executor pulls the target "
-            "out, data.labels.pull_moved_matrix), scored on the same scenes' pull labels, its "
-            "threshold chosen on pull labels of the val split; the other rows: deletion labels "
+            "the trials' pull (train.models.<m>.labels; pull: a box is collapse when it moves "
+            "beyond the label threshold or leaves the shelf as the trials' executor pulls the "
+            "target out, data.labels.pull_moved_matrix; pull_collapse: only when it leaves the "
+            "shelf, drops or tips beyond trials.collapse_free, data.labels."
+            "pull_collapse_matrix), each scored on the same scenes' labels of its own kind, its "
+            "threshold chosen on those labels of the val split; the other rows: deletion labels "
             "(the target lifted out). The thesis has no such row."
         ]
         if heads

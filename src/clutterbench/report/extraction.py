@@ -429,7 +429,7 @@ def rule_note(
 
     methods = sorted(
         {
-            support_method(str(r.get("planner")), str(r["rule"]))
+            r.get("support_method") or support_method(str(r.get("planner")), str(r["rule"]))
             for recs in used.values()
             for r in recs
             if r.get("rule")
@@ -445,8 +445,9 @@ def rule_note(
         "support rule of the CP planners (multi-step, bimanual), thresholds chosen on "
         f"validation scenes: {'; '.join(parts)}"
         + (
-            "; pull_<rule>: the same rule on the CP's pull head, its thresholds chosen "
-            "against the pull truth (the *_pull planners)."
+            "; pull_<rule> / pull_collapse_<rule>: the same rule on the CP's pull head (maps of "
+            "every box the pull moves) / pull_collapse head (of what it collapses), its "
+            "thresholds chosen against that head's pull truth (the *_pull planners)."
             if any(m.startswith("pull_") for m in methods)
             else "."
         )

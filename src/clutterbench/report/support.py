@@ -195,7 +195,9 @@ def _pull_notes(scenes: pd.DataFrame) -> list[str]:
         "validation scenes against the pull truth, scored against the pull truth of the same "
         "test scenes: X supports Y when the trials' pull of X out of the settled scene moves Y "
         "beyond the threshold or off the shelf AND X and Y touch (data/support/truth.json "
-        "pull_edges). The other rows: the deletion truth above."
+        "pull_edges). pull_collapse_* rows: the same for the pull_collapse head, against the "
+        "truth of what the pull collapses (Y leaves the shelf, drops or tips beyond "
+        "trials.collapse_free; pull_collapse_edges). The other rows: the deletion truth above."
     ]
 
 

@@ -41,6 +41,7 @@ from clutterbench.trials.ch6_planners import (  # noqa: F401  (register_planner,
 )
 from clutterbench.trials.config import (
     PULL_HEAD_PLANNERS,
+    PULL_MAP_HEADS,
     Ch6TrialParams,
     SceneStreamConfig,
     support_method,
@@ -304,11 +305,16 @@ class Extraction:
             "planner": job["planner"],
             "perception": "instance",
             "rule": job["rule"] if job["planner"] in CP_PLANNERS else None,
+            "support_method": support_method(
+                job["planner"], job["rule"], job["params"].pull_map_meaning
+            )
+            if job["planner"] in CP_PLANNERS
+            else None,
             "collapse_maps": None
             if job["planner"] not in CP_PLANNERS
             else (
                 (
-                    "predicted by the pull head"
+                    f"predicted by the {PULL_MAP_HEADS[job['params'].pull_map_meaning]} head"
                     if job["planner"] in PULL_HEAD_PLANNERS
                     else "predicted"
                 )
@@ -370,7 +376,8 @@ def condition_jobs(
             f"trials.conditions.{name}: planner {cond.planner} reads physics-truth maps, which "
             "run on the kinematic executor only (executor: kinematic)"
         )
-    support = chosen_support(thresholds, support_method(cond.planner, cond.rule))
+    method = support_method(cond.planner, cond.rule, trials.ch6.pull_map_meaning)
+    support = chosen_support(thresholds, method)
     cp_max = trials.ch6.cp_max if trials.ch6.cp_max is not None else support.score_threshold
     jobs = ch6_jobs(
         name,

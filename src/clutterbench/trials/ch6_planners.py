@@ -23,7 +23,7 @@ from clutterbench.planning.support import SupportParams
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch6_oracle import SearchOracle
 from clutterbench.trials.config import PLANNERS as BUILT_IN
-from clutterbench.trials.config import Ch6TrialParams
+from clutterbench.trials.config import PULL_MAP_HEADS, Ch6TrialParams
 from clutterbench.trials.harness import load_predictor
 from clutterbench.trials.scenes import policy_rng
 from clutterbench.trials.truth_maps import TruthCollapseMaps
@@ -69,8 +69,8 @@ def chosen_support(thresholds: Path, rule: str) -> SupportParams:
     try:
         return SupportParams(**chosen["chosen"][rule])
     except (KeyError, TypeError) as exc:
-        # pull_<rule>: chosen only where the support model has a pull head
-        hint = " with a support.model that has a pull head" if rule.startswith("pull_") else ""
+        # pull_<rule>, pull_collapse_<rule>: chosen only where the support model has that head
+        hint = " with a support.model that has that pull head" if rule.startswith("pull_") else ""
         raise ClutterbenchError(
             f"{thresholds}: no usable thresholds for rule '{rule}' ({exc}); rerun the support "
             f"stage{hint}"
@@ -130,7 +130,7 @@ def _cpg_planner(
     chosen for it (the job's `support`, trials.config.support_method)."""
     params: Ch6TrialParams = job["params"]
     if spec is None:
-        head = "pull" if pull else "deletion"
+        head = PULL_MAP_HEADS[params.pull_map_meaning] if pull else "deletion"
         predictor = load_predictor(job["model_path"], job["camera"].image_size, head)
     else:
         action = (params.pull_increment_m, params.grasp_lift_m) if pull else None

@@ -44,15 +44,22 @@ fitted to each observation instead of the true scene, one arm and holding
 
 
 PULL_HEAD_PLANNERS = ("multi_step_pull", "bimanual_pull")
-"""The CP planners that read the collapse predictor's pull head (train.models.<m>.labels),
-with the support thresholds the support stage chose for that head (`pull_<rule>`)."""
+"""The CP planners that read a pull head of the collapse predictor (train.models.<m>.labels;
+which one: PULL_MAP_HEADS), with the support thresholds the support stage chose for that
+head (`<head>_<rule>`)."""
+PULL_MAP_HEADS = {"moved": "pull", "collapse": "pull_collapse"}
+"""trials.ch6.pull_map_meaning -> the collapse predictor's head (data.labels.LABEL_KINDS)
+whose maps mean the same: every box the pull moves, or only what it collapses."""
 
 
-def support_method(planner: str, rule: str) -> str:
+def support_method(planner: str, rule: str, meaning: str = "moved") -> str:
     """The support stage's method (reports/support/thresholds.json `chosen`) whose thresholds
-    a CP planner runs with: its rule, chosen on the deletion maps, or on the pull head's maps
-    (`pull_<rule>`) for the pull-head planners."""
-    return f"pull_{rule}" if planner in PULL_HEAD_PLANNERS else rule
+    a CP planner runs with: its rule, chosen on the deletion maps, or for the pull-head
+    planners on the maps of the head of pull_map_meaning `meaning` (`pull_<rule>`,
+    `pull_collapse_<rule>`)."""
+    if planner not in PULL_HEAD_PLANNERS:
+        return rule
+    return f"{PULL_MAP_HEADS[meaning]}_{rule}"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -186,10 +193,12 @@ class Ch6TrialParams:
     planners do); learn also takes the box the score feared for as carried by it, so the
     plan removes that box first or, bimanual, holds it (planning/extraction.py)."""
     pull_map_meaning: Literal["moved", "collapse"] = "moved"
-    """What the truth maps of the pull (`*_pull_truth`) mark: moved, every box the pull moves
-    beyond moved_threshold_m or off the shelf (the strict criterion's notion, as the pull
-    labels); collapse, only the boxes that collapse by the collapse-free criterion (off the
-    shelf, dropped or tipped beyond trials.collapse_free), the thesis' trial notion."""
+    """What the maps of the pull mark, truth (`*_pull_truth`) and predicted (`*_pull`, the
+    collapse predictor's head of that meaning, PULL_MAP_HEADS): moved, every box the pull
+    moves beyond moved_threshold_m or off the shelf (the strict criterion's notion; the pull
+    head); collapse, only the boxes that collapse by the collapse-free criterion (off the
+    shelf, dropped or tipped beyond trials.collapse_free), the thesis' trial notion (the
+    pull_collapse head)."""
 
 
 CH4_PLANNERS = ("risk", "random", "oracle")

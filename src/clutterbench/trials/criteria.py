@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from clutterbench.config import bounded
+from clutterbench.config import bounded, load_section
 from clutterbench.sim.geometry import tilt_change_deg
 
 MOTION_FIELDS = ("box", "held", "displacement_m", "drop_m", "tilt_change_deg", "left_shelf")
@@ -47,6 +47,13 @@ class CollapseFreeConfig:
     """A box other than the manipulated ones collapsed when its centre dropped more than this."""
     tilt_deg: float = bounded(15.0, gt=0.0, le=180.0)
     """... or when its tilt (world up in its own frame) changed by more than this (degrees)."""
+
+
+def label_thresholds(params: Mapping[str, Any]) -> tuple[float, float]:
+    """(drop_m, tilt_deg) of trials.collapse_free in `params`: what the pull_collapse labels
+    (data.labels.pull_collapse_matrix) call a collapse, so they mean what a trial does."""
+    cf = load_section(CollapseFreeConfig, "trials.collapse_free", params)
+    return cf.drop_m, cf.tilt_deg
 
 
 def box_motion(

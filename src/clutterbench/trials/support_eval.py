@@ -10,11 +10,12 @@ settled scene (PhysX contacts). Objects are the boxes a robot sees (>= min_pixel
 as the thesis, we "ignore the case where O_HYP does not correspond to O_GT", so a relation
 with a hidden box is in neither graph.
 
-Pull truth (a collapse predictor with a pull head, issue 50): the same with "removing X" read
-as "the trials' executor pulling X out" (Y moves beyond the threshold or leaves the shelf:
-data.labels.pull_moved_matrix, the pull labels' and pull-truth maps' definition), from the
-pullout_* arrays of datasets generated with pull_outcomes: true; its methods are named
-`pull_<method>` and are chosen and scored on pull truth only.
+Pull truth (a collapse predictor with pull heads, issue 50): the same with "removing X" read
+as "the trials' executor pulling X out", under the head's label kind (data.labels.label_matrix:
+`pull`, Y moves beyond the threshold or leaves the shelf; `pull_collapse`, Y collapses by
+trials.collapse_free), from the pullout_* arrays of datasets generated with pull_outcomes:
+true; a head's methods are named `<head>_<method>` (`pull_coverage`, `pull_collapse_coverage`)
+and are chosen and scored on that head's truth only.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from clutterbench.data.labels import PULL_ARRAYS, pull_moved_matrix
+from clutterbench.data.labels import LABEL_ARRAYS, label_matrix
 from clutterbench.data.shards import ShardStore, iter_shards, load_split
 from clutterbench.errors import ClutterbenchError
 from clutterbench.planning.support import (
@@ -45,8 +46,25 @@ from clutterbench.planning.support import (
 from clutterbench.sim.config import CameraConfig
 
 SCENE_KEYS = ("scene_index", "n_objects", "family", "depth_m", "instance", "removal_m", "contact")
-PULL_PREFIX = "pull_"
-"""Methods on the pull head's maps, chosen and scored against the pull truth."""
+PULL_HEADS = ("pull", "pull_collapse")
+"""The collapse predictor's heads of the trials' pull (data.labels.LABEL_KINDS); each gets
+its own methods, chosen and scored against its own truth."""
+
+
+def head_prefix(head: str) -> str:
+    """The prefix of head `head`'s method names ('' for the deletion head)."""
+    return "" if head == "deletion" else f"{head}_"
+
+
+def method_head(method: str) -> tuple[str, str]:
+    """(head, rule) of a method name: 'pull_collapse_coverage_gap' -> ('pull_collapse',
+    'coverage_gap'); 'oracle_coverage' -> ('deletion', 'oracle_coverage')."""
+    for head in sorted(PULL_HEADS, key=len, reverse=True):
+        if method.startswith(head_prefix(head)):
+            return head, method.removeprefix(head_prefix(head))
+    return "deletion", method
+
+
 PredictFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
@@ -68,15 +86,17 @@ class Scene:
     n_objects: int
     gaps_m: np.ndarray | None = None
     """(K, K) `surface_gaps` of the visible objects (None: not computed)."""
-    moved_pull: np.ndarray | None = None
-    """(K, K) bool: ids[b] moved beyond the threshold or left the shelf when the trials
-    pulled ids[a] out (None: not read)."""
+    moved_by: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    """Pull head -> (K, K) bool: the trials' pull of ids[a] marks ids[b] under that head's
+    label kind (PULL_HEADS; only the heads read)."""
 
-    def pull_view(self) -> Scene:
-        """This scene with the pull's moved matrix in place of the deletion's, so its
-        `true_edges` are the pull truth."""
-        assert self.moved_pull is not None, "scene read without its pull outcomes"
-        return dataclasses.replace(self, moved=self.moved_pull, moved_pull=None)
+    def view(self, head: str) -> Scene:
+        """This scene with head `head`'s truth in place of the deletion's, so its
+        `true_edges` are that head's truth (the deletion head: the scene itself)."""
+        if head == "deletion":
+            return self
+        assert head in self.moved_by, f"scene read without its {head} truth"
+        return dataclasses.replace(self, moved=self.moved_by[head], moved_by={})
 
     @property
     def true_edges(self) -> set[tuple[int, int]]:
@@ -103,9 +123,11 @@ def scene_from_arrays(
     threshold_m: float,
     min_pixels: int,
     camera: CameraConfig | None = None,
-    pull: bool = False,
+    heads: Sequence[str] = (),
+    collapse_free: tuple[float, float] | None = None,
 ) -> Scene:
-    """One scene of a shard's arrays; `pull`: with the pull truth too (pullout_* arrays)."""
+    """One scene of a shard's arrays, with the truth of each pull head of `heads` too
+    (pullout_* arrays; `collapse_free` (drop_m, tilt_deg) for pull_collapse)."""
     n = int(arrays["n_objects"][row])
     instance = arrays["instance"][row]
     counts = np.bincount(instance.ravel(), minlength=256)[1 : n + 1]
@@ -117,10 +139,12 @@ def scene_from_arrays(
     moved = np.nan_to_num(removal, nan=0.0) > threshold_m
     np.fill_diagonal(moved, False)
     depth_m = arrays["depth_m"][row].astype(np.float32)
-    moved_pull = None
-    if pull:
-        disp, left = (arrays[k][row][:n, :n] for k in PULL_ARRAYS)
-        moved_pull = pull_moved_matrix(disp, left, threshold_m)[np.ix_(ids, ids)]
+    moved_by = {
+        head: label_matrix(head, lambda k: arrays[k][row], n, threshold_m, collapse_free)[
+            np.ix_(ids, ids)
+        ]
+        for head in heads
+    }
     return Scene(
         index=int(arrays["scene_index"][row]),
         family=str(arrays["family"][row]),
@@ -131,21 +155,21 @@ def scene_from_arrays(
         contact=arrays["contact"][row][np.ix_(ids, ids)],
         n_objects=n,
         gaps_m=None if camera is None else surface_gaps(camera_points(depth_m, camera), masks),
-        moved_pull=moved_pull,
+        moved_by=moved_by,
     )
 
 
-def scene_keys(store: ShardStore, pull: bool) -> tuple[str, ...]:
-    """The arrays a scene is read from; with `pull`, one line when the dataset lacks them."""
-    if not pull:
-        return SCENE_KEYS
-    if not set(PULL_ARRAYS) <= set(store.array_names()):
+def scene_keys(store: ShardStore, heads: Sequence[str] = ()) -> tuple[str, ...]:
+    """The arrays a scene is read from, with the truth of pull heads `heads`; one line when
+    the dataset lacks them."""
+    extra = tuple(dict.fromkeys(a for h in heads for a in LABEL_ARRAYS[h]))
+    if not set(extra) <= set(store.array_names()):
         raise ClutterbenchError(
             f"dataset '{store.dataset}' holds no pull outcomes (pullout_*), which the pull "
             f"head's support thresholds need; generate it with generate.datasets."
             f"{store.dataset}.pull_outcomes: true"
         )
-    return SCENE_KEYS + PULL_ARRAYS
+    return SCENE_KEYS + extra
 
 
 def split_scenes(
@@ -156,21 +180,23 @@ def split_scenes(
     threshold_m: float,
     min_pixels: int,
     camera: CameraConfig | None = None,
-    pull: bool = False,
+    heads: Sequence[str] = (),
+    collapse_free: tuple[float, float] | None = None,
 ) -> list[Scene]:
-    """The first `limit` scenes of a split, in split order (`pull`: with their pull truth)."""
+    """The first `limit` scenes of a split, in split order (with the truth of pull heads
+    `heads`, as scene_from_arrays)."""
     record = load_split(split_file, gen_dir)
     wanted = [int(i) for i in record[which]][:limit]
     order = {s: i for i, s in enumerate(wanted)}
     store = ShardStore(gen_dir, record["dataset"], cache_shards=1)
-    keys = scene_keys(store, pull)
+    keys = scene_keys(store, heads)
     found: dict[int, Scene] = {}
     for shard in range(store.n_shards):
         arrays = store.load(shard, keys)
         for row, s in enumerate(arrays["scene_index"]):
             if int(s) in order:
                 found[int(s)] = scene_from_arrays(
-                    arrays, row, threshold_m, min_pixels, camera, pull
+                    arrays, row, threshold_m, min_pixels, camera, heads, collapse_free
                 )
     return [found[s] for s in wanted if s in found]
 
@@ -181,13 +207,16 @@ def all_scenes(
     threshold_m: float,
     min_pixels: int,
     camera: CameraConfig | None = None,
-    pull: bool = False,
+    heads: Sequence[str] = (),
+    collapse_free: tuple[float, float] | None = None,
 ) -> Iterator[Scene]:
-    """Every scene of a generated dataset (`pull`: with their pull truth)."""
-    keys = scene_keys(ShardStore(gen_dir, dataset, cache_shards=1), pull)
+    """Every scene of a generated dataset (with the truth of pull heads `heads`)."""
+    keys = scene_keys(ShardStore(gen_dir, dataset, cache_shards=1), heads)
     for arrays in iter_shards(gen_dir, dataset, keys):
         for row in range(len(arrays["scene_index"])):
-            yield scene_from_arrays(arrays, row, threshold_m, min_pixels, camera, pull)
+            yield scene_from_arrays(
+                arrays, row, threshold_m, min_pixels, camera, heads, collapse_free
+            )
 
 
 def evidence(scene: Scene, heatmaps: np.ndarray) -> SceneEvidence:
@@ -207,7 +236,7 @@ def sweep_all(
     prefix: str = "",
 ) -> pd.DataFrame:
     """Every rule on the CP's heatmaps and on the oracle collapse map, one frame; methods
-    named `prefix` + rule (PULL_PREFIX: the pull head's, on pull truth)."""
+    named `prefix` + rule (head_prefix(head): a pull head's, on its truth)."""
     frames = []
     for source, scenes in (("cp", cp_evidence), ("oracle", oracle_evidence)):
         for rule in RULES:
@@ -237,7 +266,7 @@ def choose_all(sweep: pd.DataFrame) -> dict[str, SupportParams]:
     chosen: dict[str, SupportParams] = {}
     for method in dict.fromkeys(sweep["method"]):
         rows = ranked["method"] == method
-        rule = method.removeprefix(PULL_PREFIX).removeprefix("oracle_")
+        rule = method_head(method)[1].removeprefix("oracle_")
         # `method`: exactly the thesis' rule (no surface-gap test); `<method>_gap`: the same
         # rule with the surface-gap test on pseudo-direct contact (ours), where swept.
         if (rows & no_gap).any():
@@ -299,7 +328,7 @@ def evaluate_scene(
     oracle = oracle_heatmaps(scene.moved, scene.masks) if scene.ids else heatmaps
     edges: dict[str, set[tuple[int, int]]] = {}
     for method, params in chosen.items():
-        is_oracle = method.removeprefix(PULL_PREFIX).startswith("oracle_")
+        is_oracle = method_head(method)[1].startswith("oracle_")
         maps = oracle if is_oracle else heatmaps
         found = (
             infer_support(maps, scene.masks, scene.ids, params, scene.gaps_m)
