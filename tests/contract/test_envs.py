@@ -481,7 +481,7 @@ def _trials_records(env, planner: str, episodes: int, support, cp_max: float, cp
 
 
 def _same_records(got, want):
-    drop = {"rule"}  # the agent's record does not know the planner's support rule
+    drop = {"rule", "support_method"}  # the agent's record does not know its support rule
     assert [{k: v for k, v in r.items() if k not in drop} for r in got] == [
         {k: v for k, v in r.items() if k not in drop} for r in want
     ]
@@ -492,12 +492,13 @@ def _same_records(got, want):
     [("multi_step", 0.5), ("multi_step", 0.4), ("multi_step_pull", 0.5), ("bimanual_pull", 0.4)],
 )
 def test_a_cp_planner_as_an_agent_gives_the_trials_records(
-    planner, prob_threshold, tiny_cp, tiny_cp_heads
+    planner, prob_threshold, tiny_cp, tiny_cp_three_heads
 ):
     """evaluate-agent's loop with the project's CP planners wrapped as agents writes, on the
     tiny profile, exactly the records the trials stage writes for that planner (the same
     scenes, targets, decisions and outcomes, bit for bit; collapses at 0.5, give-ups at 0.4);
-    the *_pull agents on a two-head network's pull head, as the trials stage's *_pull rows."""
+    the *_pull agents on a three-head network's head of trials.ch6.pull_map_meaning, as the
+    trials stage's *_pull rows."""
     from clutterbench.envs.agents import PlannerAgent
     from clutterbench.envs.evaluate import run_agent
     from clutterbench.parallel import worker_init
@@ -505,7 +506,7 @@ def test_a_cp_planner_as_an_agent_gives_the_trials_records(
 
     worker_init(1)
     support = SupportParams("coverage", prob_threshold, 0.3, 2, 0.0)
-    cp = tiny_cp_heads if planner.endswith("_pull") else tiny_cp
+    cp = tiny_cp_three_heads if planner.endswith("_pull") else tiny_cp
     env = gym.make(PLAN_ENV_ID, scale="tiny", name=planner)
     agent = PlannerAgent(env, planner, rule="coverage", support=support, cp_max=0.5, model_path=cp)
     got = [r.record for r in run_agent(env, agent, range(3))]

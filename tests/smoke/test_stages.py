@@ -185,10 +185,12 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     assert pull_chain.sum() == 2 * 4  # the pull head's chain: oracle -> pull truth -> pull CP
     assert dec[~pull_chain]["meaning"].notna().all()  # every CP row has its pull-truth row
     assert dec[pull_chain]["meaning"].isna().all()
+    head = {"moved": "pull", "collapse": "pull_collapse"}[trials.ch6.pull_map_meaning]
     for name, cond in trials.conditions.items():
-        if cond.planner in ("multi_step_pull", "bimanual_pull"):  # maps of the pull head
+        if cond.planner in ("multi_step_pull", "bimanual_pull"):  # maps of that pull head
             recs = read_records(a / "reports/trials" / name / "records.jsonl")
-            assert {r["collapse_maps"] for r in recs} == {"predicted by the pull head"}, name
+            assert {r["collapse_maps"] for r in recs} == {f"predicted by the {head} head"}, name
+            assert {r["support_method"] for r in recs} == {f"{head}_{cond.rule}"}, name
     # the physics-from-depth planner's estimates: one row per stream, and the figure
     est = pd.read_csv(a / "reports/tables/box_estimation.csv")
     assert set(est["stream"]) == {"ch6_3_5", "ch6_10", "ch6_3_10"}
@@ -197,10 +199,8 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     t62 = pd.read_csv(a / "reports/tables/table_6_2.csv")
     assert t62.astype(str).apply(lambda c: c.str.contains("physics from depth")).any().any()
     assert t62.iloc[:, 0].str.contains("CP pull head").sum() == 1  # against the pull truth
-    assert (
-        "pull_coverage_gap"
-        in json.loads((a / "reports/support/thresholds.json").read_text())["chosen"]
-    )
+    chosen = json.loads((a / "reports/support/thresholds.json").read_text())["chosen"]
+    assert {"pull_coverage_gap", "pull_collapse_coverage_gap"} <= set(chosen)
     t42 = pd.read_csv(a / "reports/tables/table_4_2.csv")
     assert len(t42) == 4
     # chapter 3: every variant's games, one row per slide, one MCAP per variant, Fig. 3.15
