@@ -103,7 +103,8 @@ def report(params: dict, base: BaseConfig) -> None:
         cond: read_records(Path(f"reports/trials/{cond}/records.jsonl"))
         for cond in cfg.table_6_3.values()
     }
-    trial_note = trial_params_note(load_section(TrialsConfig, "trials", params).ch6)
+    ch6 = load_section(TrialsConfig, "trials", params).ch6
+    trial_note = trial_params_note(ch6)
     chosen = _json_key(support / "thresholds.json", "chosen")
     rules = rule_note(records, chosen, cfg.table_6_2_methods)
     extraction_table(
@@ -112,7 +113,7 @@ def report(params: dict, base: BaseConfig) -> None:
     extraction_families_table(
         records, cfg.table_6_3, Path("reports/tables"), base.scale, [trial_note]
     )
-    decomposition_table(records, Path("reports/tables"), base.scale)
+    decomposition_table(records, Path("reports/tables"), base.scale, ch6.pull_map_meaning)
     estimation_table(records, Path("reports/tables"), base.scale)
 
     by_condition: dict[str, list[dict]] = {}

@@ -35,6 +35,7 @@ import numpy as np
 import pandas as pd
 
 from clutterbench.report.tables import Column, write_raw_csv, write_table
+from clutterbench.trials.config import PULL_MAP_HEADS
 from clutterbench.trials.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
 
 TABLE = "table_6_3_decomposition"
@@ -167,13 +168,22 @@ def _text(row: Mapping[str, Any], part: str) -> str:
     return f"{row[part]:.1f} [{row[f'{part}_lo']:.1f}, {row[f'{part}_hi']:.1f}]"
 
 
+PULL_MARKS = {
+    "moved": "the boxes that move beyond the label threshold or leave the shelf",
+    "collapse": "the boxes that leave the shelf, drop or tip beyond trials.collapse_free",
+}
+"""What a pull map marks under each trials.ch6.pull_map_meaning."""
+
+
 def decomposition_table(
     records_by_condition: Mapping[str, Sequence[Mapping[str, Any]]],
     out_dir: Path,
     scale: str,
+    pull_map_meaning: str = "moved",
 ) -> pd.DataFrame | None:
     """reports/tables/table_6_3_decomposition.{md,csv,png}; None (nothing written) when no
-    stream has a CP row, its truth row and its oracle."""
+    stream has a CP row, its truth row and its oracle. `pull_map_meaning`: what the pull maps
+    mark (trials.ch6.pull_map_meaning), for the notes."""
     rows = decompose(records_by_condition)
     if not rows:
         return None
@@ -207,13 +217,15 @@ def decomposition_table(
         "Oracles: oracle (one arm) for multi-step, oracle_hold (may hold one box) for bimanual, "
         "as in Table 6.3.",
         "Where the stream has the planner on physics-truth maps of the trials' own pull "
-        "(*_pull_truth: the boxes that move beyond the label threshold or leave the shelf when "
-        "box x is pulled out by the trials' executor from the present state, bit for bit what "
-        "executing that pull does), the split is three ways: planning = oracle - pull truth; "
+        f"(*_pull_truth: {PULL_MARKS[pull_map_meaning]} when box x is pulled out by the trials' "
+        "executor from the present state, bit for bit what executing that pull does; "
+        f"trials.ch6.pull_map_meaning: {pull_map_meaning}), the split is three ways: "
+        "planning = oracle - pull truth; "
         "what the map predicts = pull truth - truth (deletion maps, as the network's labels); "
         "perception = truth - CP.",
-        "Pull chain (multi_step_pull, bimanual_pull: the CP's pull head, trained on labels of the "
-        "trials' pull, with support thresholds chosen against the pull truth): planning = "
+        "Pull chain (multi_step_pull, bimanual_pull: the CP's head of the same meaning, "
+        f"{PULL_MAP_HEADS[pull_map_meaning]}, trained on labels of the trials' pull, with support "
+        "thresholds chosen against that head's pull truth): planning = "
         "oracle - the planner on pull-truth maps; perception = pull truth - pull CP (in the "
         "columns of the pull truth and the perception part). The pull-truth rows run with the "
         "deletion head's thresholds (they are the three-way split's rows too), so this "
