@@ -122,7 +122,8 @@ def compare_designs(
     mcfg = cfg.models[dcfg.model]
     gen = load_section(GenerateConfig, "generate", params)
     threshold_m = gen.datasets[mcfg.dataset].moved_threshold_m
-    collapse_free = label_thresholds(params)
+    # the pull_collapse labels' notion of a collapse (trials.collapse_free), where trained
+    collapse_free = label_thresholds(params) if "pull_collapse" in mcfg.labels else None
     split_file = data_dir / "split" / f"{mcfg.dataset}.json"
     if not split_file.exists():
         raise ClutterbenchError(f"{split_file} not found; run stage split@{mcfg.dataset} first")
