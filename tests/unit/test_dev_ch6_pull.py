@@ -146,3 +146,58 @@ def test_truth_planners_need_no_network_and_a_cp_planner_names_its_own(root, tmp
     params["dev"]["ch6_pull"]["planners"] = ["multi_step_pull_truth", "multi_step_pull"]
     with pytest.raises(ClutterbenchError, match=r"best\.pt missing \(planner multi_step_pull"):
         trial_jobs(load_section(DevConfig, "dev", params), params)
+
+
+def test_pull_thresholds_reach_only_the_pull_head_planners(root, tmp_path, monkeypatch):
+    """trials.ch6.pull_prob_threshold / pull_score_threshold override the support stage's
+    choice for the pull-head CP planners alone (support and abort threshold), through the
+    stage's condition_jobs and the dev recheck's section alike."""
+    import dataclasses
+
+    from clutterbench.trials.ch6 import condition_jobs, planner_support
+    from clutterbench.trials.config import ConditionConfig
+
+    params = load_params(root / "params.yaml")
+    params["base"]["scale"] = "tiny"
+    monkeypatch.chdir(tmp_path)
+    trials = load_section(TrialsConfig, "trials", params)
+    for model in (trials.ch6.model, trials.ch6.ch4_model):
+        (tmp_path / "models" / model).mkdir(parents=True)
+        (tmp_path / "models" / model / "best.pt").write_bytes(b"")
+    chosen = {"rule": "coverage", "prob_threshold": 0.5, "score_threshold": 0.3}
+    chosen |= {"bbox_margin_px": 2, "adjacency_iou": 0.0, "max_gap_m": 0.05}
+    thresholds = {f"{h}coverage_gap": chosen for h in ("", "pull_", "pull_collapse_")}
+    path = tmp_path / "t.json"
+    path.write_text(json.dumps({"chosen": thresholds}))
+    over = {"pull_prob_threshold": 0.2, "pull_score_threshold": 0.8}
+    ch6 = dataclasses.replace(trials.ch6, **over)
+    for planner in ("multi_step_pull", "bimanual_pull", "multi_step", "multi_step_pull_truth"):
+        support, cp_max = planner_support(path, planner, "coverage_gap", ch6)
+        pulled = planner in ("multi_step_pull", "bimanual_pull")
+        assert (support.prob_threshold, support.score_threshold, cp_max) == (
+            (0.2, 0.8, 0.8) if pulled else (0.5, 0.3, 0.3)
+        ), planner
+        assert support.max_gap_m == 0.05  # the rest stays the support stage's choice
+    cond = ConditionConfig("bimanual_pull", "ch6_3_10", 1, "coverage_gap")
+    staged = dataclasses.replace(trials, ch6=ch6)
+    jobs, support, cp_max = condition_jobs("c", cond, staged, 0, None, None, path)
+    assert (jobs[0]["support"].prob_threshold, jobs[0]["cp_max"], cp_max) == (0.2, 0.8, 0.8)
+    monkeypatch.setattr(ch6_pull, "THRESHOLDS", path)
+    params["dev"]["ch6_pull_thresholds"] = {
+        "streams": list(params["dev"]["ch6_pull"]["streams"]),
+        "variants": {"support": {}, "high": over},
+        "planners": ["multi_step_pull", "multi_step"],
+        "episodes": 1,
+        "oracle": False,
+    }
+    dev = load_section(DevConfig, "dev", params)
+    got = {
+        j["condition"].split("/")[0]: (j["support"].prob_threshold, j["cp_max"])
+        for j in trial_jobs(dev, params, "ch6_pull_thresholds")
+    }
+    assert got == {
+        "support:multi_step_pull": (0.5, 0.3),
+        "high:multi_step_pull": (0.2, 0.8),
+        "support:multi_step": (0.5, 0.3),
+        "high:multi_step": (0.5, 0.3),
+    }

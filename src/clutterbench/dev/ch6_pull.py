@@ -1,6 +1,7 @@
 """Recheck on dev streams: what the ch. 6 planners on maps of the pull do after an abort.
 
-    python -m clutterbench.dev.ch6_pull     # make dev-ch6-pull
+    python -m clutterbench.dev.ch6_pull                       # make dev-ch6-pull
+    python -m clutterbench.dev.ch6_pull ch6_pull_thresholds   # make dev-ch6-pull-thresholds
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
 rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull
@@ -8,8 +9,8 @@ rejects the box. `trials.ch6.abort_response` says what the planners on maps of t
 an episode whose every candidate is skipped gives up), `learn` takes the box the score
 feared for as carried by the box being pulled (an edge of the collapse prediction graph for
 the rest of the episode), so the plan removes that box first or, bimanual, holds it
-(planning/extraction.py). This recheck runs each planner of dev.ch6_pull.planners under each
-variant of dev.ch6_pull.variants on the dev streams of dev.ch6_pull.streams (own seeds, never
+(planning/extraction.py). This recheck runs each planner of dev.<section>.planners under each
+variant of dev.<section>.variants on the dev streams of dev.<section>.streams (own seeds, never
 a table's scenes), and both search oracles on the same scenes; every variant meets the same
 scenes and targets, so each is compared with the first, planner by planner and episode by
 episode (McNemar's exact test).
@@ -17,12 +18,15 @@ episode (McNemar's exact test).
 Reads the support stage's chosen thresholds (reports/support/thresholds.json) and, where a
 planner reads the collapse predictor, models/<trials.ch6.model> (dvc repro trials' upstream
 first; the truth-map planners and the oracles need no network). Writes
-reports/dev/ch6_pull.{json,md}; not a dvc stage.
+reports/dev/<section>.{json,md}; not a dvc stage. Sections: ch6_pull (what an abort teaches,
+what the pull maps mean), ch6_pull_thresholds (the pull-head CP planners' thresholds,
+trials.ch6.pull_prob_threshold / pull_score_threshold).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -57,23 +61,25 @@ def oracle_of(planner: str) -> str:
     return "oracle_hold" if planner.startswith("bimanual") else "oracle"
 
 
-def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]]:
+def trial_jobs(
+    dev: DevConfig, params: Mapping[str, Any], section: str = "ch6_pull"
+) -> list[dict[str, Any]]:
     """Every (stream, variant, planner) episode's job, condition "<variant>:<planner>/<stream>",
     with trials.ch6 as params set it but for the variant's overrides, and both oracles'."""
     from clutterbench.sim.config import SimConfig
     from clutterbench.trials.ch6 import (
         CP_PLANNERS,
         ch6_jobs,
-        chosen_support,
         load_planners,
+        planner_support,
         reads_truth_maps,
     )
-    from clutterbench.trials.config import ConditionConfig, TrialsConfig, support_method
+    from clutterbench.trials.config import ConditionConfig, TrialsConfig
 
     base = load_section(BaseConfig, "base", params)
     trials = load_section(TrialsConfig, "trials", params)
     sim = load_section(SimConfig, "sim", params)
-    cfg = dev.ch6_pull
+    cfg = getattr(dev, section)
     load_planners(trials.planner_modules, cfg.planners)
     predicted = [p for p in cfg.planners if p in CP_PLANNERS and not reads_truth_maps(p)]
     if predicted and not Path(f"models/{trials.ch6.model}/best.pt").exists():
@@ -89,9 +95,7 @@ def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]
         for variant, planner in arms:
             over = cfg.variants.get(variant, {})
             ch6 = dataclasses.replace(trials.ch6, **over)
-            method = support_method(planner, rule, ch6.pull_map_meaning)
-            support = chosen_support(THRESHOLDS, method)
-            cp_max = ch6.cp_max if ch6.cp_max is not None else support.score_threshold
+            support, cp_max = planner_support(THRESHOLDS, planner, rule, ch6)
             jobs += ch6_jobs(
                 f"{condition_label(variant, planner)}/{stream}",
                 ConditionConfig(planner, stream, cfg.episodes, rule),
@@ -176,17 +180,25 @@ def what_it_shows(comps: Sequence[Mapping[str, Any]]) -> str:
     return f"Beyond chance (McNemar, Bonferroni level {level:.3g}): {cells}. Summed: {pooled}."
 
 
+TITLES = {
+    "ch6_pull": "what the ch. 6 pull planners do after an abort, and what their maps mean",
+    "ch6_pull_thresholds": "the thresholds of the ch. 6 pull-head CP planners",
+}
+
+
 def markdown(result: Mapping[str, Any]) -> str:
     c = result["config"]
     variants = "; ".join(
         f"`{name}`: " + (", ".join(f"{k} {v}" for k, v in over.items()) or "params' own")
         for name, over in c["variants"].items()
     )
+    title = TITLES[result.get("section", "ch6_pull")]
+    oracles = ", and both search oracles," if c.get("oracle", True) else ""
     lines = [
-        f"# Dev recheck: what the ch. 6 pull planners do after an abort ({result['scale']} scale)",
+        f"# Dev recheck: {title} ({result['scale']} scale)",
         "",
         f"The planners {', '.join(c['planners'])} under each variant of `trials.ch6` "
-        f"({variants}), and both search oracles, on dev streams (own seeds, never a table's "
+        f"({variants}){oracles} on dev streams (own seeds, never a table's "
         f"scenes), {c['episodes']} episodes each; the params' own: "
         f"{result['current'] or 'none of them'}.",
         "",
@@ -225,8 +237,10 @@ def markdown(result: Mapping[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def ch6_pull(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
-    """Run the recheck of dev.ch6_pull; writes out_dir/ch6_pull.{json,md}."""
+def ch6_pull(
+    params: Mapping[str, Any], out_dir: Path = OUT, section: str = "ch6_pull"
+) -> dict[str, Any]:
+    """Run the recheck of dev.<section>; writes out_dir/<section>.{json,md}."""
     from clutterbench.parallel import ParallelConfig
     from clutterbench.trials.ch6 import run_ch6_episode
     from clutterbench.trials.config import TrialsConfig
@@ -237,10 +251,10 @@ def ch6_pull(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
     dev = load_section(DevConfig, "dev", params)
     trials = load_section(TrialsConfig, "trials", params)
     check_dev_streams(dev, trials)
-    cfg = dev.ch6_pull
+    cfg = getattr(dev, section)
     if not cfg.streams:
-        raise ClutterbenchError("dev.ch6_pull.streams: no dev stream to run on")
-    jobs = trial_jobs(dev, params)
+        raise ClutterbenchError(f"dev.{section}.streams: no dev stream to run on")
+    jobs = trial_jobs(dev, params, section)
     parallel = load_section(ParallelConfig, "parallel", params)
     results = run_episodes("dev ch6 pull", run_ch6_episode, jobs, trials.workers, parallel)
     records = [r.record for r in results]
@@ -248,6 +262,7 @@ def ch6_pull(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
     result = {
         "scale": base.scale,
         "seed": base.seed,
+        "section": section,
         "config": as_dict(cfg),
         "streams": {s: as_dict(dev.streams[s]) for s in cfg.streams},
         "current": current_variant(cfg.variants, trials.ch6),
@@ -256,11 +271,17 @@ def ch6_pull(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
         "shows": what_it_shows(comps),
         "n_episodes": len(records),
     }
-    return save(result, started, out_dir, "ch6_pull", markdown)
+    return save(result, started, out_dir, section, markdown)
+
+
+SECTIONS = tuple(TITLES)
 
 
 def main() -> None:
-    run_command(ch6_pull, "ch6_pull")
+    section = sys.argv[1] if len(sys.argv) > 1 else SECTIONS[0]
+    if section not in SECTIONS or len(sys.argv) > 2:
+        sys.exit(f"usage: python -m clutterbench.dev.ch6_pull [{' | '.join(SECTIONS)}]")
+    run_command(lambda params: ch6_pull(params, section=section), section)
 
 
 if __name__ == "__main__":

@@ -89,7 +89,7 @@ class Ch5PlannerConfig:
             raise ValueError("ch5_planner.perceptions: no perception to run the planner with")
 
 
-CH6_VARIED = ("abort_response", "pull_map_meaning")
+CH6_VARIED = ("abort_response", "pull_map_meaning", "pull_prob_threshold", "pull_score_threshold")
 """The trials.ch6 fields a ch. 6 pull-planner variant may set."""
 
 
@@ -165,7 +165,12 @@ class DevConfig:
     ch6_pull: Ch6PullConfig = dataclasses.field(
         default_factory=lambda: Ch6PullConfig(variants={"block": {}, "learn": {}})
     )
-    """The ch. 6 pull-planner recheck (what an abort teaches the graph)."""
+    """The ch. 6 pull-planner recheck (what an abort teaches the graph, what the maps mean)."""
+    ch6_pull_thresholds: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(variants={"support": {}, "other": {}})
+    )
+    """The same recheck over the pull-head CP planners' thresholds (python -m
+    clutterbench.dev.ch6_pull ch6_pull_thresholds)."""
 
     def __post_init__(self) -> None:
         for name in self.streams:
@@ -176,6 +181,7 @@ class DevConfig:
             ("ch5_planner", self.ch5_planner.streams),
             ("perturbed_fit", self.perturbed_fit.streams),
             ("ch6_pull", self.ch6_pull.streams),
+            ("ch6_pull_thresholds", self.ch6_pull_thresholds.streams),
         ):
             for name in names:
                 if name not in self.streams:

@@ -10,6 +10,7 @@ planner.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -356,6 +357,23 @@ def _rounded(d: dict[str, Any]) -> dict[str, Any]:
     return {k: round(v, 6) if isinstance(v, float) else v for k, v in d.items()}
 
 
+def planner_support(
+    thresholds: Path, planner: str, rule: str, ch6: Any
+) -> tuple[SupportParams, float]:
+    """A CP planner's support thresholds and its abort threshold cp_max: the support stage's
+    choice on validation scenes for its method (trials.config.support_method), the pull-head
+    planners' overridden by trials.ch6.pull_prob_threshold / pull_score_threshold where set
+    (chosen on dev streams); cp_max: trials.ch6.cp_max, else the score threshold."""
+    support = chosen_support(thresholds, support_method(planner, rule, ch6.pull_map_meaning))
+    if planner in PULL_HEAD_PLANNERS:
+        over = {
+            "prob_threshold": ch6.pull_prob_threshold,
+            "score_threshold": ch6.pull_score_threshold,
+        }
+        support = dataclasses.replace(support, **{k: v for k, v in over.items() if v is not None})
+    return support, ch6.cp_max if ch6.cp_max is not None else support.score_threshold
+
+
 def condition_jobs(
     name: str,
     cond: Any,
@@ -376,9 +394,7 @@ def condition_jobs(
             f"trials.conditions.{name}: planner {cond.planner} reads physics-truth maps, which "
             "run on the kinematic executor only (executor: kinematic)"
         )
-    method = support_method(cond.planner, cond.rule, trials.ch6.pull_map_meaning)
-    support = chosen_support(thresholds, method)
-    cp_max = trials.ch6.cp_max if trials.ch6.cp_max is not None else support.score_threshold
+    support, cp_max = planner_support(thresholds, cond.planner, cond.rule, trials.ch6)
     jobs = ch6_jobs(
         name,
         cond,

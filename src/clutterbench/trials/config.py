@@ -192,6 +192,14 @@ class Ch6TrialParams:
     over cp_max: block skips the box until a step succeeds (Algorithm 1, what the deletion
     planners do); learn also takes the box the score feared for as carried by it, so the
     plan removes that box first or, bimanual, holds it (planning/extraction.py)."""
+    pull_prob_threshold: float | None = bounded(None, gt=0.0, le=1.0)
+    """The pull-head CP planners' (PULL_HEAD_PLANNERS) collapse area R_C = heatmap > this;
+    null: the support stage's choice on validation scenes (the support graph's F-measure
+    against pull truth). Issue 50: chosen on dev streams for the trials' own outcome
+    (make dev-ch6-pull, docs/design-choices.md)."""
+    pull_score_threshold: float | None = bounded(None, gt=0.0, le=1.0)
+    """The same planners' support-edge score threshold, and their abort threshold cp_max
+    unless cp_max is set; null: the support stage's choice on validation scenes."""
     pull_map_meaning: Literal["moved", "collapse"] = "moved"
     """What the maps of the pull mark, truth (`*_pull_truth`) and predicted (`*_pull`, the
     collapse predictor's head of that meaning, PULL_MAP_HEADS): moved, every box the pull
