@@ -40,6 +40,27 @@ def test_targets_repairs_and_rates_side_by_side(tmp_path, monkeypatch):
     assert "| pfd | theirs | (records before the repair's counts)" in text
 
 
+def test_episode_by_episode_what_differs(tmp_path, monkeypatch):
+    monkeypatch.setattr(compare_runs, "artifact_targets", lambda: {})
+    steps = [{"box": 2}, {"box": 3}]
+    ours = [
+        _rec(0, 3, True, scene="h0", steps=steps),
+        _rec(1, 3, True, scene="h1", steps=steps),
+        _rec(2, 3, False, scene="h2", steps=steps),
+    ]
+    theirs = [
+        _rec(0, 3, True, scene="h0", steps=steps),  # identical
+        _rec(1, 3, True, scene="h1", steps=steps[::-1]),  # same outcome, other order
+        _rec(2, 3, True, scene="hX", steps=steps),  # other start, other outcome
+    ]
+    _run(tmp_path / "a", "c", ours)
+    _run(tmp_path / "b", "c", theirs)
+    text = "\n".join(compare_runs.compare(tmp_path / "a", tmp_path / "b"))
+    # targets differ | start = benchmark | scenes differ | outcome | pulled | identical
+    assert "| 0/3 | 0/3 targets | 1/3 | 1 | 1 | 1 |" in text
+    assert "| **all 1** | | | | | | 0/3 | | 1/3 | 1 | 1 | 1 |" in text
+
+
 def test_a_directory_without_trials_is_one_line(tmp_path):
     with pytest.raises(ClutterbenchError, match="no trials reports"):
         compare_runs.compare(tmp_path, tmp_path)

@@ -73,6 +73,31 @@ def artifact_targets(scale: str = "default") -> dict[tuple[str, int], int]:
     return out
 
 
+def episode_pairs(
+    ra: Sequence[Mapping[str, Any]], rb: Sequence[Mapping[str, Any]]
+) -> list[tuple[Mapping[str, Any], Mapping[str, Any]]]:
+    """The episodes both runs hold, paired by index."""
+    by_b = {r["episode"]: r for r in rb}
+    return [(r, by_b[r["episode"]]) for r in ra if r["episode"] in by_b]
+
+
+def _pulled(r: Mapping[str, Any]) -> list[Any]:
+    return [s.get("box") for s in r.get("steps") or []]
+
+
+PAIRED = {
+    "target": lambda x, y: x["target"] != y["target"],
+    "scene": lambda x, y: x.get("scene") != y.get("scene"),
+    "outcome": lambda x, y: (
+        (bool(x["success"]), bool(x["strict_success"]))
+        != (bool(y["success"]), bool(y["strict_success"]))
+    ),
+    "pulled": lambda x, y: _pulled(x) != _pulled(y),
+    "identical": lambda x, y: x == y,
+}
+"""Per paired episode: what differs between the runs (identical: nothing)."""
+
+
 def compare(ours: Path, theirs: Path) -> list[str]:
     a, b = read_conditions(ours), read_conditions(theirs)
     shared = [c for c in a if c in b]
@@ -85,27 +110,38 @@ def compare(ours: Path, theirs: Path) -> list[str]:
         + (" (One run given twice: read its own columns and the last one.)" if same_run else ""),
         "",
         "| condition | stream | ours: collapse-free | theirs | ours: strict | theirs | "
-        "targets differ | ours: start = benchmark |",
-        "|---|---|---|---|---|---|---|---|",
+        "targets differ | ours: start = benchmark | scene hashes differ | outcome differs | "
+        "boxes pulled differ | records identical |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
+    total = dict.fromkeys(PAIRED, 0)
     for c in shared:
         ra, rb = a[c], b[c]
-        by_b = {r["episode"]: r for r in rb}
-        differ = sum(
-            r["target"] != by_b[r["episode"]]["target"] for r in ra if r["episode"] in by_b
-        )
+        pairs = episode_pairs(ra, rb)
         stream = str(ra[0].get("stream"))
         same = sum(targets.get((stream, int(r["episode"]))) == r["target"] for r in ra)
+        diff = {k: sum(f(x, y) for x, y in pairs) for k, f in PAIRED.items()}
+        total = {k: total[k] + v for k, v in diff.items()}
         lines.append(
             f"| {c} | {stream} | {rate(ra, 'success')} | {rate(rb, 'success')} | "
             f"{rate(ra, 'strict_success')} | {rate(rb, 'strict_success')} | "
-            f"{differ}/{len(ra)} | {same}/{len(ra)} targets |"
+            f"{diff['target']}/{len(pairs)} | {same}/{len(ra)} targets | "
+            f"{diff['scene']}/{len(pairs)} | {diff['outcome']} | {diff['pulled']} | "
+            f"{diff['identical']} |"
         )
+    n = sum(len(episode_pairs(a[c], b[c])) for c in shared)
+    lines.append(
+        f"| **all {len(shared)}** | | | | | | {total['target']}/{n} | | {total['scene']}/{n} | "
+        f"{total['outcome']} | {total['pulled']} | {total['identical']} |"
+    )
     lines += [
         "",
         "'targets differ': episodes whose target differs between the runs (their settled "
         "starts differ: the CPUs' physics); 'start = benchmark': episodes of ours whose target "
-        "is the benchmark scenes' target of that episode.",
+        "is the benchmark scenes' target of that episode; 'scene hashes differ': episodes whose "
+        "records name different start scenes; 'outcome differs': collapse-free or strict "
+        "success differs; 'boxes pulled differ': the sequence of pulled boxes differs; "
+        "'records identical': the episode's record is the same in both runs, field for field.",
         "",
         "## Physics from depth: the box repair (issue 53)",
         "",
