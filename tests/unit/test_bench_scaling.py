@@ -1,10 +1,13 @@
 """bench.scaling's arithmetic (issue 52): per-job costs, efficiency and Ray's overhead from
-the cases, and the paper scale costed from them (hand-made cases; no backend runs)."""
+the cases, and the paper scale costed from them (hand-made cases; no backend runs); and the
+bench's workloads (bench.workloads): each a stage's own jobs on the bench's seed, only the
+conditions it may run without a trained network (built, never run)."""
 
 from __future__ import annotations
 
 import pytest
 
+from clutterbench.bench import scaling
 from clutterbench.bench.scaling import (
     CASES,
     cost_markdown,
@@ -13,6 +16,10 @@ from clutterbench.bench.scaling import (
     stage_jobs,
     trials_target,
 )
+from clutterbench.bench.workloads import SEED, WORKLOADS, scale_params, workload_jobs
+from clutterbench.config import load_section
+from clutterbench.errors import ClutterbenchError
+from clutterbench.trials.config import TrialsConfig
 
 
 def _case(workload: str, backend: str, workers: int, wall: float, start: float = 0.0) -> dict:
@@ -79,11 +86,9 @@ def test_the_trials_workload_is_the_stages_mix_of_network_free_planners():
     """The bench's trials jobs cycle through every default condition whose planner needs no
     network (the search oracles, the truth-map planners, physics from depth, random,
     pull_target), so its per-episode cost weighs them as the stage does."""
-    from clutterbench.bench.scaling import NETWORK_PLANNERS, _params, mix_conditions, workload_jobs
-    from clutterbench.config import load_section
-    from clutterbench.trials.config import TrialsConfig
+    from clutterbench.bench.workloads import NETWORK_PLANNERS, mix_conditions
 
-    trials = load_section(TrialsConfig, "trials", _params("default"))
+    trials = load_section(TrialsConfig, "trials", scale_params("default"))
     names = mix_conditions(trials)
     planners = {trials.conditions[n].planner for n in names}
     assert {"oracle", "oracle_hold", "multi_step_pull_truth", "physics_from_depth"} <= planners
@@ -98,11 +103,9 @@ def test_the_trials_workload_is_the_stages_mix_of_network_free_planners():
 def test_the_ch4_and_slides_workloads_are_the_stages_jobs():
     """trials_ch4: the stage's random and oracle conditions round-robin (the risk planner reads
     a network); slides: one pile per job, as the slides stage fans them out."""
-    from clutterbench.bench.scaling import CH4_NETWORK_FREE, _params, workload_jobs
-    from clutterbench.config import load_section
-    from clutterbench.trials.config import TrialsConfig
+    from clutterbench.bench.workloads import CH4_NETWORK_FREE
 
-    trials = load_section(TrialsConfig, "trials", _params("default"))
+    trials = load_section(TrialsConfig, "trials", scale_params("default"))
     names = [k for k, c in trials.ch4_conditions.items() if c.planner in CH4_NETWORK_FREE]
     assert {trials.ch4_conditions[n].planner for n in names} == {"random", "oracle"}
     _, jobs, units = workload_jobs("trials_ch4", "default", 0, 0, len(names) + 1)
@@ -113,3 +116,139 @@ def test_the_ch4_and_slides_workloads_are_the_stages_jobs():
     assert all(j["model_path"] is None for j in jobs)
     _, piles, units = workload_jobs("slides", "default", 3, 0, 0)
     assert units == len(piles) == 3 and len({p["seed"] for p in piles}) == 3
+
+
+def test_the_ch5_workload_is_the_stages_jobs_of_its_network_free_conditions():
+    """trials_ch5: the stage's own jobs (trials.ch5.ch5_jobs) of the conditions that read
+    neither the collapse map network nor the detector, on the bench's seed, round-robin;
+    their oracles do not also simulate the detector's view (that needs its network)."""
+    import dataclasses
+
+    from clutterbench.bench.workloads import ch5_network_free
+    from clutterbench.sim.config import SimConfig
+    from clutterbench.trials.ch5 import ch5_jobs, run_ch5_episode
+
+    params = scale_params("tiny")
+    trials = load_section(TrialsConfig, "trials", params)
+    sim = load_section(SimConfig, "sim", params)
+    names = [k for k, c in trials.ch5_conditions.items() if ch5_network_free(c)]
+    conds = [trials.ch5_conditions[n] for n in names]
+    assert {c.planner for c in conds} == {"oracle", "oracle_no_contact"}
+    assert {c.perception for c in conds} == {"clusters"}
+    fn, jobs, units = workload_jobs("trials_ch5", "tiny", 0, 0, len(names) + 1)
+    assert fn is run_ch5_episode and units == len(jobs) == len(names) + 1
+    assert [j["condition"] for j in jobs] == [f"bench_{n}" for n in names + names[:1]]
+    assert [j["index"] for j in jobs] == [0] * len(names) + [1]
+    first = trials.ch5_conditions[names[0]]
+    own = ch5_jobs(
+        f"bench_{names[0]}",
+        dataclasses.replace(first, episodes=2),
+        trials.ch5,
+        trials.streams[first.stream],
+        SEED,
+        sim.physics,
+        sim.camera,
+        trials.max_attempts,
+        False,
+        0.5,
+        first.stream.removeprefix("ch5_"),
+        False,
+        collapse_free=trials.collapse_free,
+    )
+    assert jobs[0] == own[0] and jobs[-1] == own[1]
+    assert all(j["seed"] == SEED and not j["oracle_detector"] for j in jobs)
+
+
+def test_the_ch3_workload_is_the_stages_games_without_the_convnet():
+    """trials_ch3: the stage's own jobs (trials.ch3.ch3_jobs) of the variants that read no
+    ConvNet, game g of each on the pile of the bench's seed stream, round-robin."""
+    from clutterbench.bench.workloads import CH3_NETWORK_FREE
+    from clutterbench.data.slides import pile_seed
+    from clutterbench.trials.ch3 import run_ch3_game
+
+    fn, jobs, units = workload_jobs("trials_ch3", "tiny", 0, 0, 4)
+    assert fn is run_ch3_game and units == len(jobs) == 4
+    assert [j["variant"] for j in jobs] == ["no_convnet", "random", "oracle", "no_convnet"]
+    assert set(CH3_NETWORK_FREE) == {"no_convnet", "random", "oracle"}
+    assert [j["game"] for j in jobs] == [0, 0, 0, 1]
+    assert [j["seed"] for j in jobs] == [pile_seed(SEED, "ch3_games", g) for g in (0, 0, 0, 1)]
+    assert all(j["model"] is None and not j["mcap_images"] for j in jobs)
+    assert jobs[0]["cfg"].games.variants == ("no_convnet",)
+
+
+@pytest.fixture
+def bare(root, tmp_path, monkeypatch):
+    """A working directory with the project's params and no trained network."""
+    (tmp_path / "params.yaml").symlink_to(root / "params.yaml")
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def test_the_arm_workload_runs_the_arm_conditions_whose_network_exists(bare):
+    """trials_arm: every arm condition repeats a network planner, so the workload runs those
+    whose network is trained (here only ch4_various: various_5_arm), as the stage builds
+    them (executor arm, the chapter said), on the bench's seed; none: it cannot run."""
+    import importlib.util
+
+    from clutterbench.bench.workloads import unavailable
+    from clutterbench.trials.arm import run_arm_episode
+
+    if importlib.util.find_spec("mani_skill") is None:
+        pytest.skip("ManiSkill is not installed (the workload is skipped without it)")
+    with pytest.raises(ClutterbenchError, match="no arm condition can run"):
+        workload_jobs("trials_arm", "tiny", 0, 0, 2)
+    why = unavailable("trials_arm", "tiny")
+    assert why is not None and "best.pt missing" in why
+    (bare / "models/ch4_various").mkdir(parents=True)
+    (bare / "models/ch4_various/best.pt").touch()
+    assert unavailable("trials_arm", "tiny") is None
+    fn, jobs, units = workload_jobs("trials_arm", "tiny", 0, 0, 2)
+    assert fn is run_arm_episode and units == len(jobs) == 2
+    assert [j["condition"] for j in jobs] == ["bench_various_5_arm"] * 2
+    assert [j["index"] for j in jobs] == [0, 1]
+    assert all(j["chapter"] == 4 and j["cond"].executor == "arm" for j in jobs)
+    assert all(j["seed"] == SEED and j["cond"].planner == "risk" for j in jobs)
+    # the ch. 6 conditions' network without the support stage's thresholds: still not run
+    (bare / "models/cp_focal").mkdir()
+    (bare / "models/cp_focal/best.pt").touch()
+    _, jobs, _ = workload_jobs("trials_arm", "tiny", 0, 0, 2)
+    assert {j["condition"] for j in jobs} == {"bench_various_5_arm"}
+
+
+def test_the_bench_skips_a_workload_it_cannot_run_with_a_line(bare, monkeypatch, capsys):
+    pytest.importorskip("ray")
+    monkeypatch.setattr(scaling, "WORKLOADS", ("trials_arm",))
+    result = scaling.bench_ray("tiny", out_dir=bare / "out")
+    assert result["cases"] == [] and "trials_arm" in result["skipped"]
+    assert "bench ray: trials_arm skipped (" in capsys.readouterr().out
+    rows = {r["stage"]: r for r in paper_cost(result)["rows"]}
+    assert "cpu_hours" not in rows["trials_arm"] and "skipped" in rows["trials_arm"]
+    line = next(x for x in cost_markdown(paper_cost(result)) if x.startswith("| trials_arm |"))
+    assert "not measured by this bench (skipped: " in line
+
+
+def test_the_arm_episodes_flag_is_trials_arms_job_count(monkeypatch):
+    calls = []
+    monkeypatch.setattr(scaling, "bench_ray", lambda *a: calls.append(a))
+    scaling.main(["--episodes", "9", "--arm-episodes", "2"])
+    scaling.main([])
+    assert [c[3] for c in calls] == [9, 16] and [c[5] for c in calls] == [2, 4]
+
+
+def test_every_workload_costs_its_stage(bench):
+    """With every workload measured, every simulation stage's row is costed, and a job's
+    cost says what it is (trials_arm: the conditions the bench ran)."""
+    cases = [
+        _case(w, b, n, WALLS[(b, n)], 3.0 if b == "ray" else 0.0)
+        | {"conditions": ["bench_various_5_arm"] if w == "trials_arm" else []}
+        for w in WORKLOADS
+        for b, n in CASES
+    ]
+    full = bench | {"cases": cases, "derived": derived(cases)}
+    assert set(full["derived"]) == set(WORKLOADS)
+    rows = {r["stage"]: r for r in paper_cost(full)["rows"]}
+    assert all("cpu_hours" in r for r in rows.values())
+    assert "oracle_no_contact" in rows["trials_ch5"]["cost_of"]
+    assert "no_convnet" in rows["trials_ch3"]["cost_of"]
+    assert rows["trials_arm"]["cost_of"].startswith("an arm-level episode (Pandas) of various_5")
+    assert not any("not measured" in line for line in cost_markdown(paper_cost(full)))

@@ -7,9 +7,10 @@ support-graph latency and wall time per trial (`trials`), a Yamakuzushi game's p
 (`ch3`), an arm-level step against the kinematic one (`arm`), the physics-from-depth
 planner's decision time per step (`physics_depth`), every registered environment made
 with defaults, reset and stepped (`envs`), and the same simulation jobs on both parallel
-backends, processes and Ray, with 1 and 2 workers (`ray`: `bench/scaling.py`, which also
-costs the paper scale from them). Results go to reports/bench/: one
-JSON per part and a markdown table beside most; each records the CPU model it ran on.
+backends, processes and Ray, with 1 and 2 workers (`ray`: `bench/scaling.py`, its
+workloads built in `bench/workloads.py`; it also costs the paper scale from them). Results go
+to reports/bench/: one JSON per part and a markdown table beside most; each records the CPU
+model it ran on.
 """
 
 from __future__ import annotations

@@ -2,29 +2,33 @@
 1 and 2 workers -> reports/bench/ray.{json,md}; `--cost`: the paper scale costed from those
 measurements -> reports/bench/paper_cost.{json,md} (docs/scaling.md).
 
-Four workloads, each run whole on every backend x workers, each case in a fresh process (as a
-stage runs it): a generation shard set (`generate`: shards of the ch6 dataset's scenes,
+Seven workloads (bench/workloads.py: each a stage's own jobs on the bench's own seed), each
+run whole on every backend x workers, each case in a fresh process (as a stage runs it): a
+generation shard set (`generate`: shards of the ch6 dataset's scenes,
 data.generate.shard_arrays), the trials stage's mix (`trials`: ch. 6 episodes of every
 default condition whose planner needs no trained network, round-robin, so the search oracles,
 the truth-map planners and physics from depth weigh as in the stage; mix_conditions), the
-slides stage's piles (`slides`: `--shards` piles, data.slides.label_pile) and the trials_ch4
-stage's network-free conditions (`trials_ch4`: random and oracle trials, round-robin). Every
-job times itself in its worker; a case's wall time includes starting its workers (a pool, or
-a local Ray instance and its workers) and shutting them down. Measures per case: jobs per
-second, overhead per job (wall time not spent in jobs, the jobs' time spread over the
+slides stage's piles (`slides`: `--shards` piles, data.slides.label_pile), the network-free
+conditions of trials_ch4 (`trials_ch4`: random and oracle trials), of trials_ch5
+(`trials_ch5`: the oracles on the generator's clusters) and of trials_ch3 (`trials_ch3`:
+Yamakuzushi games without the ConvNet), each round-robin, and `--arm-episodes` arm-level
+episodes of the trials_arm stage's conditions whose networks are trained (`trials_arm`;
+skipped, with a printed line, when none is: every arm condition repeats a network planner).
+Every job times itself in its worker; a case's wall time includes starting its workers (a
+pool, or a local Ray instance and its workers) and shutting them down. Measures per case: jobs
+per second, overhead per job (wall time not spent in jobs, the jobs' time spread over the
 workers; starting the workers and their renderers included, a local Ray instance's own start
 and stop not: that is given apart), parallel efficiency (1-worker wall / (2 x 2-worker wall))
 and whether every case gave the same bytes.
 
     python -m clutterbench.bench.scaling [--scale default] [--shards 8] [--shard-size 5]
-                                         [--episodes 16]
+                                         [--episodes 16] [--arm-episodes 4]
     python -m clutterbench.bench.scaling --cost      # after the bench: paper_cost.md
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import hashlib
 import json
 import os
@@ -37,16 +41,21 @@ from typing import Any
 import numpy as np
 
 from clutterbench.bench import header, write_result
-from clutterbench.config import load_params, load_section
+from clutterbench.bench.workloads import (
+    WORKLOADS,
+    job_conditions,
+    scale_params,
+    unavailable,
+    workload_jobs,
+)
+from clutterbench.config import load_section
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import read_json, write_json, write_text
 from clutterbench.parallel import BACKENDS, ParallelConfig, connect_ray, map_in_workers
 from clutterbench.platform_info import cpu_description
 
 OUT = Path("reports/bench")
-WORKLOADS = ("generate", "trials", "slides", "trials_ch4")
 CASES = [(b, w) for b in ("processes", "ray") for w in (1, 2)]
-SEED = 99  # the bench's own scenes, no stage's
 CLUSTER_NODES = (1, 4, 16)
 CLUSTER_CORES = 16
 """The paper-scale table's Ray clusters: N nodes of 16 cores."""
@@ -69,149 +78,6 @@ def _digest(result: Any) -> str:
     else:
         h.update(json.dumps(result.record, sort_keys=True).encode())
     return h.hexdigest()
-
-
-def _params(scale: str) -> dict[str, Any]:
-    params = load_params("params.yaml")
-    return {**params, "base": {**params["base"], "scale": scale}}
-
-
-NETWORK_PLANNERS = ("single_step", "multi_step", "bimanual", "multi_step_pull", "bimanual_pull")
-"""The ch. 6 planners that read a trained network: left out of the bench's trials mix (the
-bench runs before, or without, any training)."""
-
-
-def mix_conditions(trials: Any) -> list[str]:
-    """The trials stage's conditions whose planner needs no trained network, in params order."""
-    return [k for k, c in trials.conditions.items() if c.planner not in NETWORK_PLANNERS]
-
-
-def round_robin(by_condition: list[list[dict[str, Any]]], n: int) -> list[dict[str, Any]]:
-    """The first `n` jobs taken one per condition in turn (each list as long as the first)."""
-    return [js[i] for i in range(len(by_condition[0])) for js in by_condition][:n]
-
-
-def workload_jobs(
-    workload: str, scale: str, shards: int, shard_size: int, episodes: int
-) -> tuple[Any, list[dict[str, Any]], int]:
-    """(job function, jobs, units): units are scenes (generate) or episodes (trials)."""
-    from clutterbench.sim.config import SimConfig
-    from clutterbench.trials.config import TrialsConfig
-
-    params = _params(scale)
-    sim = load_section(SimConfig, "sim", params)
-    trials = load_section(TrialsConfig, "trials", params)
-    if workload == "generate":
-        from clutterbench.data.config import GenerateConfig
-        from clutterbench.data.generate import shard_arrays
-
-        gen = load_section(GenerateConfig, "generate", params)
-        pull = (trials.ch6.pull_increment_m, trials.ch6.grasp_lift_m)
-        jobs = [
-            {
-                "shard": k,
-                "indices": list(range(k * shard_size, (k + 1) * shard_size)),
-                "ds": gen.datasets["ch6"],
-                "sim": sim,
-                "seed": SEED,
-                "dataset": "bench",
-                "digest": "bench",
-                "max_attempts": gen.max_attempts,
-                "pull": pull,
-            }
-            for k in range(shards)
-        ]
-        return shard_arrays, jobs, shards * shard_size
-    if workload == "slides":
-        return _slide_jobs(params, shards)
-    if workload == "trials_ch4":
-        return _ch4_jobs(params, trials, sim, episodes)
-    from clutterbench.planning.support import SupportParams
-    from clutterbench.trials.ch6 import ch6_jobs, run_ch6_episode
-    from clutterbench.trials.config import ConditionConfig
-
-    names = mix_conditions(trials)
-    if not names:
-        raise ClutterbenchError("bench trials: no ch. 6 condition without a network to run")
-    support = SupportParams("coverage", 0.5, 0.3, 2, 0.0)  # the truth planners' graph rule
-    per = -(-episodes // len(names))  # episodes per condition, enough for round_robin
-    by_condition = []
-    for name in names:
-        cond = trials.conditions[name]
-        cond = ConditionConfig(planner=cond.planner, stream=cond.stream, episodes=per)
-        by_condition.append(
-            ch6_jobs(
-                f"bench_{name}",
-                cond,
-                trials,
-                trials.streams[cond.stream],
-                SEED,
-                sim.physics,
-                sim.camera,
-                support,
-                0.5,
-                Path("models/none/best.pt"),  # no planner of the mix loads a network
-            )
-        )
-    jobs = round_robin(by_condition, episodes)
-    return run_ch6_episode, jobs, episodes
-
-
-def _slide_jobs(params: dict[str, Any], piles: int) -> tuple[Any, list[dict[str, Any]], int]:
-    """The slides stage's jobs (data.slides.generate_slide_dataset): one pile each."""
-    from clutterbench.data.slide_crops import ScanConfig
-    from clutterbench.data.slides import SlideDataConfig, label_pile, pile_seed
-    from clutterbench.sim.pile_config import PileCameraConfig, PileConfig, SlideConfig
-
-    def section(cls, name):
-        return load_section(cls, f"yamakuzushi.{name}", params)
-
-    data = section(SlideDataConfig, "data")
-    fixed = {
-        "pile": section(PileConfig, "pile"),
-        "slide": section(SlideConfig, "slide"),
-        "camera": section(PileCameraConfig, "camera"),
-        "scan": section(ScanConfig, "scan"),
-        "slides_per_pile": data.slides_per_pile,
-    }
-    jobs = [{"index": i, "seed": pile_seed(SEED, "ch3_data", i)} | fixed for i in range(piles)]
-    return label_pile, jobs, piles
-
-
-CH4_NETWORK_FREE = ("random", "oracle")
-"""The ch. 4 planners the bench's trials_ch4 workload runs (the risk planner reads a network)."""
-
-
-def _ch4_jobs(
-    params: dict[str, Any], trials: Any, sim: Any, episodes: int
-) -> tuple[Any, list[dict[str, Any]], int]:
-    """The trials_ch4 stage's network-free conditions, `episodes` trials round-robin."""
-    from clutterbench.trials.ch4 import ch4_jobs, run_ch4_episode
-
-    names = [k for k, c in trials.ch4_conditions.items() if c.planner in CH4_NETWORK_FREE]
-    if not names:
-        raise ClutterbenchError("bench trials_ch4: no ch. 4 condition without a network to run")
-    per = -(-episodes // len(names))  # episodes per condition, enough for round_robin
-    by_condition = []
-    for name in names:
-        cond = trials.ch4_conditions[name]
-        cond = dataclasses.replace(cond, episodes=per)
-        by_condition.append(
-            ch4_jobs(
-                f"bench_{name}",
-                cond,
-                trials.ch4,
-                trials.streams[cond.stream],
-                SEED,
-                sim.physics,
-                sim.camera,
-                trials.max_attempts,
-                False,
-                collapse_free=trials.collapse_free,
-            )
-        )
-    jobs = round_robin(by_condition, episodes)
-    return run_ch4_episode, jobs, episodes
 
 
 def run_case(
@@ -251,6 +117,7 @@ def run_case(
         "jobs_per_s": len(jobs) / wall,
         "overhead_per_job_s": (wall - start_s - shutdown_s - sum(job_s) / workers) / len(jobs),
         "digest": digest,
+        "conditions": job_conditions(jobs),
     }
 
 
@@ -260,25 +127,36 @@ def bench_ray(
     shard_size: int = 5,
     episodes: int = 16,
     out_dir: Path = OUT,
+    arm_episodes: int = 4,
 ) -> dict[str, Any]:
-    """Every workload x backend x workers, each case in a fresh process -> ray.{json,md}."""
+    """Every workload x backend x workers, each case in a fresh process -> ray.{json,md}.
+    `episodes`: the jobs of every trials workload but trials_arm, which runs `arm_episodes`
+    (an arm-level episode takes seconds to a minute). A workload that cannot run here (no
+    condition it may run: bench.workloads.unavailable) is skipped with a printed line."""
     try:
         import ray  # noqa: F401
     except ImportError:
         print("bench ray: skipped (ray is not installed; make setup installs it)")
         return {}
-    cases = []
+    cases, skipped = [], {}
     for workload in WORKLOADS:
+        why = unavailable(workload, scale)
+        if why is not None:
+            print(f"bench ray: {workload} skipped ({why})")
+            skipped[workload] = why
+            continue
+        n = arm_episodes if workload == "trials_arm" else episodes
         for backend, workers in CASES:
-            args = [workload, backend, str(workers), scale, str(shards), str(shard_size)]
+            args = [workload, backend, str(workers), scale, str(shards), str(shard_size), str(n)]
             cmd = [sys.executable, "-m", "clutterbench.bench.scaling", "--case", *args]
             env = os.environ | {"PYTHONHASHSEED": "0"}  # as a stage runs (clutterbench.stage)
-            out = subprocess.run(cmd + [str(episodes)], capture_output=True, text=True, env=env)
+            out = subprocess.run(cmd, capture_output=True, text=True, env=env)
             if out.returncode != 0:
                 tail = (out.stderr.strip().splitlines() or ["(no output)"])[-1]
                 raise ClutterbenchError(f"bench ray: {workload} {backend} x{workers}: {tail}")
             cases.append(json.loads(out.stdout.strip().splitlines()[-1]))
-    result = {"scale": scale, "cases": cases, "derived": derived(cases)} | cpu_description()
+    result = {"scale": scale, "cases": cases, "derived": derived(cases), "skipped": skipped}
+    result |= cpu_description()
     write_result(out_dir, "ray", result, ray_markdown(result))
     return result
 
@@ -301,8 +179,13 @@ def derived(cases: list[dict[str, Any]]) -> dict[str, Any]:
             "ray_overhead_per_task_s": by[("ray", 2)]["overhead_per_job_s"]
             - by[("processes", 2)]["overhead_per_job_s"],
             "same_bytes": len({c["digest"] for c in by.values()}) == 1,
+            "conditions": one.get("conditions", []),
         }
     return out
+
+
+UNITS = {"generate": "scene", "slides": "pile", "trials_ch3": "game"}
+"""What a workload's unit is (the others: an episode)."""
 
 
 def ray_markdown(result: dict[str, Any]) -> list[str]:
@@ -332,12 +215,14 @@ def ray_markdown(result: dict[str, Any]) -> list[str]:
         "|---|---|---|---|---|---|---|",
     ]
     for workload, d in result["derived"].items():
-        unit = {"generate": "scene", "slides": "pile"}.get(workload, "episode")
+        unit = UNITS.get(workload, "episode")
         lines.append(
             f"| {workload} | {d['unit_s']:.3f} per {unit} | {d['efficiency']['processes']:.2f} "
             f"| {d['efficiency']['ray']:.2f} | {d['ray_overhead_per_task_s']:.3f} | "
             f"{d['ray_fixed_s']:.2f} | {'yes' if d['same_bytes'] else 'NO'} |"
         )
+    for workload, why in result.get("skipped", {}).items():
+        lines += ["", f"Skipped: `{workload}` ({why})."]
     target = trials_target(result)
     if target is not None:
         lines += [
@@ -368,7 +253,7 @@ def stage_jobs(scale: str) -> dict[str, int]:
     from clutterbench.trials.ch3_config import Ch3Config
     from clutterbench.trials.config import SupportEvalConfig, TrialsConfig
 
-    params = _params(scale)
+    params = scale_params(scale)
     gen = load_section(GenerateConfig, "generate", params)
     trials = load_section(TrialsConfig, "trials", params)
     ch3 = load_section(Ch3Config, "yamakuzushi", params)
@@ -390,8 +275,22 @@ COSTED = {
     "trials": ("trials", "episodes (every ch. 6 condition)", "an episode of the stage's mix"),
     "slides": ("slides", "piles", "a pile at the bench's slides per pile"),
     "trials_ch4": ("trials_ch4", "trials", "a random or oracle trial"),
+    "trials_ch5": (
+        "trials_ch5",
+        "episodes (every ch. 5 condition)",
+        "a network-free ch. 5 episode (oracle, oracle_no_contact on the generator's clusters, "
+        "not also simulating the detector's view)",
+    ),
+    "trials_arm": (
+        "trials_arm",
+        "episodes (every arm condition)",
+        "an arm-level episode (Pandas) of {conditions}, with their trained networks",
+    ),
+    "trials_ch3": ("trials_ch3", "games (every variant)", "a no_convnet, random or oracle game"),
 }
-"""Stages costed from a bench workload: (workload, what a job is, what its cost is)."""
+"""Stages costed from a bench workload: (workload, what a job is, what its cost is; a
+`{conditions}` in it: the conditions the bench ran, which for trials_arm depend on the
+networks trained where it ran)."""
 
 
 def paper_cost(bench: dict[str, Any], scale: str = "paper") -> dict[str, Any]:
@@ -402,14 +301,18 @@ def paper_cost(bench: dict[str, Any], scale: str = "paper") -> dict[str, Any]:
     rows = []
     for stage, n in jobs.items():
         row: dict[str, Any] = {"stage": stage, "jobs": n}
-        if stage in COSTED and COSTED[stage][0] in bench["derived"]:
-            workload, what, cost_of = COSTED[stage]
+        workload = COSTED[stage][0] if stage in COSTED else None
+        if workload in bench.get("skipped", {}):
+            row["skipped"] = bench["skipped"][workload]
+        if workload in bench["derived"]:
+            _, what, cost_of = COSTED[stage]
             d = bench["derived"][workload]
+            ran = [c.removeprefix("bench_") for c in d.get("conditions", [])]
             cpu_s = n * d["unit_s"]
             row |= {
                 "what": what,
                 "unit_s": d["unit_s"],
-                "cost_of": cost_of,
+                "cost_of": cost_of.format(conditions=", ".join(ran) or "its conditions"),
                 "cpu_hours": cpu_s / 3600,
                 "wall_h_2_cores": cpu_s / (2 * d["efficiency"]["processes"]) / 3600,
             }
@@ -441,7 +344,8 @@ def cost_markdown(cost: dict[str, Any]) -> list[str]:
     ]
     for r in cost["rows"]:
         if "cpu_hours" not in r:
-            cells = ["not measured by this bench"] + [""] * (2 + len(ray_cols))
+            why = f" (skipped: {r['skipped']})" if "skipped" in r else ""
+            cells = [f"not measured by this bench{why}"] + [""] * (2 + len(ray_cols))
             lines.append(f"| {r['stage']} | {r['jobs']:,} | " + " | ".join(cells) + " |")
             continue
         walls = [f"{r[f'wall_h_ray_{n}x{CLUSTER_CORES}']:.2f}" for n in CLUSTER_NODES]
@@ -474,6 +378,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--shards", type=int, default=8)
     parser.add_argument("--shard-size", type=int, default=5)
     parser.add_argument("--episodes", type=int, default=16)
+    parser.add_argument(
+        "--arm-episodes", type=int, default=4, help="trials_arm's jobs (slow: Pandas)"
+    )
     parser.add_argument("--out", type=Path, default=OUT)
     parser.add_argument("--cost", action="store_true", help="write paper_cost.md from ray.json")
     parser.add_argument("--case", nargs=7, help=argparse.SUPPRESS)
@@ -489,7 +396,9 @@ def main(argv: list[str] | None = None) -> None:
             write_paper_cost(args.out)
             print(f"wrote {args.out / 'paper_cost.md'}")
         else:
-            bench_ray(args.scale, args.shards, args.shard_size, args.episodes, args.out)
+            bench_ray(
+                args.scale, args.shards, args.shard_size, args.episodes, args.out, args.arm_episodes
+            )
             print(f"wrote {args.out / 'ray.md'}")
     except ClutterbenchError as exc:
         print(f"error: {exc}", file=sys.stderr)
