@@ -112,3 +112,38 @@ def test_a_learned_edge_leaves_with_its_box():
     # box 1 is out: its edge is gone, the target is a leaf again
     gone = Observation(obs.depth_m, np.where(obs.instance == 2, 0, obs.instance), obs.camera)
     assert planner.decide(gone, 0, frozenset()).pull == 0
+
+
+def test_a_watched_pull_stops_when_a_neighbour_moves_in_depth():
+    """pull_watch_m: box 1 comes 6 mm closer on its pixels seen in both images (box 0, the
+    pulled one, hides part of it: occlusion alone is no motion) -> the pull stops, naming
+    box 1; 2 mm of motion, or no watch, leaves the prediction (nothing) alone."""
+    from clutterbench.planning.extraction import depth_changes
+
+    obs, boxes = _scene(extra_leaf=False)
+    phase = {"mid": False}  # the prediction never fears anything here
+
+    def moved(by_m: float) -> Observation:
+        depth, inst = obs.depth_m.copy(), obs.instance.copy()
+        depth[boxes[1]] -= by_m
+        inst[8:20, 8:10] = 1  # the pulled box 0, closer, now covers part of box 1
+        depth[8:20, 8:10] = 0.5
+        return Observation(depth, inst, obs.camera)
+
+    assert depth_changes(obs, moved(0.006), 1)[1] == pytest.approx(0.006, abs=1e-6)
+    assert depth_changes(obs, moved(0.0), 1) == {0: 0.0, 1: 0.0}  # box 0's own pixels too
+    for watch, by_m, stops in [(0.004, 0.006, True), (0.004, 0.002, False), (None, 0.006, False)]:
+        planner = CollapseGraphPlanner(
+            _dragging_predictor(boxes, phase),
+            PARAMS,
+            0.5,
+            1,
+            learn_from_aborts=True,
+            watch_m=watch,
+        )
+        assert planner.decide(obs, 0, frozenset()).pull == 0
+        assert planner.collapse_score(obs, 0) == 0.0  # the decision's image: nothing moved
+        cp = planner.collapse_score(moved(by_m), 0)
+        assert (cp > 0.5) == stops, (watch, by_m)
+        if stops:
+            assert cp == pytest.approx(1.006, abs=1e-6) and planner._threat == (0, 1, cp)

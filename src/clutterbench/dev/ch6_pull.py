@@ -2,6 +2,7 @@
 
     python -m clutterbench.dev.ch6_pull                       # make dev-ch6-pull
     python -m clutterbench.dev.ch6_pull ch6_pull_thresholds   # make dev-ch6-pull-thresholds
+    python -m clutterbench.dev.ch6_pull ch6_pull_watch        # make dev-ch6-pull-watch
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
 rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull
@@ -20,7 +21,8 @@ planner reads the collapse predictor, models/<trials.ch6.model> (dvc repro trial
 first; the truth-map planners and the oracles need no network). Writes
 reports/dev/<section>.{json,md}; not a dvc stage. Sections: ch6_pull (what an abort teaches,
 what the pull maps mean), ch6_pull_thresholds (the pull-head CP planners' thresholds,
-trials.ch6.pull_prob_threshold / pull_score_threshold).
+trials.ch6.pull_prob_threshold / pull_score_threshold), ch6_pull_watch (their watch of the
+pull in depth, trials.ch6.pull_watch_m).
 """
 
 from __future__ import annotations
@@ -183,6 +185,7 @@ def what_it_shows(comps: Sequence[Mapping[str, Any]]) -> str:
 TITLES = {
     "ch6_pull": "what the ch. 6 pull planners do after an abort, and what their maps mean",
     "ch6_pull_thresholds": "the thresholds of the ch. 6 pull-head CP planners",
+    "ch6_pull_watch": "the ch. 6 pull-head CP planners watching their pull in depth",
 }
 
 

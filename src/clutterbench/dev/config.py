@@ -89,7 +89,13 @@ class Ch5PlannerConfig:
             raise ValueError("ch5_planner.perceptions: no perception to run the planner with")
 
 
-CH6_VARIED = ("abort_response", "pull_map_meaning", "pull_prob_threshold", "pull_score_threshold")
+CH6_VARIED = (
+    "abort_response",
+    "pull_map_meaning",
+    "pull_prob_threshold",
+    "pull_score_threshold",
+    "pull_watch_m",
+)
 """The trials.ch6 fields a ch. 6 pull-planner variant may set."""
 
 
@@ -171,6 +177,11 @@ class DevConfig:
     )
     """The same recheck over the pull-head CP planners' thresholds (python -m
     clutterbench.dev.ch6_pull ch6_pull_thresholds)."""
+    ch6_pull_watch: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(variants={"off": {}, "on": {}})
+    )
+    """The same recheck over the pull-head CP planners' watch of their pull
+    (trials.ch6.pull_watch_m; python -m clutterbench.dev.ch6_pull ch6_pull_watch)."""
 
     def __post_init__(self) -> None:
         for name in self.streams:
@@ -182,6 +193,7 @@ class DevConfig:
             ("perturbed_fit", self.perturbed_fit.streams),
             ("ch6_pull", self.ch6_pull.streams),
             ("ch6_pull_thresholds", self.ch6_pull_thresholds.streams),
+            ("ch6_pull_watch", self.ch6_pull_watch.streams),
         ):
             for name in names:
                 if name not in self.streams:

@@ -71,6 +71,7 @@ class CollapseGraphPlanner:
         bimanual: bool = False,
         clear_hold_load: bool = False,
         learn_from_aborts: bool = False,
+        watch_m: float | None = None,
     ):
         self.predict, self.params, self.cp_max = predict, params, cp_max
         self.min_pixels, self.bimanual = min_pixels, bimanual
@@ -82,6 +83,14 @@ class CollapseGraphPlanner:
         box being pulled (an edge of the CPG for the rest of the episode), so the plan
         removes it first or, bimanual, holds it, instead of skipping the pulled box until
         the graph has nothing left (Algorithm 1 blocks the box and re-plans)."""
+        self.watch_m = watch_m
+        """Issue 50 (not the thesis): also watch the pull. Before each increment, a box other
+        than the pulled and the held one whose pixels, seen in both the decision's
+        observation and the present one, moved in depth by more than this (median, m) stops
+        the pull as a collapse score over cp_max does (score: 1 + that depth change, above
+        any share), naming that box. None: the prediction alone (Algorithm 1)."""
+        self._decided_on: Observation | None = None
+        """The observation of the last decision: where the watched pull started."""
         self.learned: dict[tuple[int, int], float] = {}
         """(supporter, supported) -> collapse score: the edges the aborts taught."""
         self._threat: tuple[int, int, float] | None = None
@@ -147,6 +156,7 @@ class CollapseGraphPlanner:
         }
         if self.learn_from_aborts:
             state["learned"] = [[a, b, round(v, 4)] for (a, b), v in sorted(self.learned.items())]
+        self._decided_on = obs
         return Decision(plan.pull, plan.hold, state)
 
     def _learn(self, threat: tuple[int, int, float]) -> bool:
@@ -186,11 +196,32 @@ class CollapseGraphPlanner:
             for j in range(len(ids))
             if j != k and contact[j] and ids[j] != hold
         }
+        start = self._decided_on
+        if self.watch_m is not None and start is not None and start is not obs:
+            moved = {
+                j: 1.0 + change
+                for j, change in depth_changes(start, obs, self.min_pixels).items()
+                if j not in (box, hold) and change > self.watch_m
+            }
+            scores |= {j: max(scores.get(j, 0.0), v) for j, v in moved.items()}
         cp = max(scores.values(), default=0.0)
         if cp > self.cp_max:  # the box it fears for (ties: the smallest id)
             feared = min(scores, key=lambda j: (-scores[j], j))
             self._threat = (box, feared, cp)
         return cp
+
+
+def depth_changes(start: Observation, now: Observation, min_pixels: int) -> dict[int, float]:
+    """Box id -> the median |depth change| (m) over its pixels visible in both observations
+    (at least `min_pixels` of them): how far it moved along the view, from the images alone.
+    A box hidden behind another now (the pulled box coming closer) keeps only its pixels
+    still seen, so occlusion alone is no motion."""
+    out = {}
+    for k in start.visible_boxes(min_pixels):
+        both = (start.instance == k + 1) & (now.instance == k + 1)
+        if both.sum() >= min_pixels:
+            out[k] = float(np.median(np.abs(now.depth_m[both] - start.depth_m[both])))
+    return out
 
 
 class TargetFirstPlanner:

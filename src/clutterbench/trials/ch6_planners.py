@@ -144,6 +144,7 @@ def _cpg_planner(
         bimanual=bimanual,
         clear_hold_load=pull,  # the pull planners clear the held box's load first
         learn_from_aborts=pull and params.abort_response == "learn",
+        watch_m=params.pull_watch_m if pull and spec is None else None,
     )
 
 

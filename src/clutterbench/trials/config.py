@@ -200,6 +200,12 @@ class Ch6TrialParams:
     pull_score_threshold: float | None = bounded(None, gt=0.0, le=1.0)
     """The same planners' support-edge score threshold, and their abort threshold cp_max
     unless cp_max is set; null: the support stage's choice on validation scenes."""
+    pull_watch_m: float | None = bounded(None, gt=0.0)
+    """The pull-head CP planners also watch their pull (issue 50): before each increment, a
+    box other than the pulled and held one whose pixels seen at the decision and now moved
+    in depth by more than this (median, m) stops the pull like a collapse score over cp_max
+    (abort_response learn: that box is then taken as carried by the pulled one). The robot's
+    own depth images, no prediction; null: no watch. Chosen on dev streams."""
     pull_map_meaning: Literal["moved", "collapse"] = "moved"
     """What the maps of the pull mark, truth (`*_pull_truth`) and predicted (`*_pull`, the
     collapse predictor's head of that meaning, PULL_MAP_HEADS): moved, every box the pull
