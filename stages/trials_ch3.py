@@ -12,7 +12,7 @@ from clutterbench.io import write_json, write_text
 from clutterbench.parallel import ParallelConfig
 from clutterbench.stage import run_stage
 from clutterbench.trials.ch3 import ch3_jobs, run_ch3_game, slide_rows
-from clutterbench.trials.ch3_config import Ch3Config
+from clutterbench.trials.ch3_config import CONVNET_VARIANTS, Ch3Config
 from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import run_episodes, write_mcap
 from clutterbench.trials.records import write_records
@@ -26,7 +26,7 @@ MODEL = Path("models/slide_convnet/best.pt")
 def trials_ch3(params: dict, base: BaseConfig) -> None:
     cfg = load_section(Ch3Config, "yamakuzushi", params)
     model = None
-    if "convnet" in cfg.games.variants:
+    if set(CONVNET_VARIANTS) & set(cfg.games.variants):  # either reads the ConvNet
         from clutterbench.models.slide_convnet import load_slide_convnet
 
         net, _ = load_slide_convnet(MODEL)  # one clear error before any worker starts

@@ -78,3 +78,24 @@ def test_every_slide_carries_the_named_fields_and_per_piece_motion(games, cfg, t
     for g in read_records(path):
         (row,) = rejudge.rejudge([g], g["moved_threshold_m"], CollapseFreeConfig())
         assert row["success"] == row["strict_success"] == g["success"]
+
+
+def test_a_convnet_variant_alone_still_needs_the_slide_convnet(root, tmp_path):
+    """convnet_no_pomdp reads the ConvNet as convnet does: listed alone, a missing network is
+    one line naming it before any game starts (it once reached the workers as None)."""
+    import shutil
+    import subprocess
+    import sys
+
+    import yaml
+
+    params = yaml.safe_load((root / "params.yaml").read_text())
+    params["base"]["scale"] = "tiny"
+    params["yamakuzushi"]["games"]["variants"] = ["convnet_no_pomdp"]
+    (tmp_path / "params.yaml").write_text(yaml.safe_dump(params))
+    shutil.copytree(root / "stages", tmp_path / "stages")
+    out = subprocess.run(
+        [sys.executable, "stages/trials_ch3.py"], cwd=tmp_path, capture_output=True, text=True
+    )
+    assert out.returncode != 0
+    assert "slide_convnet" in out.stderr.strip().splitlines()[-1]

@@ -38,6 +38,7 @@ from clutterbench.planning.yamakuzushi import (
 )
 from clutterbench.shogi_piece import PIECE_SIZE_M
 from clutterbench.trials import criteria
+from clutterbench.trials.ch3_config import CONVNET_VARIANTS
 from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import EpisodeLog, EpisodeResult
 
@@ -169,7 +170,7 @@ def _oracle_choice(poses: np.ndarray, top: Observation, cfg) -> tuple[Target | N
 def _targets(variant: str, job: dict[str, Any], top: Observation, rng) -> list[Target]:
     cfg = job["cfg"]
     scan: ScanConfig = cfg.scan
-    if variant in ("convnet", "convnet_no_pomdp"):
+    if variant in CONVNET_VARIANTS:
         with flush_denormals():  # as in training (clutterbench.denormals)
             return convnet_targets(_convnet(job["model"]), top, scan, cfg.select)
     if variant == "no_convnet":

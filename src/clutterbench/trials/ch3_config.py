@@ -18,6 +18,8 @@ VARIANTS = ("convnet", "no_convnet", "convnet_no_pomdp", "random", "oracle")
 (the least-occluded piece, then the POMDP); the ConvNet's best piece slid at once, without
 the POMDP (its share); a random candidate slid at once (floor); every candidate slide
 simulated from the present state, the first success kept (ceiling)."""
+CONVNET_VARIANTS = ("convnet", "convnet_no_pomdp")
+"""The variants that read the slide ConvNet (models/slide_convnet)."""
 
 
 @dataclasses.dataclass(frozen=True)
