@@ -201,7 +201,7 @@ def _ch4_jobs(
     params: dict[str, Any], trials: Any, sim: Any, episodes: int
 ) -> tuple[Any, list[dict[str, Any]], int]:
     """The trials_ch4 stage's network-free conditions, `episodes` trials round-robin."""
-    from clutterbench.trials.ch4 import ch4_jobs, run_ch4_episode
+    from clutterbench.trials.ch4 import run_ch4_episode
 
     names = [k for k, c in trials.ch4_conditions.items() if c.planner in CH4_NETWORK_FREE]
     if not names:
@@ -211,22 +211,29 @@ def _ch4_jobs(
     for name in names:
         cond = trials.ch4_conditions[name]
         cond = dataclasses.replace(cond, episodes=per)
-        by_condition.append(
-            ch4_jobs(
-                f"bench_{name}",
-                cond,
-                trials.ch4,
-                trials.streams[cond.stream],
-                SEED,
-                sim.physics,
-                sim.camera,
-                trials.max_attempts,
-                False,
-                collapse_free=trials.collapse_free,
-            )
-        )
+        by_condition.append(_bench_ch4_jobs(name, cond, trials, sim))
     jobs = round_robin(by_condition, episodes)
     return run_ch4_episode, jobs, episodes
+
+
+def _bench_ch4_jobs(name: str, cond: Any, trials: Any, sim: Any) -> list[dict[str, Any]]:
+    """Ch. 4 condition `cond`'s jobs on the bench's seed, without MCAP images, as the
+    trials_ch4 (kinematic) and trials_arm (cond.executor "arm") stages build them."""
+    from clutterbench.trials.ch4 import ch4_jobs
+
+    return ch4_jobs(
+        f"bench_{name}",
+        cond,
+        trials.ch4,
+        trials.streams[cond.stream],
+        SEED,
+        sim.physics,
+        sim.camera,
+        trials.max_attempts,
+        False,
+        trials.arm if cond.executor == "arm" else None,
+        collapse_free=trials.collapse_free,
+    )
 
 
 def ch5_network_free(cond: Any) -> bool:
@@ -311,7 +318,6 @@ def _arm_condition_jobs(
     """Arm condition `name`'s first `episodes` episodes on the bench's seed, built as the
     trials_arm stage builds them; a ClutterbenchError when its network (or a ch. 6
     condition's support thresholds) is missing."""
-    from clutterbench.trials.ch4 import ch4_jobs
     from clutterbench.trials.ch6 import condition_jobs, load_planners
 
     if arm.of in trials.conditions:
@@ -325,20 +331,7 @@ def _arm_condition_jobs(
     cond = dataclasses.replace(trials.ch4_conditions[arm.of], executor="arm", episodes=episodes)
     if cond.model is not None and not Path(f"models/{cond.model}/best.pt").exists():
         raise ClutterbenchError(f"models/{cond.model}/best.pt missing; run train@{cond.model}")
-    jobs = ch4_jobs(
-        f"bench_{name}",
-        cond,
-        trials.ch4,
-        trials.streams[cond.stream],
-        SEED,
-        sim.physics,
-        sim.camera,
-        trials.max_attempts,
-        False,
-        trials.arm,
-        collapse_free=trials.collapse_free,
-    )
-    return [j | {"chapter": 4} for j in jobs]
+    return [j | {"chapter": 4} for j in _bench_ch4_jobs(name, cond, trials, sim)]
 
 
 def arm_conditions(trials: Any, sim: Any) -> tuple[list[str], dict[str, str]]:
