@@ -405,7 +405,7 @@ def test_the_plan_env_replays_a_committed_episode(plan_env, condition, episode):
     assert terminated and info["end"] == rec["end"]
     assert reward == float(rec["success"])
     mine = plan_env.unwrapped.episode_result().record
-    keys = ("end", "success", "strict_success", "judged_steps", "strict_steps")
+    keys = ("end", "success", "strict_success", "counted_steps", "strict_steps")
     assert {k: mine[k] for k in keys} == {k: rec[k] for k in keys}
     # records before issue 50 named it target_out
     assert mine["target_extracted"] == rec.get("target_extracted", rec.get("target_out"))

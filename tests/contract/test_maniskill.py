@@ -157,7 +157,7 @@ def test_an_arm_that_gave_up_after_moving_a_box_is_a_judged_failure():
         THR,
         CF,
     )
-    assert not quiet["judged"] and quiet["success"] is None
+    assert not quiet["judged"] and not quiet["counted"] and quiet["success"] is None
     hit = judge_arm_step(
         PullResult(0, False, False, knocked, knocked, on_shelf, start, fell),
         0,
@@ -167,5 +167,5 @@ def test_an_arm_that_gave_up_after_moving_a_box_is_a_judged_failure():
         CF,
     )
     assert not hit["aborted_before_motion"] and hit["aborted_after_motion"]
-    assert hit["judged"] and hit["success"] is False and hit["n_disturbed"] == 1
+    assert hit["judged"] and hit["counted"] and hit["success"] is False and hit["n_disturbed"] == 1
     assert episode_end(hit, False, True) == "collapse"

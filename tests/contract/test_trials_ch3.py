@@ -65,7 +65,7 @@ def test_every_slide_carries_the_named_fields_and_per_piece_motion(games, cfg, t
     assert slides
     for s in slides:
         assert named <= set(s)
-        assert s["executed"] and s["judged"] and not s["aborted_before_motion"]
+        assert s["executed"] and s["judged"] and s["counted"] and not s["aborted_before_motion"]
         assert s["extracted"] == s["target_out"]
         assert s["success"] == s["strict_success"] == (s["target_out"] and s["others_still"])
         assert s["piece"] not in {e["box"] for e in s["box_motion"]}

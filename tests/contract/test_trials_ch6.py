@@ -228,7 +228,7 @@ def test_rejudging_the_records_at_their_thresholds_gives_the_records(stack3, tmp
     ]
     for r in records:
         for s in r["steps"]:
-            assert s["executed"] or not s["judged"]
+            assert s["judged"] == s["executed"] and (s["executed"] or not s["counted"])
             assert not (s["executed"] and s["aborted_before_motion"])
             assert s["box"] not in {e["box"] for e in s["box_motion"]}
             assert all(set(e) == set(MOTION_FIELDS) for e in s["box_motion"])
@@ -424,9 +424,9 @@ def test_every_planner_gives_a_judged_record(planner, tiny_cp, tiny_cp_heads, ti
         assert rec["support_method"] == f"pull_{rec['rule']}"
     assert rec["success"] == (rec["end"] == "target_out")
     for s in rec["steps"]:
-        expected = (s["extracted"] and s["collapse_free"]) if s["judged"] else None
+        expected = (s["extracted"] and s["collapse_free"]) if s["counted"] else None
         assert s["success"] == expected
-        strict = (s["extracted"] and s["others_still"]) if s["strict_judged"] else None
+        strict = (s["extracted"] and s["others_still"]) if s["strict_counted"] else None
         assert s["strict_success"] == strict
         assert not s["aborted_before_motion"], "a planner picked a box its own rule rejects"
     # the episode stops at its first (collapse-free) failed step

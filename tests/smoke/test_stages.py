@@ -154,7 +154,8 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
             for step in rec["steps"]:
                 assert {"executed", "aborted_before_motion", "aborted_after_motion"} <= set(step)
                 assert {"extracted", "others_still", "success", "success_held"} <= set(step)
-                assert {"judged", "strict_success", "collapse_free", "box_motion"} <= set(step)
+                assert {"judged", "counted", "strict_counted", "collapse_free"} <= set(step)
+                assert {"strict_success", "box_motion"} <= set(step)
                 assert not (step["executed"] and step["aborted_before_motion"])
             # no step follows a (collapse-free) failed one; an abort that disturbed nothing
             # is no failure; the strict episode is a prefix, so strict implies collapse-free
@@ -167,7 +168,7 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
         assert topics.get("/camera/calibration", 0) >= cond.episodes, name
     for rec in ch4:
         assert {"executed", "aborted_before_motion", "success_held", "risk_ties"} <= set(rec)
-        assert {"judged", "strict_success", "box_motion"} <= set(rec)
+        assert {"judged", "counted", "strict_success", "box_motion"} <= set(rec)
         assert rec["valid"] or not rec["success"]  # an invalid action is never a success
     assert (a / "reports/trials_ch4/fig_4_8.png").stat().st_size > 1000
     n63 = len(load_section(ReportConfig, "report", params).table_6_3)

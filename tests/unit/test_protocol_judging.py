@@ -45,14 +45,15 @@ def test_a_stopped_pull_that_drops_its_own_box_off_the_shelf_is_a_collapse():
     r = result([[-0.05, -0.1, -0.2], [0.1, 0.0, 0.05], [0.1, 0.1, 0.05]], [False, True, True])
     step = judge_pull(r, 0, None, frozenset(), 0.005, CF)
     assert step["aborted_after_motion"] and not step["extracted"]
-    assert not step["collapse_free"] and step["judged"] and step["success"] is False
+    assert not step["collapse_free"] and step["counted"] and step["success"] is False
     assert [e["box"] for e in step["box_motion"] if e["held"]] == [0]
 
 
 def test_a_stopped_pull_whose_box_stays_on_the_shelf_is_an_abort():
     r = result([[0.05, -0.1, 0.05], [0.1, 0.0, 0.05], [0.1, 0.1, 0.05]], [True, True, True])
     step = judge_pull(r, 0, None, frozenset(), 0.005, CF)
-    assert step["collapse_free"] and not step["judged"] and step["success"] is None
+    assert step["collapse_free"] and not step["counted"] and step["success"] is None
+    assert step["judged"]  # executed: judged from physics, counted apart as an abort
 
 
 def test_a_box_already_off_the_shelf_is_not_the_next_steps_collapse():

@@ -8,7 +8,7 @@ import pytest
 from clutterbench.sim.pull import PullResult
 from clutterbench.trials.criteria import CollapseFreeConfig, tilt_change_deg
 from clutterbench.trials.judge import disturbance
-from clutterbench.trials.protocol import STEP_FIELDS, episode_end, judge_episode, judged
+from clutterbench.trials.protocol import STEP_FIELDS, counted, episode_end, judge_episode
 from clutterbench.trials.protocol import judge_pull as _judge_pull
 
 THR = 0.005
@@ -75,7 +75,7 @@ def test_an_abort_before_motion_is_not_a_collapse_and_is_not_judged():
         step = judge_pull(r, 0, None, frozenset(), THR)
         assert step["aborted_before_motion"] is True and step["executed"] is False
         assert step["others_still"] is True and step["success"] is None
-        assert not judged(step) and step["judged"] is False
+        assert not counted(step) and step["counted"] is False and step["judged"] is False
         assert episode_end(step | {"box": 0}, False, True) is None
 
 
@@ -83,12 +83,13 @@ def test_an_abort_after_motion_that_moved_nothing_is_an_abort():
     r = _result([0.05, 0.0], [0.05, 0.0], increments=3, aborted=True, extracted=False)
     step = judge_pull(r, 0, None, frozenset(), THR)
     assert step["aborted_after_motion"] and step["executed"] and not step["extracted"]
-    assert step["others_still"] and not judged(step) and step["judged"] is False
+    assert step["others_still"] and not counted(step) and step["counted"] is False
+    assert step["judged"] is True  # executed, so judged from physics: it counts apart
     assert step["success"] is None and step["success_held"] is None  # neither won nor lost
     moved = judge_pull(
         _result([0.05, 0.02], [0.05, 0.02], 3, True, False), 0, None, frozenset(), THR
     )
-    assert judged(moved) and not moved["success"]
+    assert counted(moved) and not moved["success"]
 
 
 def _step(box, success, others_still=None, strict=None, **kw):
@@ -105,7 +106,8 @@ def _step(box, success, others_still=None, strict=None, **kw):
         "others_still": strict if others_still is None else still,
         "collapse_free": success if others_still is None else still,
         "judged": True,
-        "strict_judged": True,
+        "counted": True,
+        "strict_counted": True,
         "success": success,
         "strict_success": strict,
         "others_still_held": still,
@@ -125,7 +127,7 @@ def test_the_episode_ends_at_its_first_failed_step():
 
 def test_the_episode_succeeds_only_when_it_ended_with_the_target_out():
     ok = judge_episode([_step(2, True), _step(0, True)], "target_out", target=0)
-    assert ok["success"] and ok["target_extracted"] and ok["judged_steps"] == 2
+    assert ok["success"] and ok["target_extracted"] and ok["counted_steps"] == 2
     bad = judge_episode([_step(2, True), _step(1, False)], "collapse", target=0)
     assert not bad["success"] and not bad["success_held"]
     # the target came out cleanly while held; its release disturbed the pile
@@ -134,7 +136,7 @@ def test_the_episode_succeeds_only_when_it_ended_with_the_target_out():
     assert not released["success"] and released["success_held"]
     aborted = _step(1, False, True, executed=False, aborted_before_motion=True, extracted=False)
     gave_up = judge_episode([aborted], "gave_up", target=0)
-    assert gave_up["aborted_before_motion"] == 1 and gave_up["judged_steps"] == 0
+    assert gave_up["aborted_before_motion"] == 1 and gave_up["counted_steps"] == 0
 
 
 def _tipped(deg: float, dz: float = 0.0) -> np.ndarray:
@@ -188,8 +190,8 @@ def test_the_strict_episode_is_the_prefix_up_to_its_first_strict_failure():
     slid = _step(2, True, strict=False)
     ep = judge_episode([_step(1, True), slid, _step(0, True)], "target_out", target=0)
     assert ep["success"] is True and ep["strict_success"] is False
-    assert ep["strict_steps"] == 2 and ep["strict_judged_steps"] == 2
-    assert ep["judged_steps"] == 3
+    assert ep["strict_steps"] == 2 and ep["strict_counted_steps"] == 2
+    assert ep["counted_steps"] == 3
 
 
 def test_strict_step_counts_stop_at_the_first_strict_failure():

@@ -163,3 +163,17 @@ def test_aborts_that_moved_nothing_are_not_judged_steps():
     row = aggregate(recs).iloc[0]
     assert (row["step_success_k"], row["step_success_n"]) == (1, 1)
     assert row["aborts"] == 1 and row["aborts_before_motion"] == 1
+
+
+def test_per_step_rates_read_the_counted_flag_and_the_old_judged_one():
+    base = {"aborted_before_motion": False, "extracted": False, "others_still": True}
+    ok = base | {"executed": True, "extracted": True, "success": True}
+    # an abort after motion that collapsed nothing: judged from physics, not counted
+    abort = base | {"executed": True, "aborted_after_motion": True, "success": None}
+    new = abort | {"judged": True, "counted": False, "strict_counted": False}
+    old = abort | {"judged": False, "strict_judged": False}  # before the rename
+    for step in (new, old):
+        recs = [episode("c", True, [step, ok | {"aborted_after_motion": False}], 0, 0.0)]
+        row = aggregate(recs).iloc[0]
+        assert (row["step_success_k"], row["step_success_n"]) == (1, 1)
+        assert row["aborts"] == 1

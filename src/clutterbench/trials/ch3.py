@@ -320,7 +320,8 @@ def slide_outcome(target_out: bool, others_still: bool) -> dict[str, Any]:
         "target_out": target_out,
         "others_still": others_still,
         "judged": True,
-        "strict_judged": True,
+        "counted": True,
+        "strict_counted": True,
         "success": success,
         "strict_success": success,
     }

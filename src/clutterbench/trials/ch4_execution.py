@@ -110,7 +110,7 @@ def arm_pull_outcome(
         "aborted_before_motion": not executed,
         "aborted_after_motion": executed and not reached,
     }
-    return out | flags | _judged_flags(out | flags) | done.fields
+    return out | flags | _counted_flags(out | flags) | done.fields
 
 
 def judge_ch4_pull(
@@ -157,16 +157,18 @@ def judge_ch4_pull(
         "displacement_m": disp,
         "displacement_held_m": disp_held,
     }
-    return step | _judged_flags(step)
+    return step | _counted_flags(step)
 
 
-def _judged_flags(step: dict[str, Any]) -> dict[str, Any]:
-    """`judged` / `strict_judged` and the success under each criterion of one executed (or
-    not) pull: a trial is always judged (an abort is a failure of its one attempt)."""
+def _counted_flags(step: dict[str, Any]) -> dict[str, Any]:
+    """`judged` (executed, judged from physics), `counted` / `strict_counted` and the success
+    under each criterion of one executed (or not) pull: a trial always counts (an abort is a
+    failure of its one attempt)."""
     ok = step["executed"] and step["extracted"]
     return {
-        "judged": True,
-        "strict_judged": True,
+        "judged": bool(step["executed"]),
+        "counted": True,
+        "strict_counted": True,
         "success": bool(ok and step["collapse_free"]),
         "strict_success": bool(ok and step["others_still"]),
     }

@@ -17,9 +17,11 @@ protocol").
   (fell: a failure), or when the planner gives up; the planner does not know the criterion,
   so the strict episode is the prefix up to its first strict failure (`criteria.strict_prefix`),
   and every strict count is taken over that prefix only.
-- **An abort before any motion is an abort, not a collapse:** nothing moved, so nothing is
-  judged; an abort after motion that disturbed nothing is an abort too. Per-step success
-  counts the judged steps: the executed pulls that took the box out or disturbed the pile.
+- **An abort before any motion is an abort, not a collapse:** nothing was executed, so
+  nothing is judged. Every executed step is judged from physics (`judged`), aborted or not,
+  the released box included; an abort after motion that disturbed nothing is an abort too.
+  Per-step success counts the *counted* steps (`counted`, `strict_counted`): the executed
+  pulls that took the box out or disturbed the pile under that criterion.
 """
 
 from __future__ import annotations
@@ -40,19 +42,21 @@ STEP_FIELDS = (
     "others_still",
     "collapse_free",
     "judged",
-    "strict_judged",
+    "counted",
+    "strict_counted",
     "success",
     "strict_success",
     "others_still_held",
     "success_held",
     "box_motion",
 )
-"""The named outcome of every step record (judged from physics). `success` (collapse-free)
-and `strict_success` are booleans on the steps judged under that criterion (`judged`,
-`strict_judged`) and None on an abort that disturbed nothing under it (neither a success nor
-a failure: the episode goes on). `others_still` is the strict criterion's, `collapse_free`
-the other's; `*_held` is the strict judgement while the second arm still held.
-`box_motion`: per box, its motion over the step (trials/criteria.py)."""
+"""The named outcome of every step record. `judged`: the step was executed and judged from
+physics after the release (false only where nothing was executed). `success`
+(collapse-free) and `strict_success` are booleans on the steps counted in per-step success
+under that criterion (`counted`, `strict_counted`) and None on an abort that disturbed
+nothing under it (neither a success nor a failure: the episode goes on). `others_still` is
+the strict criterion's, `collapse_free` the other's; `*_held` is the strict judgement while
+the second arm still held. `box_motion`: per box, its motion over the step (trials/criteria.py)."""
 
 EPISODE_ENDS = ("target_out", "collapse", "target_fell", "gave_up", "max_steps")
 """Why an episode ended: the target left the shelf after a clean step; a step moved another
@@ -83,7 +87,8 @@ def judge_pull(
             "others_still": True,
             "collapse_free": True,
             "judged": False,
-            "strict_judged": False,
+            "counted": False,
+            "strict_counted": False,
             "success": None,
             "strict_success": None,
             "others_still_held": True,
@@ -107,10 +112,11 @@ def judge_pull(
         "others_still": criteria.still(motion, threshold_m, cf),
         "collapse_free": criteria.collapse_free(motion, cf),
     }
-    counts, strict_counts = judged(step), strict_judged(step)
+    counts, strict_counts = counted(step), strict_counted(step)
     return step | {
-        "judged": counts,
-        "strict_judged": strict_counts,
+        "judged": True,
+        "counted": counts,
+        "strict_counted": strict_counts,
         "success": result.extracted and step["collapse_free"] if counts else None,
         "strict_success": result.extracted and step["others_still"] if strict_counts else None,
         "others_still_held": n_held == 0,
@@ -140,13 +146,13 @@ def _motion(
     return criteria.box_motion(result.poses_start, result.poses_end, result.on_shelf, others, held)
 
 
-def judged(step: dict[str, Any]) -> bool:
+def counted(step: dict[str, Any]) -> bool:
     """Whether a step counts in collapse-free per-step success: an executed pull that took
     its box out or made a box collapse (an abort that collapsed nothing is an abort)."""
     return bool(step["executed"] and (step["extracted"] or not step["collapse_free"]))
 
 
-def strict_judged(step: dict[str, Any]) -> bool:
+def strict_counted(step: dict[str, Any]) -> bool:
     """Whether a step counts in strict per-step success: an executed pull that took its box
     out or disturbed the pile beyond the label threshold."""
     return bool(step["executed"] and (step["extracted"] or not step["others_still"]))
@@ -170,7 +176,7 @@ def judge_episode(steps: list[dict[str, Any]], end: str, target: int) -> dict[st
     target came out at all (a step that took it out may still have made a box collapse);
     `strict_success` when, in addition, no step disturbed the pile beyond the label threshold
     (the strict episode, the prefix up to its first strict failure, ended with the target
-    out); their judged steps.
+    out); their counted steps (per-step success under each criterion).
     `success_held`: the strict judgement while the second arm still held, where that is
     decidable (it differs only when the strict episode's last step pulled the target and its
     release disturbed the pile)."""
@@ -200,6 +206,6 @@ def judge_episode(steps: list[dict[str, Any]], end: str, target: int) -> dict[st
         "success_held": strict_ok or released_only,
         "aborted_before_motion": sum(bool(s["aborted_before_motion"]) for s in steps),
         "aborted_after_motion": sum(bool(s["aborted_after_motion"]) for s in steps),
-        "judged_steps": sum(judged(s) for s in steps),
-        "strict_judged_steps": sum(strict_judged(s) for s in prefix),
+        "counted_steps": sum(counted(s) for s in steps),
+        "strict_counted_steps": sum(strict_counted(s) for s in prefix),
     }

@@ -86,16 +86,20 @@ def _steps(record: Mapping[str, Any]) -> list[Mapping[str, Any]]:
     return steps
 
 
-JUDGED_BY = {"success": "judged", "strict_success": "strict_judged"}
-"""A step's success under a criterion counts where the step is judged under it."""
+COUNTED_BY = {"success": "counted", "strict_success": "strict_counted"}
+"""A step's success under a criterion counts where the step is counted under it."""
+OLD_COUNTED_BY = {"success": "judged", "strict_success": "strict_judged"}
+"""The same flags in records written before they were renamed (there `judged` meant counted;
+now it says the step was judged from physics)."""
 
 
-def _judged(step: Mapping[str, Any], key: str = "success") -> bool:
-    """A step counts in per-step success when it is judged under the criterion of `key`
+def _counted(step: Mapping[str, Any], key: str = "success") -> bool:
+    """A step counts in per-step success when it is counted under the criterion of `key`
     (trials/protocol.py): an executed pull that took its box out or disturbed the pile.
-    Records of the older schemas: without the judged flag, from the others_still flag; without
-    `executed`, every step."""
-    flag = JUDGED_BY.get(key, "judged")
+    Records of the older schemas: the flag under its old name; without it, from the
+    others_still flag; without `executed`, every step."""
+    names = COUNTED_BY if "counted" in step else OLD_COUNTED_BY
+    flag = names.get(key, names["success"])
     if flag in step:
         return bool(step[flag])
     if "executed" not in step:
@@ -104,7 +108,7 @@ def _judged(step: Mapping[str, Any], key: str = "success") -> bool:
 
 
 def _episode_steps(record: Mapping[str, Any], key: str) -> tuple[int, int]:
-    """(successes, judged steps) of one episode under `key`; strict: over the strict
+    """(successes, counted steps) of one episode under `key`; strict: over the strict
     episode only, the prefix up to the first strict failure (trials/criteria.py)."""
     from clutterbench.trials.criteria import strict_prefix
 
@@ -113,7 +117,7 @@ def _episode_steps(record: Mapping[str, Any], key: str) -> tuple[int, int]:
         steps = strict_prefix(steps)
     k = n = 0
     for i, step in enumerate(steps):
-        if _judged(step, key):
+        if _counted(step, key):
             k += _flag(step.get(key), key, f"{_where(record)}, step {i}")
             n += 1
     return k, n
@@ -201,7 +205,7 @@ def _mean(records: Sequence[Mapping[str, Any]], key: str) -> float:
 def aggregate(records: Sequence[Mapping[str, Any]], group_by: str = "condition") -> pd.DataFrame:
     """One row per value of `group_by` (in order of first appearance): episode success
     k/n, rate and Wilson 95% bounds; with per-episode `steps`, the pooled per-step success
-    over judged steps with an episode-cluster bootstrap interval, the mean steps and the
+    over counted steps with an episode-cluster bootstrap interval, the mean steps and the
     aborts without a collapse (`aborts`; of them `aborts_before_motion`, and `aborts_moved`:
     after motion, another box moved beyond the label threshold); the means of `n_disturbed` /
     `disturbance_m` and the `strict_success` rate where the records have them (columns absent
@@ -222,7 +226,8 @@ def aggregate(records: Sequence[Mapping[str, Any]], group_by: str = "condition")
             row["mean_steps"] = float(np.mean([len(_steps(r)) for r in recs]))
             if all("aborted_before_motion" in s for r in recs for s in _steps(r)):
                 row["aborts"] = sum(
-                    bool(s["aborted_before_motion"] or s["aborted_after_motion"]) and not _judged(s)
+                    bool(s["aborted_before_motion"] or s["aborted_after_motion"])
+                    and not _counted(s)
                     for r in recs
                     for s in _steps(r)
                 )
@@ -232,7 +237,7 @@ def aggregate(records: Sequence[Mapping[str, Any]], group_by: str = "condition")
                 # of the aborts without a collapse: those that moved another box beyond the
                 # label threshold (strict failures)
                 row["aborts_moved"] = sum(
-                    bool(s["aborted_after_motion"]) and not _judged(s) and not s["others_still"]
+                    bool(s["aborted_after_motion"]) and not _counted(s) and not s["others_still"]
                     for r in recs
                     for s in _steps(r)
                 )
