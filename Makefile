@@ -19,7 +19,7 @@ TORCH_PIP_ARGS := $(if $(TORCH_INDEX_URL),--index-url $(TORCH_INDEX_URL))
 TORCH_CHOICE := $(if $(filter-out torch==2.13.0,$(TORCH_SPEC))$(TORCH_INDEX_URL),echo '$(TORCH_SPEC) $(TORCH_INDEX_URL)';)
 STAMP := $(VENV)/.installed-$(shell ($(TORCH_CHOICE) cat requirements.lock pyproject.toml) 2>/dev/null | sha1sum | cut -c1-12)
 
-.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner dev-perturbed-fit dev-ch6-pull dev-ch6-pull-thresholds dev-ch6-pull-watch benchmark-scenes clean-venv shell
+.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner dev-perturbed-fit dev-ch6-pull dev-ch6-pull-thresholds dev-ch6-pull-watch dev-ch6-no-plan dev-ch6-no-plan-thresholds benchmark-scenes clean-venv shell
 
 setup: system venv .dvc/config
 
@@ -112,6 +112,18 @@ dev-ch6-pull-thresholds: setup
 # -> reports/dev/ch6_pull_watch.{json,md}
 dev-ch6-pull-watch: setup
 	python -m clutterbench.dev.ch6_pull ch6_pull_watch
+
+# What the pull planners do when their rule rejects every candidate (issue 50):
+# trials.ch6.when_no_plan, each variant of dev.ch6_no_plan on dev scenes of the 3-10 stream
+# -> reports/dev/ch6_no_plan.{json,md}
+dev-ch6-no-plan: setup
+	python -m clutterbench.dev.ch6_pull ch6_no_plan
+
+# The pull-head CP planners' thresholds once a decision that rejects every candidate pulls the
+# least risky one (issue 50): each variant of dev.ch6_no_plan_thresholds on dev scenes of the
+# 3-10 stream -> reports/dev/ch6_no_plan_thresholds.{json,md}
+dev-ch6-no-plan-thresholds: setup
+	python -m clutterbench.dev.ch6_pull ch6_no_plan_thresholds
 
 # The benchmark scenes (data/benchmark/: every table's test-stream starts and targets, the
 # same bytes on every CPU), regenerated for the tiny and default profiles. Never run by a

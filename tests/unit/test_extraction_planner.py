@@ -51,6 +51,31 @@ def test_a_box_whose_collapse_score_exceeds_cp_max_is_never_picked():
         planner.decide(obs, 0, frozenset())
 
 
+@pytest.mark.parametrize(
+    ("response", "limit"), [("least_risk", 0.6), ("least_risk_unmonitored", float("inf"))]
+)
+def test_with_no_plan_left_the_least_risk_rejected_pull_is_taken(response, limit):
+    obs, boxes = _scene(extra_leaf=False)
+    planner = CollapseGraphPlanner(
+        _predictor(boxes), PARAMS, cp_max=0.5, min_pixels=1, when_no_plan=response
+    )
+    # The same scene as above: box 1, the only leaf, is rejected (0.6 > 0.5); instead of
+    # giving up the planner pulls it, aborting only beyond its own score (or never).
+    decision = planner.decide(obs, 0, frozenset())
+    assert decision.pull == 1 and decision.state["no_plan"] == response
+    assert [r[0] for r in decision.state["rejected"]] == [1]
+    assert decision.cp_max == pytest.approx(limit, abs=0.1)
+    # Nothing was rejected at all (every candidate blocked by earlier aborts): it gives up.
+    with pytest.raises(ValueError):
+        planner.decide(obs, 0, frozenset({0, 1}))
+
+
+def test_an_unknown_no_plan_response_is_refused():
+    obs, boxes = _scene(extra_leaf=False)
+    with pytest.raises(ValueError, match="when_no_plan"):
+        CollapseGraphPlanner(_predictor(boxes), PARAMS, 0.5, 1, when_no_plan="retry")
+
+
 def test_the_next_candidate_is_taken_when_one_is_rejected():
     obs, boxes = _scene(extra_leaf=False)
     lenient = CollapseGraphPlanner(_predictor(boxes), PARAMS, cp_max=0.9, min_pixels=1)

@@ -3,6 +3,8 @@
     python -m clutterbench.dev.ch6_pull                       # make dev-ch6-pull
     python -m clutterbench.dev.ch6_pull ch6_pull_thresholds   # make dev-ch6-pull-thresholds
     python -m clutterbench.dev.ch6_pull ch6_pull_watch        # make dev-ch6-pull-watch
+    python -m clutterbench.dev.ch6_pull ch6_no_plan           # make dev-ch6-no-plan
+    python -m clutterbench.dev.ch6_pull ch6_no_plan_thresholds   # make dev-ch6-no-plan-thresholds
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
 rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull
@@ -22,7 +24,9 @@ first; the truth-map planners and the oracles need no network). Writes
 reports/dev/<section>.{json,md}; not a dvc stage. Sections: ch6_pull (what an abort teaches,
 what the pull maps mean), ch6_pull_thresholds (the pull-head CP planners' thresholds,
 trials.ch6.pull_prob_threshold / pull_score_threshold), ch6_pull_watch (their watch of the
-pull in depth, trials.ch6.pull_watch_m).
+pull in depth, trials.ch6.pull_watch_m), ch6_no_plan (what the pull planners do when their
+rule rejects every candidate, trials.ch6.when_no_plan), ch6_no_plan_thresholds (the pull-head
+CP planners' thresholds once they do that).
 """
 
 from __future__ import annotations
@@ -186,6 +190,9 @@ TITLES = {
     "ch6_pull": "what the ch. 6 pull planners do after an abort, and what their maps mean",
     "ch6_pull_thresholds": "the thresholds of the ch. 6 pull-head CP planners",
     "ch6_pull_watch": "the ch. 6 pull-head CP planners watching their pull in depth",
+    "ch6_no_plan": "what the ch. 6 pull planners do when their rule rejects every candidate",
+    "ch6_no_plan_thresholds": "the thresholds of the ch. 6 pull-head CP planners that pull "
+    "the least risk when their rule rejects every candidate",
 }
 
 

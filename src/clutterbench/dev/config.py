@@ -94,6 +94,7 @@ CH6_VARIED = (
     "pull_map_meaning",
     "pull_prob_threshold",
     "pull_score_threshold",
+    "when_no_plan",
     "pull_watch_m",
 )
 """The trials.ch6 fields a ch. 6 pull-planner variant may set."""
@@ -182,6 +183,16 @@ class DevConfig:
     )
     """The same recheck over the pull-head CP planners' watch of their pull
     (trials.ch6.pull_watch_m; python -m clutterbench.dev.ch6_pull ch6_pull_watch)."""
+    ch6_no_plan: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(variants={"give_up": {}, "least_risk": {}})
+    )
+    """The same recheck over what the pull planners do when their rule rejects every
+    candidate (trials.ch6.when_no_plan; python -m clutterbench.dev.ch6_pull ch6_no_plan)."""
+    ch6_no_plan_thresholds: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(variants={"support": {}, "other": {}})
+    )
+    """The pull-head CP planners' thresholds once a decision that rejects every candidate
+    pulls the least risky one (python -m clutterbench.dev.ch6_pull ch6_no_plan_thresholds)."""
 
     def __post_init__(self) -> None:
         for name in self.streams:
@@ -194,6 +205,8 @@ class DevConfig:
             ("ch6_pull", self.ch6_pull.streams),
             ("ch6_pull_thresholds", self.ch6_pull_thresholds.streams),
             ("ch6_pull_watch", self.ch6_pull_watch.streams),
+            ("ch6_no_plan", self.ch6_no_plan.streams),
+            ("ch6_no_plan_thresholds", self.ch6_no_plan_thresholds.streams),
         ):
             for name in names:
                 if name not in self.streams:

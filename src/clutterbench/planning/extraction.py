@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -37,6 +38,16 @@ class Decision:
     """Box the second arm holds during the pull (bimanual), or None."""
     state: dict[str, Any]
     """What the planner saw and decided (JSON; logged to the MCAP)."""
+    cp_max: float | None = None
+    """This pull's abort threshold of the collapse score; None: the planner's own (a
+    least-risk pull taken when no plan is left carries its own score: NO_PLAN_RESPONSES)."""
+
+
+NO_PLAN_RESPONSES = ("give_up", "least_risk", "least_risk_unmonitored")
+"""What a CPG planner does when every candidate is rejected by its own rule (issue 50):
+give_up (the episode ends, Algorithm 1); least_risk pulls the rejected candidate of the
+lowest collapse score, aborting only when the score grows beyond that one;
+least_risk_unmonitored pulls it without abort checks."""
 
 
 def visible_objects(obs: Observation, min_pixels: int) -> tuple[list[int], np.ndarray]:
@@ -72,6 +83,7 @@ class CollapseGraphPlanner:
         clear_hold_load: bool = False,
         learn_from_aborts: bool = False,
         watch_m: float | None = None,
+        when_no_plan: str = "give_up",
     ):
         self.predict, self.params, self.cp_max = predict, params, cp_max
         self.min_pixels, self.bimanual = min_pixels, bimanual
@@ -89,6 +101,11 @@ class CollapseGraphPlanner:
         observation and the present one, moved in depth by more than this (median, m) stops
         the pull as a collapse score over cp_max does (score: 1 + that depth change, above
         any share), naming that box. None: the prediction alone (Algorithm 1)."""
+        if when_no_plan not in NO_PLAN_RESPONSES:
+            raise ValueError(f"when_no_plan: {when_no_plan!r} is none of {NO_PLAN_RESPONSES}")
+        self.when_no_plan = when_no_plan
+        """Issue 50 (not the thesis): what to do when the rule rejects every candidate
+        (NO_PLAN_RESPONSES)."""
         self._decided_on: Observation | None = None
         """The observation of the last decision: where the watched pull started."""
         self.learned: dict[tuple[int, int], float] = {}
@@ -119,7 +136,9 @@ class CollapseGraphPlanner:
         """Algorithm 1's next pull, under one decision rule: a candidate whose collapse score
         (eq. 6.2, the abort test of the pull) already exceeds cp_max on this observation is
         blocked here and the plan redrawn, so the pull executed never aborts before any
-        motion. Raises ValueError when every candidate is blocked (the planner gives up)."""
+        motion. When every candidate is blocked, raises ValueError (the planner gives up) or,
+        by `when_no_plan`, pulls the rejected candidate of the lowest score (its Decision
+        carries the abort threshold of that pull)."""
         edges = self.support_edges(obs)
         now = set(blocked)
         threat, self._threat = self._threat, None
@@ -135,12 +154,22 @@ class CollapseGraphPlanner:
         else:
             plan_fn = single_arm_plan
         rejected: list[list[float]] = []
+        candidates: list[tuple[float, Any]] = []
+        limit = None
         while True:
-            plan = plan_fn(graph, target, frozenset(now))
+            try:
+                plan = plan_fn(graph, target, frozenset(now))
+            except ValueError:
+                if self.when_no_plan == "give_up" or not candidates:
+                    raise
+                cp, plan = min(candidates, key=lambda c: c[0])  # ties: the first rejected
+                limit = cp if self.when_no_plan == "least_risk" else math.inf
+                break
             cp = self.collapse_score(obs, plan.pull, plan.hold)
             if cp <= self.cp_max:
                 break
             rejected.append([plan.pull, -1 if plan.hold is None else plan.hold, round(cp, 4)])
+            candidates.append((cp, plan))
             threat, self._threat = self._threat, None
             if self.learn_from_aborts and threat is not None and self._learn(threat):
                 graph = build_cpg([*edges, *self._learned_edges(visible)], target)
@@ -156,8 +185,10 @@ class CollapseGraphPlanner:
         }
         if self.learn_from_aborts:
             state["learned"] = [[a, b, round(v, 4)] for (a, b), v in sorted(self.learned.items())]
+        if limit is not None:
+            state["no_plan"] = self.when_no_plan
         self._decided_on = obs
-        return Decision(plan.pull, plan.hold, state)
+        return Decision(plan.pull, plan.hold, state, limit)
 
     def _learn(self, threat: tuple[int, int, float]) -> bool:
         """Record that `threat`'s box carries the box its score feared for -> whether that

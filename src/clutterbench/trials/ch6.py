@@ -91,7 +91,9 @@ def execute_decision(
         cp = float(monitor(obs if done == 0 else now, box, hold))
         max_cp = max(max_cp, cp)
         log.json(t, DECISION_TOPIC, {"box": box, "cp": round(cp, 4)})
-        return cp <= cp_max
+        return cp <= limit
+
+    limit = cp_max if decision.cp_max is None else decision.cp_max
 
     arm_fields: dict[str, Any] = {}
     if arm is None:
@@ -140,6 +142,8 @@ def execute_decision(
         "increments": result.increments,
         "max_cp": round(max_cp, 4),
     } | step
+    if "no_plan" in decision.state:  # no plan left: the least-risk rejected pull (issue 50)
+        record["no_plan"] = decision.state["no_plan"]
     return record | arm_fields, state, elapsed
 
 

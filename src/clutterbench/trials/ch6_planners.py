@@ -145,6 +145,7 @@ def _cpg_planner(
         clear_hold_load=pull,  # the pull planners clear the held box's load first
         learn_from_aborts=pull and params.abort_response == "learn",
         watch_m=params.pull_watch_m if pull and spec is None else None,
+        when_no_plan=params.when_no_plan if pull else "give_up",
     )
 
 

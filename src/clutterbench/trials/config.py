@@ -206,6 +206,13 @@ class Ch6TrialParams:
     in depth by more than this (median, m) stops the pull like a collapse score over cp_max
     (abort_response learn: that box is then taken as carried by the pulled one). The robot's
     own depth images, no prediction; null: no watch. Chosen on dev streams."""
+    when_no_plan: Literal["give_up", "least_risk", "least_risk_unmonitored"] = "give_up"
+    """What the planners on maps of the pull (`*_pull*`, issue 50) do when their rule
+    rejects every candidate: give_up ends the episode (Algorithm 1, what the deletion
+    planners do); least_risk pulls the rejected candidate of the lowest collapse score,
+    aborting only when the score grows beyond that one; least_risk_unmonitored pulls it
+    without abort checks (planning/extraction.py NO_PLAN_RESPONSES). Chosen on dev
+    streams (make dev-ch6-no-plan)."""
     pull_map_meaning: Literal["moved", "collapse"] = "moved"
     """What the maps of the pull mark, truth (`*_pull_truth`) and predicted (`*_pull`, the
     collapse predictor's head of that meaning, PULL_MAP_HEADS): moved, every box the pull
