@@ -172,3 +172,61 @@ def test_a_watched_pull_stops_when_a_neighbour_moves_in_depth():
         assert (cp > 0.5) == stops, (watch, by_m)
         if stops:
             assert cp == pytest.approx(1.006, abs=1e-6) and planner._threat == (0, 1, cp)
+
+
+def _grazing_predictor(boxes: dict[int, np.ndarray], share: float):
+    """Removing box 0 collapses the top `share` of box 1 (below any edge threshold used)."""
+
+    def predict(depth, masks):
+        out = np.zeros(masks.shape, np.float32)
+        rows = np.nonzero(boxes[1].any(axis=1))[0]
+        cut = rows[0] + int(round(share * len(rows)))
+        for k, m in enumerate(masks.astype(bool)):
+            if (m & boxes[0]).any():
+                out[k, rows[0] : cut] = boxes[1][rows[0] : cut]
+        return out
+
+    return predict
+
+
+@pytest.mark.parametrize(("idle_hold_share", "hold"), [(None, None), (0.1, 1), (0.4, None)])
+def test_the_idle_arm_holds_the_neighbour_of_the_largest_share_above_its_threshold(
+    idle_hold_share, hold
+):
+    obs, boxes = _scene(extra_leaf=False)
+    planner = CollapseGraphPlanner(
+        _grazing_predictor(boxes, 0.25),
+        PARAMS,
+        cp_max=0.5,
+        min_pixels=1,
+        bimanual=True,
+        idle_hold_share=idle_hold_share,
+    )
+    # 0.25 of box 1 is below the edge threshold: no edge, the plan pulls the target with the
+    # second arm idle; with idle_hold_share below 0.25 that arm holds box 1.
+    decision = planner.decide(obs, 0, frozenset())
+    assert decision.pull == 0 and decision.hold == hold
+    assert ("idle_hold" in decision.state) == (hold is not None)
+    if hold is not None:
+        assert decision.state["cp"] == 0.0  # the held box cannot collapse
+    one_arm = CollapseGraphPlanner(
+        _grazing_predictor(boxes, 0.25), PARAMS, 0.5, 1, idle_hold_share=idle_hold_share
+    )
+    assert one_arm.decide(obs, 0, frozenset()).hold is None  # one arm: nothing to hold with
+
+
+@pytest.mark.parametrize(("idle_hold_prob", "hold"), [(None, None), (0.1, 1), (0.3, None)])
+def test_the_idle_hold_reads_the_map_at_its_own_pixel_threshold(idle_hold_prob, hold):
+    obs, boxes = _scene(extra_leaf=False)
+
+    def faint(depth, masks):  # removing box 0 puts all of box 1 at probability 0.2
+        out = np.zeros(masks.shape, np.float32)
+        for k, m in enumerate(masks.astype(bool)):
+            if (m & boxes[0]).any():
+                out[k][boxes[1]] = 0.2
+        return out
+
+    planner = CollapseGraphPlanner(
+        faint, PARAMS, 0.5, 1, bimanual=True, idle_hold_share=0.0, idle_hold_prob=idle_hold_prob
+    )
+    assert planner.decide(obs, 0, frozenset()).hold == hold

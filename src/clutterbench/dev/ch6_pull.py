@@ -5,6 +5,7 @@
     python -m clutterbench.dev.ch6_pull ch6_pull_watch        # make dev-ch6-pull-watch
     python -m clutterbench.dev.ch6_pull ch6_no_plan           # make dev-ch6-no-plan
     python -m clutterbench.dev.ch6_pull ch6_no_plan_thresholds   # make dev-ch6-no-plan-thresholds
+    python -m clutterbench.dev.ch6_pull ch6_idle_hold         # make dev-ch6-idle-hold
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
 rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull
@@ -26,7 +27,8 @@ what the pull maps mean), ch6_pull_thresholds (the pull-head CP planners' thresh
 trials.ch6.pull_prob_threshold / pull_score_threshold), ch6_pull_watch (their watch of the
 pull in depth, trials.ch6.pull_watch_m), ch6_no_plan (what the pull planners do when their
 rule rejects every candidate, trials.ch6.when_no_plan), ch6_no_plan_thresholds (the pull-head
-CP planners' thresholds once they do that).
+CP planners' thresholds once they do that), ch6_idle_hold (the bimanual pull planners' idle
+arm, trials.ch6.idle_hold_share).
 """
 
 from __future__ import annotations
@@ -193,6 +195,7 @@ TITLES = {
     "ch6_no_plan": "what the ch. 6 pull planners do when their rule rejects every candidate",
     "ch6_no_plan_thresholds": "the thresholds of the ch. 6 pull-head CP planners that pull "
     "the least risk when their rule rejects every candidate",
+    "ch6_idle_hold": "the ch. 6 bimanual pull planners holding a neighbour with the idle arm",
 }
 
 

@@ -95,6 +95,8 @@ CH6_VARIED = (
     "pull_prob_threshold",
     "pull_score_threshold",
     "when_no_plan",
+    "idle_hold_share",
+    "idle_hold_prob",
     "pull_watch_m",
 )
 """The trials.ch6 fields a ch. 6 pull-planner variant may set."""
@@ -193,6 +195,11 @@ class DevConfig:
     )
     """The pull-head CP planners' thresholds once a decision that rejects every candidate
     pulls the least risky one (python -m clutterbench.dev.ch6_pull ch6_no_plan_thresholds)."""
+    ch6_idle_hold: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(variants={"idle": {}, "hold": {}})
+    )
+    """The bimanual pull planners' idle arm (trials.ch6.idle_hold_share; python -m
+    clutterbench.dev.ch6_pull ch6_idle_hold)."""
 
     def __post_init__(self) -> None:
         for name in self.streams:
@@ -207,6 +214,7 @@ class DevConfig:
             ("ch6_pull_watch", self.ch6_pull_watch.streams),
             ("ch6_no_plan", self.ch6_no_plan.streams),
             ("ch6_no_plan_thresholds", self.ch6_no_plan_thresholds.streams),
+            ("ch6_idle_hold", self.ch6_idle_hold.streams),
         ):
             for name in names:
                 if name not in self.streams:

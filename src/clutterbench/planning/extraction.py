@@ -84,6 +84,8 @@ class CollapseGraphPlanner:
         learn_from_aborts: bool = False,
         watch_m: float | None = None,
         when_no_plan: str = "give_up",
+        idle_hold_share: float | None = None,
+        idle_hold_prob: float | None = None,
     ):
         self.predict, self.params, self.cp_max = predict, params, cp_max
         self.min_pixels, self.bimanual = min_pixels, bimanual
@@ -106,6 +108,14 @@ class CollapseGraphPlanner:
         self.when_no_plan = when_no_plan
         """Issue 50 (not the thesis): what to do when the rule rejects every candidate
         (NO_PLAN_RESPONSES)."""
+        self.idle_hold_share = idle_hold_share
+        """Issue 50 (not the thesis), bimanual: a pull the plan makes with the second arm idle
+        holds the pulled box's contact neighbour of the largest predicted share above this
+        (one that carries nothing in the graph; the held box may settle when let go, what it
+        carries may not). None: the arm stays idle (Fig. 6.7)."""
+        self.idle_hold_prob = idle_hold_prob
+        """The pixel probability threshold of the collapse area those shares are taken of
+        (None: the rule's, params.prob_threshold)."""
         self._decided_on: Observation | None = None
         """The observation of the last decision: where the watched pull started."""
         self.learned: dict[tuple[int, int], float] = {}
@@ -187,8 +197,25 @@ class CollapseGraphPlanner:
             state["learned"] = [[a, b, round(v, 4)] for (a, b), v in sorted(self.learned.items())]
         if limit is not None:
             state["no_plan"] = self.when_no_plan
+        hold = plan.hold
+        if self.bimanual and hold is None and self.idle_hold_share is not None:
+            hold = self._idle_hold(obs, plan.pull, graph)
+            if hold is not None:
+                state["idle_hold"] = hold
+                state["cp"] = round(self.collapse_score(obs, plan.pull, hold), 4)
+                self._threat = None
         self._decided_on = obs
-        return Decision(plan.pull, plan.hold, state, limit)
+        return Decision(plan.pull, hold, state, limit)
+
+    def _idle_hold(self, obs: Observation, box: int, graph: Any) -> int | None:
+        """The box the idle arm holds while `box` is pulled (idle_hold_share), or None."""
+        carries = {n for n in graph if graph.out_degree(n) > 0}
+        shares = {
+            j: v
+            for j, v in self._shares(obs, box, None, self.idle_hold_prob).items()
+            if v > self.idle_hold_share and j not in carries
+        }
+        return min(shares, key=lambda j: (-shares[j], j)) if shares else None
 
     def _learn(self, threat: tuple[int, int, float]) -> bool:
         """Record that `threat`'s box carries the box its score feared for -> whether that
@@ -212,21 +239,7 @@ class CollapseGraphPlanner:
         """Thesis eq. (6.2) during a pull: R_C predicted for removing `box` now, against the
         area of each object in pseudo-direct contact with it; the largest share. The object
         the other arm holds (`hold`) cannot collapse and is left out (Fig. 6.7 (d))."""
-        ids, masks = visible_objects(obs, self.min_pixels)
-        if box not in ids or len(ids) < 2:
-            return 0.0
-        k = ids.index(box)
-        if self.reuse_maps and self._maps and self._maps[0] is obs and self._maps[1] == ids:
-            heat = self._maps[2][k]
-        else:
-            heat = self.predict(obs.depth_m, masks[k : k + 1].astype(np.uint8))[0]
-        area_c = heat > self.params.prob_threshold
-        contact = support_contact(masks, self.params, self._gaps(obs, masks))[k]
-        scores = {
-            ids[j]: float(np.logical_and(area_c, masks[j]).sum() / masks[j].sum())
-            for j in range(len(ids))
-            if j != k and contact[j] and ids[j] != hold
-        }
+        scores = self._shares(obs, box, hold)
         start = self._decided_on
         if self.watch_m is not None and start is not None and start is not obs:
             moved = {
@@ -240,6 +253,28 @@ class CollapseGraphPlanner:
             feared = min(scores, key=lambda j: (-scores[j], j))
             self._threat = (box, feared, cp)
         return cp
+
+    def _shares(
+        self, obs: Observation, box: int, hold: int | None, prob: float | None = None
+    ) -> dict[int, float]:
+        """Eq. (6.2)'s shares: box id -> the part of it in R_C predicted for removing `box`,
+        for each object in pseudo-direct contact with it but `hold` (R_C: heatmap > `prob`,
+        None: the rule's threshold)."""
+        ids, masks = visible_objects(obs, self.min_pixels)
+        if box not in ids or len(ids) < 2:
+            return {}
+        k = ids.index(box)
+        if self.reuse_maps and self._maps and self._maps[0] is obs and self._maps[1] == ids:
+            heat = self._maps[2][k]
+        else:
+            heat = self.predict(obs.depth_m, masks[k : k + 1].astype(np.uint8))[0]
+        area_c = heat > (self.params.prob_threshold if prob is None else prob)
+        contact = support_contact(masks, self.params, self._gaps(obs, masks))[k]
+        return {
+            ids[j]: float(np.logical_and(area_c, masks[j]).sum() / masks[j].sum())
+            for j in range(len(ids))
+            if j != k and contact[j] and ids[j] != hold
+        }
 
 
 def depth_changes(start: Observation, now: Observation, min_pixels: int) -> dict[int, float]:

@@ -146,6 +146,8 @@ def _cpg_planner(
         learn_from_aborts=pull and params.abort_response == "learn",
         watch_m=params.pull_watch_m if pull and spec is None else None,
         when_no_plan=params.when_no_plan if pull else "give_up",
+        idle_hold_share=params.idle_hold_share if pull else None,
+        idle_hold_prob=params.idle_hold_prob,
     )
 
 

@@ -213,6 +213,15 @@ class Ch6TrialParams:
     aborting only when the score grows beyond that one; least_risk_unmonitored pulls it
     without abort checks (planning/extraction.py NO_PLAN_RESPONSES). Chosen on dev
     streams (make dev-ch6-no-plan)."""
+    idle_hold_share: float | None = bounded(None, ge=0.0, le=1.0)
+    """The bimanual planners on maps of the pull (`bimanual_pull*`, issue 50): a pull their
+    plan makes with the second arm idle holds the pulled box's contact neighbour of the
+    largest predicted share (eq. 6.2's, below the edge threshold) above this, one that carries
+    nothing in the graph; null: the arm stays idle (thesis Fig. 6.7). Chosen on dev streams
+    (make dev-ch6-idle-hold)."""
+    idle_hold_prob: float | None = bounded(None, gt=0.0, le=1.0)
+    """The pixel probability threshold of the collapse area idle_hold_share's shares are
+    taken of (null: the support rule's, as the edges' and aborts'). Chosen on dev streams."""
     pull_map_meaning: Literal["moved", "collapse"] = "moved"
     """What the maps of the pull mark, truth (`*_pull_truth`) and predicted (`*_pull`, the
     collapse predictor's head of that meaning, PULL_MAP_HEADS): moved, every box the pull
