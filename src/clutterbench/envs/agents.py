@@ -79,6 +79,7 @@ class PlannerAgent:
         self.name, self.job = planner, job
         self.planner: Any = None
         self._seen: tuple[dict[str, Any], Any] | None = None
+        self._decision: Any = None
         if not hasattr(self._make(0), "collapse_score"):
             self.collapse_score = None  # nothing to monitor the pulls with
 
@@ -102,11 +103,18 @@ class PlannerAgent:
         seen = as_observation(obs)
         self._seen = (obs, seen)
         blocked = frozenset(int(k) for k in np.nonzero(obs["blocked"])[0])
+        self._decision = None
         try:
             d = self.planner.decide(seen, int(obs["target"]), blocked)
         except ValueError:  # every action its rule allows is rejected: it gives up
             return NO_BOX, NO_BOX
+        self._decision = d
         return d.pull, NO_BOX if d.hold is None else d.hold
+
+    def last_decision(self) -> Any:
+        """The planner's last Decision (its own abort threshold, a least-risk pull's: the
+        env applies it to that step, envs/plan.py set_monitor)."""
+        return self._decision
 
     def collapse_score(self, obs: dict[str, Any], pull: int, hold: int | None) -> float:
         return self.planner.collapse_score(self._observation(obs), pull, hold)

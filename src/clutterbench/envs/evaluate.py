@@ -70,7 +70,9 @@ def run_agent(env: Any, agent: Any, episodes: range, label: str = "episodes") ->
         raise ClutterbenchError("agent: the factory returned neither a callable nor an act(obs)")
     monitor = getattr(agent, "collapse_score", None)
     if monitor is not None:
-        u.set_monitor(monitor, getattr(agent, "cp_max", float("inf")))
+        u.set_monitor(
+            monitor, getattr(agent, "cp_max", float("inf")), getattr(agent, "last_decision", None)
+        )
     results = []
     with progress_bar(label, total=len(episodes)) as advance:
         for i in episodes:

@@ -35,7 +35,10 @@ episode's. terminated: the protocol ended the episode; truncated: its attempt ca
 A policy may also monitor its pulls as Algorithm 1 does: `env.unwrapped.set_monitor(score,
 cp_max)` with `score(obs, pull, hold) -> float`, called before every pull increment with
 the observation of that moment (the first: the one the decision read); a score above cp_max
-stops the pull (an abort, as in the trials).
+stops the pull (an abort, as in the trials). With `set_monitor(..., decision=f)`, `f()`
+returns the policy's last planning.extraction.Decision (or None): when it is the action
+taken, its own abort threshold (`cp_max`, a least-risk pull's) and its `no_plan` note
+apply to that step, as in the trials.
 """
 
 from __future__ import annotations
@@ -140,15 +143,22 @@ class ClutterShelfPlanEnv(gym.Env):
         self.action_space = spaces.MultiDiscrete([MAX_BOXES + 1, MAX_BOXES + 1])
         self.monitor: Monitor | None = None
         self.cp_max = np.inf
+        self.decision_of: Callable[[], Decision | None] | None = None
         self.episode = None
         self.episode_index: int | None = None
         self._next_episode = 0
         self._obs: dict[str, Any] | None = None
 
     # -- the policy's optional pull monitor ----------------------------------------------------
-    def set_monitor(self, score: Monitor | None, cp_max: float) -> None:
-        """Monitor every pull with `score(obs, pull, hold)`; above `cp_max` it stops."""
-        self.monitor, self.cp_max = score, float(cp_max)
+    def set_monitor(
+        self,
+        score: Monitor | None,
+        cp_max: float,
+        decision: Callable[[], Decision | None] | None = None,
+    ) -> None:
+        """Monitor every pull with `score(obs, pull, hold)`; above `cp_max` (or the policy's
+        decision's own threshold, `decision`: module doc) it stops."""
+        self.monitor, self.cp_max, self.decision_of = score, float(cp_max), decision
         if self.episode is not None:
             self.episode.job["cp_max"] = self.cp_max
 
@@ -287,7 +297,7 @@ class ClutterShelfPlanEnv(gym.Env):
         if pull == NO_BOX:
             ep.give_up()
         else:
-            step = ep.step(Decision(pull, hold, {"policy": self.name}), decider)
+            step = ep.step(self._decision(pull, hold), decider)
         self._obs = self._observation()
         info: dict[str, Any] = {"action_mask": self.action_mask(), "end": ep.end}
         if step is not None:
@@ -302,6 +312,15 @@ class ClutterShelfPlanEnv(gym.Env):
         truncated = ep.end == "max_steps"
         terminated = ep.done and not truncated
         return self._obs, reward, terminated, truncated, info
+
+    def _decision(self, pull: int, hold: int | None) -> Decision:
+        """The step's Decision: the action, with the policy's own abort threshold and note
+        where its last decision (set_monitor's `decision`) is this action."""
+        made = self.decision_of() if self.decision_of is not None else None
+        if made is None or (made.pull, made.hold) != (pull, hold):
+            return Decision(pull, hold, {"policy": self.name})
+        note = {k: made.state[k] for k in ("no_plan",) if k in made.state}
+        return Decision(pull, hold, {"policy": self.name} | note, made.cp_max)
 
     def episode_result(self) -> EpisodeResult:
         """The ended episode's record (the trials' format) and its MCAP events."""
