@@ -163,23 +163,21 @@ class CollapseGraphPlanner:
             plan_fn = functools.partial(bimanual_plan, clear_hold_load=self.clear_hold_load)
         else:
             plan_fn = single_arm_plan
-        rejected: list[list[float]] = []
-        candidates: list[tuple[float, Any]] = []
+        rejected: list[tuple[float, Any]] = []  # (collapse score, plan), in order
         limit = None
         while True:
             try:
                 plan = plan_fn(graph, target, frozenset(now))
             except ValueError:
-                if self.when_no_plan == "give_up" or not candidates:
+                if self.when_no_plan == "give_up" or not rejected:
                     raise
-                cp, plan = min(candidates, key=lambda c: c[0])  # ties: the first rejected
+                cp, plan = min(rejected, key=lambda c: c[0])  # ties: the first rejected
                 limit = cp if self.when_no_plan == "least_risk" else math.inf
                 break
             cp = self.collapse_score(obs, plan.pull, plan.hold)
             if cp <= self.cp_max:
                 break
-            rejected.append([plan.pull, -1 if plan.hold is None else plan.hold, round(cp, 4)])
-            candidates.append((cp, plan))
+            rejected.append((cp, plan))
             threat, self._threat = self._threat, None
             if self.learn_from_aborts and threat is not None and self._learn(threat):
                 graph = build_cpg([*edges, *self._learned_edges(visible)], target)
@@ -189,7 +187,9 @@ class CollapseGraphPlanner:
             "edges": _edges_json(edges),
             "order": extraction_order(graph, target),
             "blocked": sorted(blocked),
-            "rejected": rejected,
+            "rejected": [
+                [p.pull, -1 if p.hold is None else p.hold, round(c, 4)] for c, p in rejected
+            ],
             "cp": round(cp, 4),
             "steps_to_target": plan.steps_to_target,
         }

@@ -80,6 +80,7 @@ def execute_decision(
     max_cp = 0.0
 
     truth = truth_maps_of(planner)
+    limit = cp_max if decision.cp_max is None else decision.cp_max  # a least-risk pull's own
 
     def score(done: int, now: Observation | None, t: float) -> bool:
         nonlocal max_cp
@@ -92,8 +93,6 @@ def execute_decision(
         max_cp = max(max_cp, cp)
         log.json(t, DECISION_TOPIC, {"box": box, "cp": round(cp, 4)})
         return cp <= limit
-
-    limit = cp_max if decision.cp_max is None else decision.cp_max
 
     arm_fields: dict[str, Any] = {}
     if arm is None:

@@ -147,7 +147,7 @@ def _cpg_planner(
         watch_m=params.pull_watch_m if pull and spec is None else None,
         when_no_plan=params.when_no_plan if pull else "give_up",
         idle_hold_share=params.idle_hold_share if pull else None,
-        idle_hold_prob=params.idle_hold_prob,
+        idle_hold_prob=params.idle_hold_prob if pull else None,
     )
 
 
