@@ -230,3 +230,49 @@ def test_the_idle_hold_reads_the_map_at_its_own_pixel_threshold(idle_hold_prob, 
         faint, PARAMS, 0.5, 1, bimanual=True, idle_hold_share=0.0, idle_hold_prob=idle_hold_prob
     )
     assert planner.decide(obs, 0, frozenset()).hold == hold
+
+
+def test_a_visible_score_sees_a_collapse_of_a_box_the_pulled_one_does_not_touch():
+    """score_over: the target's pull collapses box 2, far from it (no pseudo-contact):
+    eq. 6.2 over the contact objects sees nothing and pulls; over every visible object the
+    pull is rejected (Algorithm 1 then gives up)."""
+    obs, _ = _scene(extra_leaf=False)
+    inst = obs.instance.copy()
+    inst[8:20, 18:23] = 3  # box 2: four pixels right of box 1, none of them box 0's
+    obs = Observation(obs.depth_m, inst, obs.camera)
+
+    def predict(depth, masks):
+        out = np.zeros(masks.shape, np.float32)
+        for k, m in enumerate(masks.astype(bool)):
+            if (m & (inst == 1)).any():
+                out[k] = inst == 3
+        return out
+
+    contact = CollapseGraphPlanner(predict, PARAMS, 0.5, 1)
+    assert contact.collapse_score(obs, 0) == 0.0
+    assert contact.decide(obs, 0, frozenset()).pull == 0
+    visible = CollapseGraphPlanner(predict, PARAMS, 0.5, 1, score_over="visible")
+    assert visible.collapse_score(obs, 0) == 1.0
+    with pytest.raises(ValueError):
+        visible.decide(obs, 0, frozenset())
+    with pytest.raises(ValueError, match="score_over"):
+        CollapseGraphPlanner(predict, PARAMS, 0.5, 1, score_over="everything")
+
+
+def test_with_no_plan_left_clear_pulls_a_safe_neighbour_of_the_rejected_first():
+    """when_no_plan clear: box 1, the only leaf of target 0's graph, is rejected (0.6 >
+    0.5); box 2 lies on box 1 and its pull collapses nothing, so it goes first (a pull of
+    the rule's own limit). With no such neighbour, the least-risk pull."""
+    obs, boxes = _scene(extra_leaf=True)
+    planner = CollapseGraphPlanner(_predictor(boxes), PARAMS, 0.5, 1, when_no_plan="clear")
+    decision = planner.decide(obs, 0, frozenset())
+    assert (decision.pull, decision.hold, decision.cp_max) == (2, None, None)
+    assert decision.state["no_plan"] == "clear" and decision.state["cp"] == 0.0
+    assert [r[0] for r in decision.state["rejected"]] == [1]
+    least = CollapseGraphPlanner(_predictor(boxes), PARAMS, 0.5, 1, when_no_plan="least_risk")
+    assert least.decide(obs, 0, frozenset()).pull == 1
+    bare, boxes = _scene(extra_leaf=False)
+    planner = CollapseGraphPlanner(_predictor(boxes), PARAMS, 0.5, 1, when_no_plan="clear")
+    decision = planner.decide(bare, 0, frozenset())
+    assert decision.pull == 1 and decision.state["no_plan"] == "least_risk"
+    assert decision.cp_max == pytest.approx(0.6, abs=0.1)

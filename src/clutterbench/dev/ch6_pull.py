@@ -6,6 +6,7 @@
     python -m clutterbench.dev.ch6_pull ch6_no_plan           # make dev-ch6-no-plan
     python -m clutterbench.dev.ch6_pull ch6_no_plan_thresholds   # make dev-ch6-no-plan-thresholds
     python -m clutterbench.dev.ch6_pull ch6_idle_hold         # make dev-ch6-idle-hold
+    python -m clutterbench.dev.ch6_pull ch6_clear             # make dev-ch6-clear
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
 rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull
@@ -28,7 +29,8 @@ trials.ch6.pull_prob_threshold / pull_score_threshold), ch6_pull_watch (their wa
 pull in depth, trials.ch6.pull_watch_m), ch6_no_plan (what the pull planners do when their
 rule rejects every candidate, trials.ch6.when_no_plan), ch6_no_plan_thresholds (the pull-head
 CP planners' thresholds once they do that), ch6_idle_hold (the bimanual pull planners' idle
-arm, trials.ch6.idle_hold_share).
+arm, trials.ch6.idle_hold_share), ch6_clear (whose shares their collapse score takes,
+trials.ch6.score_over, and when_no_plan clear).
 """
 
 from __future__ import annotations
@@ -196,6 +198,8 @@ TITLES = {
     "ch6_no_plan_thresholds": "the thresholds of the ch. 6 pull-head CP planners that pull "
     "the least risk when their rule rejects every candidate",
     "ch6_idle_hold": "the ch. 6 bimanual pull planners holding a neighbour with the idle arm",
+    "ch6_clear": "whose shares the ch. 6 pull planners' collapse score takes, and clearing "
+    "around a rejected plan",
 }
 
 

@@ -97,6 +97,7 @@ CH6_VARIED = (
     "when_no_plan",
     "idle_hold_share",
     "idle_hold_prob",
+    "score_over",
     "pull_watch_m",
 )
 """The trials.ch6 fields a ch. 6 pull-planner variant may set."""
@@ -200,6 +201,12 @@ class DevConfig:
     )
     """The bimanual pull planners' idle arm (trials.ch6.idle_hold_share; python -m
     clutterbench.dev.ch6_pull ch6_idle_hold)."""
+    ch6_clear: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(variants={"contact": {}, "visible": {}})
+    )
+    """Whose shares the pull planners' collapse score takes, and clearing around a rejected
+    plan (trials.ch6.score_over, when_no_plan clear; python -m clutterbench.dev.ch6_pull
+    ch6_clear)."""
 
     def __post_init__(self) -> None:
         for name in self.streams:
@@ -215,6 +222,7 @@ class DevConfig:
             ("ch6_no_plan", self.ch6_no_plan.streams),
             ("ch6_no_plan_thresholds", self.ch6_no_plan_thresholds.streams),
             ("ch6_idle_hold", self.ch6_idle_hold.streams),
+            ("ch6_clear", self.ch6_clear.streams),
         ):
             for name in names:
                 if name not in self.streams:

@@ -17,7 +17,13 @@ from typing import Any
 import numpy as np
 
 from clutterbench.observation import Observation
-from clutterbench.planning.cpg import bimanual_plan, build_cpg, extraction_order, single_arm_plan
+from clutterbench.planning.cpg import (
+    BimanualPlan,
+    bimanual_plan,
+    build_cpg,
+    extraction_order,
+    single_arm_plan,
+)
 from clutterbench.planning.support import (
     SupportEdge,
     SupportParams,
@@ -43,11 +49,19 @@ class Decision:
     least-risk pull taken when no plan is left carries its own score: NO_PLAN_RESPONSES)."""
 
 
-NO_PLAN_RESPONSES = ("give_up", "least_risk", "least_risk_unmonitored")
+NO_PLAN_RESPONSES = ("give_up", "least_risk", "least_risk_unmonitored", "clear")
 """What a CPG planner does when every candidate is rejected by its own rule (issue 50):
 give_up (the episode ends, Algorithm 1); least_risk pulls the rejected candidate of the
 lowest collapse score, aborting only when the score grows beyond that one;
-least_risk_unmonitored pulls it without abort checks."""
+least_risk_unmonitored pulls it without abort checks; clear first pulls a box the rule
+passes (score <= cp_max) from around the rejected ones (a neighbour of a rejected candidate
+or of a box its score feared for), so the next decision meets a smaller pile, and does
+least_risk when no such box is left."""
+
+SCORE_OVER = ("contact", "visible")
+"""Whose shares a collapse score takes (issue 50): contact, the objects in pseudo-direct
+contact with the pulled box (eq. 6.2); visible, every visible object (what the pull drags
+along to a box it does not touch, through one between)."""
 
 
 def visible_objects(obs: Observation, min_pixels: int) -> tuple[list[int], np.ndarray]:
@@ -86,6 +100,7 @@ class CollapseGraphPlanner:
         when_no_plan: str = "give_up",
         idle_hold_share: float | None = None,
         idle_hold_prob: float | None = None,
+        score_over: str = "contact",
     ):
         self.predict, self.params, self.cp_max = predict, params, cp_max
         self.min_pixels, self.bimanual = min_pixels, bimanual
@@ -116,6 +131,10 @@ class CollapseGraphPlanner:
         self.idle_hold_prob = idle_hold_prob
         """The pixel probability threshold of the collapse area those shares are taken of
         (None: the rule's, params.prob_threshold)."""
+        if score_over not in SCORE_OVER:
+            raise ValueError(f"score_over: {score_over!r} is none of {SCORE_OVER}")
+        self.score_over = score_over
+        """Issue 50 (not the thesis): whose shares the collapse score takes (SCORE_OVER)."""
         self._decided_on: Observation | None = None
         """The observation of the last decision: where the watched pull started."""
         self.learned: dict[tuple[int, int], float] = {}
@@ -164,21 +183,34 @@ class CollapseGraphPlanner:
         else:
             plan_fn = single_arm_plan
         rejected: list[tuple[float, Any]] = []  # (collapse score, plan), in order
+        feared: set[int] = set()  # the boxes the rejected candidates' scores feared for
         limit = None
+        no_plan = None
         while True:
             try:
                 plan = plan_fn(graph, target, frozenset(now))
             except ValueError:
                 if self.when_no_plan == "give_up" or not rejected:
                     raise
+                clear = None
+                if self.when_no_plan == "clear":
+                    around = {p.pull for _, p in rejected} | feared
+                    clear = self._clear_around(obs, around, {target, *now})
+                if clear is not None:
+                    cp, plan = clear
+                    no_plan = "clear"
+                    break
                 cp, plan = min(rejected, key=lambda c: c[0])  # ties: the first rejected
-                limit = cp if self.when_no_plan == "least_risk" else math.inf
+                limit = math.inf if self.when_no_plan == "least_risk_unmonitored" else cp
+                no_plan = "least_risk" if self.when_no_plan == "clear" else self.when_no_plan
                 break
             cp = self.collapse_score(obs, plan.pull, plan.hold)
             if cp <= self.cp_max:
                 break
             rejected.append((cp, plan))
             threat, self._threat = self._threat, None
+            if threat is not None:
+                feared.add(threat[1])
             if self.learn_from_aborts and threat is not None and self._learn(threat):
                 graph = build_cpg([*edges, *self._learned_edges(visible)], target)
             else:  # nothing new to learn: skip the box (Algorithm 1)
@@ -195,8 +227,8 @@ class CollapseGraphPlanner:
         }
         if self.learn_from_aborts:
             state["learned"] = [[a, b, round(v, 4)] for (a, b), v in sorted(self.learned.items())]
-        if limit is not None:
-            state["no_plan"] = self.when_no_plan
+        if no_plan is not None:
+            state["no_plan"] = no_plan
         hold = plan.hold
         if self.bimanual and hold is None and self.idle_hold_share is not None:
             hold = self._idle_hold(obs, plan.pull, graph)
@@ -206,6 +238,29 @@ class CollapseGraphPlanner:
                 self._threat = None
         self._decided_on = obs
         return Decision(plan.pull, hold, state, limit)
+
+    def _clear_around(
+        self, obs: Observation, around: set[int], skip: set[int]
+    ) -> tuple[float, BimanualPlan] | None:
+        """(score, plan) of the box the rule passes (collapse score <= cp_max) among the
+        contact neighbours of `around` (not in `skip`, not in `around`): the lowest score,
+        ties the smallest id; None where there is none (when_no_plan clear)."""
+        ids, masks = visible_objects(obs, self.min_pixels)
+        contact = support_contact(masks, self.params, self._gaps(obs, masks))
+        index = {box: k for k, box in enumerate(ids)}
+        near = sorted(
+            ids[j]
+            for k in (index[b] for b in around if b in index)
+            for j in np.flatnonzero(contact[k])
+            if ids[j] not in skip and ids[j] not in around
+        )
+        best = None
+        for box in dict.fromkeys(near):
+            cp = self.collapse_score(obs, box)
+            self._threat = None
+            if cp <= self.cp_max and (best is None or cp < best[0]):
+                best = (cp, BimanualPlan(hold=None, pull=box, steps_to_target=len(ids) - 1))
+        return best
 
     def _idle_hold(self, obs: Observation, box: int, graph: Any) -> int | None:
         """The box the idle arm holds while `box` is pulled (idle_hold_share), or None."""
@@ -239,7 +294,7 @@ class CollapseGraphPlanner:
         """Thesis eq. (6.2) during a pull: R_C predicted for removing `box` now, against the
         area of each object in pseudo-direct contact with it; the largest share. The object
         the other arm holds (`hold`) cannot collapse and is left out (Fig. 6.7 (d))."""
-        scores = self._shares(obs, box, hold)
+        scores = self._shares(obs, box, hold, contact=self.score_over == "contact")
         start = self._decided_on
         if self.watch_m is not None and start is not None and start is not obs:
             moved = {
@@ -255,11 +310,16 @@ class CollapseGraphPlanner:
         return cp
 
     def _shares(
-        self, obs: Observation, box: int, hold: int | None, prob: float | None = None
+        self,
+        obs: Observation,
+        box: int,
+        hold: int | None,
+        prob: float | None = None,
+        contact: bool = True,
     ) -> dict[int, float]:
         """Eq. (6.2)'s shares: box id -> the part of it in R_C predicted for removing `box`,
-        for each object in pseudo-direct contact with it but `hold` (R_C: heatmap > `prob`,
-        None: the rule's threshold)."""
+        for each object in pseudo-direct contact with it (`contact`; else each visible one)
+        but `hold` (R_C: heatmap > `prob`, None: the rule's threshold)."""
         ids, masks = visible_objects(obs, self.min_pixels)
         if box not in ids or len(ids) < 2:
             return {}
@@ -269,11 +329,14 @@ class CollapseGraphPlanner:
         else:
             heat = self.predict(obs.depth_m, masks[k : k + 1].astype(np.uint8))[0]
         area_c = heat > (self.params.prob_threshold if prob is None else prob)
-        contact = support_contact(masks, self.params, self._gaps(obs, masks))[k]
+        if contact:
+            near = support_contact(masks, self.params, self._gaps(obs, masks))[k]
+        else:
+            near = np.ones(len(ids), bool)
         return {
             ids[j]: float(np.logical_and(area_c, masks[j]).sum() / masks[j].sum())
             for j in range(len(ids))
-            if j != k and contact[j] and ids[j] != hold
+            if j != k and near[j] and ids[j] != hold
         }
 
 

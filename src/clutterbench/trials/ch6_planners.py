@@ -148,6 +148,7 @@ def _cpg_planner(
         when_no_plan=params.when_no_plan if pull else "give_up",
         idle_hold_share=params.idle_hold_share if pull else None,
         idle_hold_prob=params.idle_hold_prob if pull else None,
+        score_over=params.score_over if pull else "contact",
     )
 
 

@@ -206,13 +206,21 @@ class Ch6TrialParams:
     in depth by more than this (median, m) stops the pull like a collapse score over cp_max
     (abort_response learn: that box is then taken as carried by the pulled one). The robot's
     own depth images, no prediction; null: no watch. Chosen on dev streams."""
-    when_no_plan: Literal["give_up", "least_risk", "least_risk_unmonitored"] = "give_up"
+    when_no_plan: Literal["give_up", "least_risk", "least_risk_unmonitored", "clear"] = "give_up"
     """What the planners on maps of the pull (`*_pull*`, issue 50) do when their rule
     rejects every candidate: give_up ends the episode (Algorithm 1, what the deletion
     planners do); least_risk pulls the rejected candidate of the lowest collapse score,
     aborting only when the score grows beyond that one; least_risk_unmonitored pulls it
-    without abort checks (planning/extraction.py NO_PLAN_RESPONSES). Chosen on dev
-    streams (make dev-ch6-no-plan)."""
+    without abort checks; clear first pulls a box the rule passes from around the rejected
+    ones (a contact neighbour of a rejected candidate or of a box its score feared for; the
+    lowest score), least_risk when there is none (planning/extraction.py NO_PLAN_RESPONSES).
+    Chosen on dev streams (make dev-ch6-no-plan, make dev-ch6-clear)."""
+    score_over: Literal["contact", "visible"] = "contact"
+    """Whose shares the collapse score of the planners on maps of the pull (`*_pull*`, issue
+    50) takes: contact, the objects in pseudo-direct contact with the pulled box (eq. 6.2,
+    what the deletion planners do); visible, every visible object, so a pull that drags a
+    box it does not touch (through one between) is rejected too. Chosen on dev streams
+    (make dev-ch6-clear)."""
     idle_hold_share: float | None = bounded(None, ge=0.0, le=1.0)
     """The bimanual planners on maps of the pull (`bimanual_pull*`, issue 50): a pull their
     plan makes with the second arm idle holds the pulled box's contact neighbour of the
