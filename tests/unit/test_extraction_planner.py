@@ -276,3 +276,35 @@ def test_with_no_plan_left_clear_pulls_a_safe_neighbour_of_the_rejected_first():
     decision = planner.decide(bare, 0, frozenset())
     assert decision.pull == 1 and decision.state["no_plan"] == "least_risk"
     assert decision.cp_max == pytest.approx(0.6, abs=0.1)
+
+
+def test_the_idle_arm_never_holds_a_box_that_carries_another_in_the_graph():
+    """Target 0 carries boxes 1 and 2, box 2 carries box 3: the bimanual plan keeps 2 (the
+    larger subtree) and pulls 1 first with the second arm idle. Box 1's pull grazes box 2
+    (a quarter) and box 4 (an eighth), both below the edge threshold: the idle arm would hold
+    box 2, the larger share, but box 2 carries box 3, so it holds box 4."""
+    inst = np.zeros((30, 30), np.uint8)
+    inst[20:28, 2:26] = 1  # box 0, the target, under 1 and 2
+    inst[12:20, 2:10] = 2  # box 1
+    inst[12:20, 10:18] = 3  # box 2
+    inst[4:12, 12:18] = 4  # box 3, on box 2
+    inst[4:12, 2:10] = 5  # box 4, on box 1
+    obs = Observation(np.ones((30, 30), np.float32), inst, CameraModel(np.eye(3), np.eye(4)))
+
+    def predict(depth, masks):
+        out = np.zeros(masks.shape, np.float32)
+        for k, m in enumerate(masks.astype(bool)):
+            box = int(np.bincount(inst[m]).argmax()) - 1
+            if box == 0:
+                out[k] = (inst == 2) | (inst == 3)
+            elif box == 2:
+                out[k] = inst == 4
+            elif box == 1:
+                out[k, 12:14] = inst[12:14] == 3  # a quarter of box 2
+                out[k, 4:5] = inst[4:5] == 5  # an eighth of box 4
+        return out
+
+    planner = CollapseGraphPlanner(predict, PARAMS, 0.5, 1, bimanual=True, idle_hold_share=0.0)
+    decision = planner.decide(obs, 0, frozenset())
+    assert (decision.pull, decision.hold) == (1, 4)
+    assert decision.state["idle_hold"] == 4
