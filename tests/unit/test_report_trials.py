@@ -11,6 +11,7 @@ import pytest
 
 from clutterbench.errors import ClutterbenchError
 from clutterbench.report.extraction import (
+    _gap_text,
     extraction_families_table,
     extraction_table,
     oracle_gaps,
@@ -202,6 +203,21 @@ def test_oracle_gaps_match_each_planner_to_its_ceiling_on_the_same_scenes():
     assert gaps["bi"]["beat"] == []
     other_stream = {"ms": [r | {"stream": "elsewhere"} for r in recs["ms"]], "or": recs["or"]}
     assert "ms" not in oracle_gaps(other_stream)
+
+
+def test_an_episode_won_by_holding_during_another_pull_is_named_beside_the_oracle():
+    """oracle_hold holds a box only while pulling the target: a bimanual episode that beat it
+    holding a box while pulling another box is outside its action set, and the row says so;
+    one that held only during the target's pull is not."""
+    oracle = [_episode("oh", "oracle_hold", e, False) for e in range(2)]
+    planner = [_episode("bi", "bimanual_pull", e, True) | {"target": 0} for e in range(2)]
+    planner[0]["steps"] = [{"box": 3, "hold": 1, "success": True}, {"box": 0, "hold": None}]
+    planner[1]["steps"] = [{"box": 3, "hold": None, "success": True}, {"box": 0, "hold": 1}]
+    gap = oracle_gaps({"oh": oracle, "bi": planner})["bi"]
+    assert gap["beat"] == [0, 1] and gap["beat_held_aside"] == [0]
+    assert _gap_text(gap, "bi") == (
+        "-100.0 (oh; beat it in 2, 1 holding a box during another box's pull)"
+    )
 
 
 def scenes_frame() -> pd.DataFrame:

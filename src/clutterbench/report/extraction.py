@@ -159,11 +159,13 @@ def oracle_gaps(
         beat = [e for e in shared if ours[e] and not theirs[e]]
         by_episode = {int(r["episode"]): r for r in recs}
         partial = [e for e in beat if moved_by_a_partial_pull(by_episode[e])]
+        held = [e for e in beat if held_during_another_pull(by_episode[e])]
         out[cond] = {
             "oracle": oracle,
             "points": gap,
             "beat": beat,
             "beat_partial": partial,
+            "beat_held_aside": held,
             "episodes": len(shared),
         }
     return out
@@ -178,11 +180,23 @@ def moved_by_a_partial_pull(record: Mapping[str, Any]) -> bool:
     )
 
 
+def held_during_another_pull(record: Mapping[str, Any]) -> bool:
+    """Whether an episode held a box while pulling one other than the target (a bimanual
+    pull planner's idle arm): an action outside the search oracles' set (oracle_hold holds a
+    box only while pulling the target)."""
+    target = record.get("target")
+    return any(
+        s.get("hold") is not None and s.get("box") != target for s in record.get("steps", [])
+    )
+
+
 def _gap_text(gap: Mapping[str, Any] | None, condition: str) -> str | None:
     if gap is None or gap["oracle"] == condition:
         return None
     partial = len(gap.get("beat_partial", []))
+    held = len(gap.get("beat_held_aside", []))
     through = f", {partial} through a partial pull" if partial else ""
+    through += f", {held} holding a box during another box's pull" if held else ""
     return f"{gap['points']:.1f} ({gap['oracle']}; beat it in {len(gap['beat'])}{through})"
 
 
@@ -506,7 +520,11 @@ def _notes(
         "scenes and targets (oracle_hold for planners that hold a box, oracle otherwise) minus "
         "the row's, in points; 'beat it in': episodes the row succeeded in and its oracle did "
         "not; 'through a partial pull': of those, episodes with a pull stopped after motion "
-        "that moved another box, an action outside the oracle's set (it simulates whole pulls).",
+        "that moved another box, an action outside the oracle's set (it simulates whole pulls); "
+        "'holding a box during another box's pull': of those, episodes where the second arm "
+        "held a box while a box other than the target was pulled (the bimanual pull planners' "
+        "idle hold), also outside the oracle's set (oracle_hold holds only during the target's "
+        "pull).",
         *search_notes(used),
     ]
 
