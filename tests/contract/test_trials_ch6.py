@@ -143,7 +143,7 @@ def _clean_sequence_exists(oracle: SearchOracle, state: SceneState, target: int)
     for x in oracle.candidates(state, target):
         holds = [None] + (
             [h for h in oracle.candidates(state, target) if h != x]
-            if oracle.holding and x == target
+            if oracle.holding and (x == target or oracle.hold_any_pull)
             else []
         )
         for h in holds:
@@ -155,12 +155,18 @@ def _clean_sequence_exists(oracle: SearchOracle, state: SceneState, target: int)
     return False
 
 
-@pytest.mark.parametrize("holding", [False, True], ids=["one_arm", "holding"])
+@pytest.mark.parametrize(
+    ("holding", "any_pull"),
+    [(False, False), (True, False), (True, True)],
+    ids=["one_arm", "holding", "holding_any_pull"],
+)
 @pytest.mark.parametrize("spec_path", [STACK3, TOWER6])
-def test_the_search_oracle_finds_a_clean_sequence_whenever_one_exists(spec_path, holding, physics):
+def test_the_search_oracle_finds_a_clean_sequence_whenever_one_exists(
+    spec_path, holding, any_pull, physics
+):
     spec = SceneSpec.load(spec_path)
     for target in range(spec.n):
-        oracle = SearchOracle(spec, physics, CAM, PARAMS, holding, CF)
+        oracle = SearchOracle(spec, physics, CAM, PARAMS, holding, CF, hold_any_pull=any_pull)
         plan, _, exhausted = oracle.search(SceneState.start(spec), target)
         assert not exhausted
         assert (plan is not None) == _clean_sequence_exists(

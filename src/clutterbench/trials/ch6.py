@@ -143,6 +143,8 @@ def execute_decision(
     } | step
     if "no_plan" in decision.state:  # no plan left: the least-risk rejected pull (issue 50)
         record["no_plan"] = decision.state["no_plan"]
+    if "idle_hold" in decision.state:  # the bimanual pull planners' idle arm held (issue 50)
+        record["idle_hold"] = True
     return record | arm_fields, state, elapsed
 
 

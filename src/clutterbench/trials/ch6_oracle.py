@@ -37,7 +37,10 @@ class SearchOracle:
     planners hold one box while pulling the target), the boxes its unheld pull disturbs
     tried first. Holding a box that the unheld pull leaves within the threshold can still
     save the others (it stops the few millimetres that let them slide), so no box is left
-    out. As execution reproduces the simulation bit for bit, the plan found is followed; no
+    out. With `hold_any_pull` as well, a box other than the target whose unheld pull is not
+    clean may be pulled while any one visible box is held (the bimanual pull planners' idle
+    arm holds during such pulls). As execution reproduces the simulation bit for bit, the
+    plan found is followed; no
     planner succeeds on an episode where the search proved there is no such sequence,
     unless a node budget ran out (counted) or a planner's aborted pull left a state outside
     the search's actions.
@@ -51,9 +54,11 @@ class SearchOracle:
         params: Ch6TrialParams,
         holding: bool,
         cf: CollapseFreeConfig,
+        hold_any_pull: bool = False,
     ):
         self.spec, self.physics, self.camera, self.params = spec, physics, camera, params
         self.holding, self.cf = holding, cf
+        self.hold_any_pull = holding and hold_any_pull
         self.state: SceneState | None = None  # set by the harness before each decision
         self._plan: list[tuple[Action, SceneState]] = []
         self._expected: SceneState | None = None
@@ -128,20 +133,23 @@ class SearchOracle:
                     step, after, _ = self.simulate(now, (target, h), cut_short=cut)
                     if step[key]:
                         return [((target, h), after)]
-            children = []
+            children: list[tuple[Action, SceneState]] = []
             for x in boxes:
-                if x != target:
-                    step, after, _ = self.simulate(now, (x, None), cut_short=cut)
+                if x == target:
+                    continue
+                for h in [None, *(b for b in boxes if b != x and self.hold_any_pull)]:
+                    step, after, _ = self.simulate(now, (x, h), cut_short=cut)
                     if step[key]:
-                        children.append((x, after))
-            children.sort(key=lambda c: (not in_way[c[0]], c[0]))
-            for x, after in children:
+                        children.append(((x, h), after))
+                        break
+            children.sort(key=lambda c: (not in_way[c[0][0]], c[0][0]))
+            for action, after in children:
                 if after.removed in visited:
                     continue
                 visited.add(after.removed)
                 rest = visit(after)
                 if rest is not None:
-                    return [((x, None), after), *rest]
+                    return [(action, after), *rest]
             return None
 
         try:

@@ -114,8 +114,16 @@ def _oracle(job: dict[str, Any], spec: SceneSpec):
 
 @register_planner("oracle_hold")
 def _oracle_hold(job: dict[str, Any], spec: SceneSpec):
+    """May hold one box during any pull: the ceiling of every planner that holds, the
+    bimanual pull planners' idle hold included."""
     return SearchOracle(
-        spec, job["physics"], job["camera"], job["params"], True, job["collapse_free"]
+        spec,
+        job["physics"],
+        job["camera"],
+        job["params"],
+        True,
+        job["collapse_free"],
+        hold_any_pull=True,
     )
 
 
