@@ -308,3 +308,67 @@ def test_the_idle_arm_never_holds_a_box_that_carries_another_in_the_graph():
     decision = planner.decide(obs, 0, frozenset())
     assert (decision.pull, decision.hold) == (1, 4)
     assert decision.state["idle_hold"] == 4
+
+
+@pytest.mark.parametrize(("hold_feared", "hold"), [("never", None), ("any", 1), ("free", 1)])
+def test_a_rejected_idle_arm_pull_is_saved_by_holding_the_box_it_fears_for(hold_feared, hold):
+    """Pulling target 0 collapses a quarter of box 1: below the edge threshold (no edge, the
+    plan pulls the target with the second arm idle) but above cp_max 0.2. hold_feared never
+    rejects that pull (no plan left: the planner gives up); any / free hold box 1, which the
+    score then leaves out."""
+    obs, boxes = _scene(extra_leaf=False)
+    planner = CollapseGraphPlanner(
+        _grazing_predictor(boxes, 0.25), PARAMS, 0.2, 1, bimanual=True, hold_feared=hold_feared
+    )
+    if hold is None:
+        with pytest.raises(ValueError):
+            planner.decide(obs, 0, frozenset())
+        return
+    decision = planner.decide(obs, 0, frozenset())
+    assert (decision.pull, decision.hold) == (0, hold)
+    assert decision.state["feared_hold"] == hold and decision.state["cp"] == 0.0
+    one_arm = CollapseGraphPlanner(
+        _grazing_predictor(boxes, 0.25), PARAMS, 0.2, 1, hold_feared=hold_feared
+    )
+    with pytest.raises(ValueError):  # one arm: nothing to hold with
+        one_arm.decide(obs, 0, frozenset())
+    with pytest.raises(ValueError, match="hold_feared"):
+        CollapseGraphPlanner(_grazing_predictor(boxes, 0.25), PARAMS, 0.2, 1, hold_feared="all")
+
+
+def test_a_free_feared_hold_never_holds_a_box_that_carries_another():
+    """The scene of the test above, cp_max 0.2: box 1's pull (first of the plan, the second
+    arm idle) fears for box 2 (a quarter, the largest share), which carries box 3. any holds
+    box 2 (box 4's eighth then passes); free does not, and box 1 is not pulled."""
+    inst = np.zeros((30, 30), np.uint8)
+    inst[20:28, 2:26] = 1
+    inst[12:20, 2:10] = 2
+    inst[12:20, 10:18] = 3
+    inst[4:12, 12:18] = 4
+    inst[4:12, 2:10] = 5
+    obs = Observation(np.ones((30, 30), np.float32), inst, CameraModel(np.eye(3), np.eye(4)))
+
+    def predict(depth, masks):
+        out = np.zeros(masks.shape, np.float32)
+        for k, m in enumerate(masks.astype(bool)):
+            box = int(np.bincount(inst[m]).argmax()) - 1
+            if box == 0:
+                out[k] = (inst == 2) | (inst == 3)
+            elif box == 2:
+                out[k] = inst == 4
+            elif box == 1:
+                out[k, 12:14] = inst[12:14] == 3
+                out[k, 4:5] = inst[4:5] == 5
+        return out
+
+    def decide(hold_feared: str):
+        planner = CollapseGraphPlanner(predict, PARAMS, 0.2, 1, True, hold_feared=hold_feared)
+        try:
+            return planner.decide(obs, 0, frozenset())
+        except ValueError:
+            return None
+
+    saved = decide("any")
+    assert (saved.pull, saved.hold, saved.state["feared_hold"]) == (1, 2, 2)
+    free = decide("free")
+    assert free is None or free.pull != 1

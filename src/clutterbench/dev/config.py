@@ -99,6 +99,7 @@ CH6_VARIED = (
     "idle_hold_prob",
     "score_over",
     "pull_watch_m",
+    "hold_feared",
 )
 """The trials.ch6 fields a ch. 6 pull-planner variant may set."""
 
@@ -207,6 +208,11 @@ class DevConfig:
     """Whose shares the pull planners' collapse score takes, and clearing around a rejected
     plan (trials.ch6.score_over, when_no_plan clear; python -m clutterbench.dev.ch6_pull
     ch6_clear)."""
+    ch6_hold_feared: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(variants={"never": {}, "any": {}})
+    )
+    """The bimanual pull planners holding the box a rejected idle-arm pull fears for
+    (trials.ch6.hold_feared; python -m clutterbench.dev.ch6_pull ch6_hold_feared)."""
 
     def __post_init__(self) -> None:
         for name in self.streams:
@@ -223,6 +229,7 @@ class DevConfig:
             ("ch6_no_plan_thresholds", self.ch6_no_plan_thresholds.streams),
             ("ch6_idle_hold", self.ch6_idle_hold.streams),
             ("ch6_clear", self.ch6_clear.streams),
+            ("ch6_hold_feared", self.ch6_hold_feared.streams),
         ):
             for name in names:
                 if name not in self.streams:

@@ -37,8 +37,8 @@ cp_max)` with `score(obs, pull, hold) -> float`, called before every pull increm
 the observation of that moment (the first: the one the decision read); a score above cp_max
 stops the pull (an abort, as in the trials). With `set_monitor(..., decision=f)`, `f()`
 returns the policy's last planning.extraction.Decision (or None): when it is the action
-taken, its own abort threshold (`cp_max`, a least-risk pull's) and its `no_plan` and
-`idle_hold` notes apply to that step, as in the trials.
+taken, its own abort threshold (`cp_max`, a least-risk pull's) and its notes
+(`trials.ch6.STEP_NOTES`) apply to that step, as in the trials.
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ from clutterbench.observation import CameraModel, Observation
 from clutterbench.planning.extraction import Decision
 from clutterbench.sim import benchmark
 from clutterbench.trials.harness import EpisodeResult
-from clutterbench.trials.protocol import STEP_FIELDS, judge_episode
+from clutterbench.trials.protocol import STEP_FIELDS, STEP_NOTES, judge_episode
 from clutterbench.trials.streams import StreamSource, stream_source
 
 MAX_BOXES = 30
@@ -320,7 +320,7 @@ class ClutterShelfPlanEnv(gym.Env):
         if made is None or (made.pull, made.hold) != (pull, hold):
             return Decision(pull, hold, {"policy": self.name})
         # the decision's notes the trials' step record carries (trials/ch6.py execute_decision)
-        note = {k: made.state[k] for k in ("no_plan", "idle_hold") if k in made.state}
+        note = {k: made.state[k] for k in STEP_NOTES if k in made.state}
         return Decision(pull, hold, {"policy": self.name} | note, made.cp_max)
 
     def episode_result(self) -> EpisodeResult:

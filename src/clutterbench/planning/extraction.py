@@ -63,6 +63,12 @@ SCORE_OVER = ("contact", "visible")
 contact with the pulled box (eq. 6.2); visible, every visible object (what the pull drags
 along to a box it does not touch, through one between)."""
 
+HOLD_FEARED = ("never", "any", "free")
+"""Which box a bimanual planner may hold to save a candidate pulled with its second arm idle
+whose collapse score exceeds cp_max (issue 50): never (the candidate is rejected, thesis);
+any, the box that score fears for; free, that box only where it carries nothing in the graph
+(what a held box carries falls when it is let go)."""
+
 
 def visible_objects(obs: Observation, min_pixels: int) -> tuple[list[int], np.ndarray]:
     """Box ids with >= `min_pixels` visible pixels and their (K, H, W) bool masks."""
@@ -101,6 +107,7 @@ class CollapseGraphPlanner:
         idle_hold_share: float | None = None,
         idle_hold_prob: float | None = None,
         score_over: str = "contact",
+        hold_feared: str = "never",
     ):
         self.predict, self.params, self.cp_max = predict, params, cp_max
         self.min_pixels, self.bimanual = min_pixels, bimanual
@@ -135,6 +142,12 @@ class CollapseGraphPlanner:
             raise ValueError(f"score_over: {score_over!r} is none of {SCORE_OVER}")
         self.score_over = score_over
         """Issue 50 (not the thesis): whose shares the collapse score takes (SCORE_OVER)."""
+        if hold_feared not in HOLD_FEARED:
+            raise ValueError(f"hold_feared: {hold_feared!r} is none of {HOLD_FEARED}")
+        self.hold_feared = hold_feared
+        """Issue 50 (not the thesis), bimanual: a candidate pulled with the second arm idle
+        whose score exceeds cp_max is tried again holding the box that score fears for
+        (HOLD_FEARED says which boxes may be held)."""
         self._decided_on: Observation | None = None
         """The observation of the last decision: where the watched pull started."""
         self.learned: dict[tuple[int, int], float] = {}
@@ -186,6 +199,7 @@ class CollapseGraphPlanner:
         feared: set[int] = set()  # the boxes the rejected candidates' scores feared for
         limit = None
         no_plan = None
+        state_notes: dict[str, int] = {}
         while True:
             try:
                 plan = plan_fn(graph, target, frozenset(now))
@@ -205,6 +219,11 @@ class CollapseGraphPlanner:
                 no_plan = "least_risk" if self.when_no_plan == "clear" else self.when_no_plan
                 break
             cp = self.collapse_score(obs, plan.pull, plan.hold)
+            if cp > self.cp_max and self.bimanual and plan.hold is None:
+                held = self._hold_feared(obs, plan, graph)
+                if held is not None:
+                    cp, plan = held
+                    state_notes["feared_hold"] = plan.hold
             if cp <= self.cp_max:
                 break
             rejected.append((cp, plan))
@@ -229,6 +248,7 @@ class CollapseGraphPlanner:
             state["learned"] = [[a, b, round(v, 4)] for (a, b), v in sorted(self.learned.items())]
         if no_plan is not None:
             state["no_plan"] = no_plan
+        state |= state_notes
         hold = plan.hold
         if self.bimanual and hold is None and self.idle_hold_share is not None:
             hold = self._idle_hold(obs, plan.pull, graph)
@@ -261,6 +281,25 @@ class CollapseGraphPlanner:
             if cp <= self.cp_max and (best is None or cp < best[0]):
                 best = (cp, BimanualPlan(hold=None, pull=box, steps_to_target=len(ids) - 1))
         return best
+
+    def _hold_feared(
+        self, obs: Observation, plan: BimanualPlan, graph: Any
+    ) -> tuple[float, BimanualPlan] | None:
+        """(score, plan) of `plan`'s pull holding the box its score over cp_max fears for,
+        where hold_feared allows that box and the score without it passes; else None, and
+        the threat of the unheld pull stands (what an abort-learning planner learns)."""
+        threat = self._threat
+        if self.hold_feared == "never" or threat is None:
+            return None
+        feared = threat[1]
+        carries = graph.out_degree(feared) > 0 if feared in graph else False
+        if self.hold_feared == "free" and carries:
+            return None
+        cp = self.collapse_score(obs, plan.pull, feared)
+        if cp > self.cp_max:
+            self._threat = threat
+            return None
+        return cp, dataclasses.replace(plan, hold=feared)
 
     def _idle_hold(self, obs: Observation, box: int, graph: Any) -> int | None:
         """The box the idle arm holds while `box` is pulled (idle_hold_share), or None."""

@@ -50,7 +50,7 @@ from clutterbench.trials.config import (
 from clutterbench.trials.criteria import CollapseFreeConfig
 from clutterbench.trials.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
 from clutterbench.trials.judge import disturbance
-from clutterbench.trials.protocol import episode_end, judge_episode, judge_pull
+from clutterbench.trials.protocol import episode_end, judge_episode, judge_pull, step_notes
 from clutterbench.trials.scenes import draw_target, draw_trial_spec
 
 
@@ -141,11 +141,7 @@ def execute_decision(
         "increments": result.increments,
         "max_cp": round(max_cp, 4),
     } | step
-    if "no_plan" in decision.state:  # no plan left: the least-risk rejected pull (issue 50)
-        record["no_plan"] = decision.state["no_plan"]
-    if "idle_hold" in decision.state:  # the bimanual pull planners' idle arm held (issue 50)
-        record["idle_hold"] = True
-    return record | arm_fields, state, elapsed
+    return record | step_notes(decision.state) | arm_fields, state, elapsed
 
 
 def job_spec(job: dict[str, Any]) -> SceneSpec:

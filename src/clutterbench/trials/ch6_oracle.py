@@ -40,10 +40,9 @@ class SearchOracle:
     out. With `hold_any_pull` as well, a box other than the target whose unheld pull is not
     clean may be pulled while any one visible box is held (the bimanual pull planners' idle
     arm holds during such pulls). As execution reproduces the simulation bit for bit, the
-    plan found is followed; no
-    planner succeeds on an episode where the search proved there is no such sequence,
-    unless a node budget ran out (counted) or a planner's aborted pull left a state outside
-    the search's actions.
+    plan found is followed; no planner succeeds on an episode where the search proved there
+    is no such sequence, unless a node budget ran out (counted) or a planner's aborted pull
+    left a state outside the search's actions.
     Lives here, not in planning/, because it reads the world."""
 
     def __init__(
@@ -134,10 +133,11 @@ class SearchOracle:
                     if step[key]:
                         return [((target, h), after)]
             children: list[tuple[Action, SceneState]] = []
+            holds = boxes if self.hold_any_pull else []
             for x in boxes:
                 if x == target:
                     continue
-                for h in [None, *(b for b in boxes if b != x and self.hold_any_pull)]:
+                for h in [None, *(b for b in holds if b != x)]:
                     step, after, _ = self.simulate(now, (x, h), cut_short=cut)
                     if step[key]:
                         children.append(((x, h), after))

@@ -157,6 +157,7 @@ def _cpg_planner(
         idle_hold_share=params.idle_hold_share if pull else None,
         idle_hold_prob=params.idle_hold_prob if pull else None,
         score_over=params.score_over if pull else "contact",
+        hold_feared=params.hold_feared if pull else "never",
     )
 
 

@@ -209,3 +209,15 @@ def judge_episode(steps: list[dict[str, Any]], end: str, target: int) -> dict[st
         "counted_steps": sum(counted(s) for s in steps),
         "strict_counted_steps": sum(strict_counted(s) for s in prefix),
     }
+
+
+STEP_NOTES = ("no_plan", "idle_hold", "feared_hold")
+"""The notes of a pull planner's decision a step record carries (issue 50): no_plan (no plan
+was left: how the pull was chosen), idle_hold (the bimanual idle arm held a box),
+feared_hold (the second arm held the box the unheld pull's score feared for)."""
+
+
+def step_notes(state: dict[str, Any]) -> dict[str, Any]:
+    """The step record's fields from a decision's notes (STEP_NOTES): no_plan's value, and
+    true for a hold (the held box is the record's `hold`)."""
+    return {k: state[k] if k == "no_plan" else True for k in STEP_NOTES if k in state}
