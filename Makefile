@@ -19,7 +19,7 @@ TORCH_PIP_ARGS := $(if $(TORCH_INDEX_URL),--index-url $(TORCH_INDEX_URL))
 TORCH_CHOICE := $(if $(filter-out torch==2.13.0,$(TORCH_SPEC))$(TORCH_INDEX_URL),echo '$(TORCH_SPEC) $(TORCH_INDEX_URL)';)
 STAMP := $(VENV)/.installed-$(shell ($(TORCH_CHOICE) cat requirements.lock pyproject.toml) 2>/dev/null | sha1sum | cut -c1-12)
 
-.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner dev-perturbed-fit dev-ch6-pull dev-ch6-pull-thresholds dev-ch6-pull-watch dev-ch6-no-plan dev-ch6-no-plan-thresholds dev-ch6-idle-hold dev-ch6-clear dev-ch6-hold-feared benchmark-scenes clean-venv shell
+.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner dev-perturbed-fit dev-ch6-pull dev-ch6-pull-thresholds dev-ch6-pull-watch dev-ch6-no-plan dev-ch6-no-plan-thresholds dev-ch6-idle-hold dev-ch6-clear dev-ch6-hold benchmark-scenes clean-venv shell
 
 setup: system venv .dvc/config
 
@@ -136,11 +136,11 @@ dev-ch6-idle-hold: setup
 dev-ch6-clear: setup
 	python -m clutterbench.dev.ch6_pull ch6_clear
 
-# The bimanual pull planners holding the box a rejected idle-arm pull fears for (issue 50):
-# trials.ch6.hold_feared, each variant of dev.ch6_hold_feared on dev scenes of the 3-10 stream
-# -> reports/dev/ch6_hold_feared.{json,md}
-dev-ch6-hold-feared: setup
-	python -m clutterbench.dev.ch6_pull ch6_hold_feared
+# How the bimanual pull planners score and choose a held pull (issue 50): trials.ch6.truth_hold
+# and hold_feared, each variant of dev.ch6_hold on dev scenes of the 3-10 stream
+# -> reports/dev/ch6_hold.{json,md}
+dev-ch6-hold: setup
+	python -m clutterbench.dev.ch6_pull ch6_hold
 
 # The benchmark scenes (data/benchmark/: every table's test-stream starts and targets, the
 # same bytes on every CPU), regenerated for the tiny and default profiles. Never run by a

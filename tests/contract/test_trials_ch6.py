@@ -369,6 +369,30 @@ def test_a_collapse_meaning_pull_map_marks_what_the_judge_calls_collapsed(spec_p
     assert marked, "no pull of the scene collapses anything: the test shows nothing"
 
 
+@pytest.mark.parametrize("spec_path", [STACK3, TOWER6])
+def test_a_held_pull_truth_map_marks_what_the_judge_calls_collapsed(spec_path, physics):
+    """trials.ch6.truth_hold simulate: the map of pulling x while holding h marks exactly the
+    boxes the judge of that executed step calls collapsed, the released h included (it only
+    fails by leaving the shelf: it may settle lower)."""
+    from clutterbench.trials.criteria import collapsed
+    from clutterbench.trials.truth_maps import TruthCollapseMaps
+
+    spec = SceneSpec.load(spec_path)
+    state = SceneState.start(spec)
+    pull, cf = (PARAMS.pull_increment_m, PARAMS.grasp_lift_m), CollapseFreeConfig()
+    maps = TruthCollapseMaps(spec, physics, THR, pull, cf)
+    maps.at(state, np.zeros((4, 4), np.uint8))
+    failed = 0
+    for x in range(spec.n):
+        for h in (h for h in range(spec.n) if h != x):
+            result = execute_pull(world_at(spec, state, physics), x, h, *pull)
+            step = judge_pull(result, x, h, frozenset(), THR, cf)
+            judged = [e["box"] for e in step["box_motion"] if collapsed(e, cf)]
+            assert list(np.flatnonzero(maps.moved_by_held_pull(x, h))) == judged, (x, h)
+            failed += not step["collapse_free"]
+    assert 0 < failed < spec.n * (spec.n - 1), "every held pull judged alike: shows nothing"
+
+
 def test_collapse_meaning_pull_planners_read_the_pull_collapse_head(
     tiny_cp_three_heads, monkeypatch
 ):

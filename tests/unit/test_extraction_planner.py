@@ -372,3 +372,45 @@ def test_a_free_feared_hold_never_holds_a_box_that_carries_another():
     assert (saved.pull, saved.hold, saved.state["feared_hold"]) == (1, 2, 2)
     free = decide("free")
     assert free is None or free.pull != 1
+
+
+def test_a_held_pull_is_scored_on_its_own_map_where_the_maps_know_it():
+    """Target 0 carries box 1 (removing 0 collapses all of 1): the bimanual plan pulls 0
+    holding 1 (Fig. 6.7 (d)), scored without the held box: 0. With predict_held, the score
+    reads the held pull's own map, the held box judged too: where it falls once let go the
+    pull is rejected (and box 1, the only other leaf, is rejected as well: no plan)."""
+    obs, boxes = _scene(extra_leaf=False)
+    falls = CollapseGraphPlanner(
+        _predictor(boxes), PARAMS, 0.5, 1, True, predict_held=lambda d, m, h: h.astype(np.float32)
+    )
+    assert falls.collapse_score(obs, 0, hold=1) == 1.0
+    with pytest.raises(ValueError):
+        falls.decide(obs, 0, frozenset())
+    for predict_held in (None, lambda d, m, h: np.zeros(m.shape, np.float32)):
+        planner = CollapseGraphPlanner(
+            _predictor(boxes), PARAMS, 0.5, 1, True, predict_held=predict_held
+        )
+        decision = planner.decide(obs, 0, frozenset())
+        assert (decision.pull, decision.hold, decision.state["cp"]) == (0, 1, 0.0)
+
+
+def test_the_idle_arm_holds_nothing_where_the_held_pull_s_own_map_fails():
+    """The idle-hold scene above (the arm would hold box 1): where the held pull's own map
+    says box 1 falls once let go, the target is pulled with the arm idle."""
+    obs, boxes = _scene(extra_leaf=False)
+
+    def decide(predict_held):
+        planner = CollapseGraphPlanner(
+            _grazing_predictor(boxes, 0.25),
+            PARAMS,
+            0.5,
+            1,
+            True,
+            idle_hold_share=0.1,
+            predict_held=predict_held,
+        )
+        return planner.decide(obs, 0, frozenset())
+
+    assert decide(lambda d, m, h: np.zeros(m.shape, np.float32)).hold == 1
+    idle = decide(lambda d, m, h: h.astype(np.float32))
+    assert (idle.pull, idle.hold) == (0, None) and "idle_hold" not in idle.state

@@ -7,7 +7,7 @@
     python -m clutterbench.dev.ch6_pull ch6_no_plan_thresholds   # make dev-ch6-no-plan-thresholds
     python -m clutterbench.dev.ch6_pull ch6_idle_hold         # make dev-ch6-idle-hold
     python -m clutterbench.dev.ch6_pull ch6_clear             # make dev-ch6-clear
-    python -m clutterbench.dev.ch6_pull ch6_hold_feared       # make dev-ch6-hold-feared
+    python -m clutterbench.dev.ch6_pull ch6_hold       # make dev-ch6-hold
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
 rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull
@@ -31,8 +31,8 @@ pull in depth, trials.ch6.pull_watch_m), ch6_no_plan (what the pull planners do 
 rule rejects every candidate, trials.ch6.when_no_plan), ch6_no_plan_thresholds (the pull-head
 CP planners' thresholds once they do that), ch6_idle_hold (the bimanual pull planners' idle
 arm, trials.ch6.idle_hold_share), ch6_clear (whose shares their collapse score takes,
-trials.ch6.score_over, and when_no_plan clear), ch6_hold_feared (the bimanual pull planners
-holding the box a rejected idle-arm pull fears for, trials.ch6.hold_feared).
+trials.ch6.score_over, and when_no_plan clear), ch6_hold (how the bimanual pull
+planners score and choose a held pull, trials.ch6.truth_hold and hold_feared).
 """
 
 from __future__ import annotations
@@ -202,7 +202,7 @@ TITLES = {
     "ch6_idle_hold": "the ch. 6 bimanual pull planners holding a neighbour with the idle arm",
     "ch6_clear": "whose shares the ch. 6 pull planners' collapse score takes, and clearing "
     "around a rejected plan",
-    "ch6_hold_feared": "the ch. 6 bimanual pull planners holding the box a rejected pull fears for",
+    "ch6_hold": "how the ch. 6 bimanual pull planners score and choose a held pull",
 }
 
 

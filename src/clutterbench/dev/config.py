@@ -100,6 +100,7 @@ CH6_VARIED = (
     "score_over",
     "pull_watch_m",
     "hold_feared",
+    "truth_hold",
 )
 """The trials.ch6 fields a ch. 6 pull-planner variant may set."""
 
@@ -208,11 +209,11 @@ class DevConfig:
     """Whose shares the pull planners' collapse score takes, and clearing around a rejected
     plan (trials.ch6.score_over, when_no_plan clear; python -m clutterbench.dev.ch6_pull
     ch6_clear)."""
-    ch6_hold_feared: Ch6PullConfig = dataclasses.field(
-        default_factory=lambda: Ch6PullConfig(variants={"never": {}, "any": {}})
+    ch6_hold: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(variants={"leave_out": {}, "simulate": {}})
     )
-    """The bimanual pull planners holding the box a rejected idle-arm pull fears for
-    (trials.ch6.hold_feared; python -m clutterbench.dev.ch6_pull ch6_hold_feared)."""
+    """How the bimanual pull planners score and choose a held pull (trials.ch6.truth_hold,
+    hold_feared; python -m clutterbench.dev.ch6_pull ch6_hold)."""
 
     def __post_init__(self) -> None:
         for name in self.streams:
@@ -229,7 +230,7 @@ class DevConfig:
             ("ch6_no_plan_thresholds", self.ch6_no_plan_thresholds.streams),
             ("ch6_idle_hold", self.ch6_idle_hold.streams),
             ("ch6_clear", self.ch6_clear.streams),
-            ("ch6_hold_feared", self.ch6_hold_feared.streams),
+            ("ch6_hold", self.ch6_hold.streams),
         ):
             for name in names:
                 if name not in self.streams:

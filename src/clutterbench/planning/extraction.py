@@ -35,6 +35,11 @@ from clutterbench.planning.support import (
 PredictFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """(depth_m (H, W) float32, masks (K, H, W)) -> (K, H, W) float32 collapse heatmaps."""
 
+PredictHeldFn = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+"""(depth_m (H, W), mask of the pulled box (H, W), mask of the held box (H, W)) -> (H, W)
+float32: the collapse map of pulling that box while the other arm holds the other, the held
+box included (it is let go after the pull)."""
+
 
 @dataclasses.dataclass(frozen=True)
 class Decision:
@@ -108,6 +113,7 @@ class CollapseGraphPlanner:
         idle_hold_prob: float | None = None,
         score_over: str = "contact",
         hold_feared: str = "never",
+        predict_held: PredictHeldFn | None = None,
     ):
         self.predict, self.params, self.cp_max = predict, params, cp_max
         self.min_pixels, self.bimanual = min_pixels, bimanual
@@ -148,6 +154,11 @@ class CollapseGraphPlanner:
         """Issue 50 (not the thesis), bimanual: a candidate pulled with the second arm idle
         whose score exceeds cp_max is tried again holding the box that score fears for
         (HOLD_FEARED says which boxes may be held)."""
+        self.predict_held = predict_held
+        """Issue 50 (not the thesis): the map of a pull made holding a box, where the maps
+        know it (the truth maps of the executed pull); the score of a held pull then reads
+        it and judges the held box too. None: the unheld pull's map without the held box
+        (Fig. 6.7 (d): a network sees no hold)."""
         self._decided_on: Observation | None = None
         """The observation of the last decision: where the watched pull started."""
         self.learned: dict[tuple[int, int], float] = {}
@@ -251,11 +262,16 @@ class CollapseGraphPlanner:
         state |= state_notes
         hold = plan.hold
         if self.bimanual and hold is None and self.idle_hold_share is not None:
-            hold = self._idle_hold(obs, plan.pull, graph)
-            if hold is not None:
-                state["idle_hold"] = hold
-                state["cp"] = round(self.collapse_score(obs, plan.pull, hold), 4)
+            idle = self._idle_hold(obs, plan.pull, graph)
+            if idle is not None:
+                held_cp = self.collapse_score(obs, plan.pull, idle)
                 self._threat = None
+                # without a held pull's own map, leaving the held box out never raises the
+                # score; with one (predict_held), a hold whose pull fails is not made
+                if held_cp <= (self.cp_max if limit is None else limit):
+                    hold = idle
+                    state["idle_hold"] = hold
+                    state["cp"] = round(held_cp, 4)
         self._decided_on = obs
         return Decision(plan.pull, hold, state, limit)
 
@@ -358,12 +374,17 @@ class CollapseGraphPlanner:
     ) -> dict[int, float]:
         """Eq. (6.2)'s shares: box id -> the part of it in R_C predicted for removing `box`,
         for each object in pseudo-direct contact with it (`contact`; else each visible one)
-        but `hold` (R_C: heatmap > `prob`, None: the rule's threshold)."""
+        but `hold` (R_C: heatmap > `prob`, None: the rule's threshold). With predict_held,
+        a held pull's own map, the held box judged as the others."""
         ids, masks = visible_objects(obs, self.min_pixels)
         if box not in ids or len(ids) < 2:
             return {}
         k = ids.index(box)
-        if self.reuse_maps and self._maps and self._maps[0] is obs and self._maps[1] == ids:
+        if hold is not None and self.predict_held is not None and hold in ids:
+            held = masks[ids.index(hold)].astype(np.uint8)
+            heat = self.predict_held(obs.depth_m, masks[k].astype(np.uint8), held)
+            hold = None
+        elif self.reuse_maps and self._maps and self._maps[0] is obs and self._maps[1] == ids:
             heat = self._maps[2][k]
         else:
             heat = self.predict(obs.depth_m, masks[k : k + 1].astype(np.uint8))[0]

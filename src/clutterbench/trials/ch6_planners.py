@@ -144,6 +144,7 @@ def _cpg_planner(
         action = (params.pull_increment_m, params.grasp_lift_m) if pull else None
         falls = job["collapse_free"] if pull and params.pull_map_meaning == "collapse" else None
         predictor = TruthCollapseMaps(spec, job["physics"], params.moved_threshold_m, action, falls)
+    simulate_hold = spec is not None and pull and bimanual and params.truth_hold == "simulate"
     return CollapseGraphPlanner(
         predictor,
         job["support"],
@@ -158,6 +159,7 @@ def _cpg_planner(
         idle_hold_prob=params.idle_hold_prob if pull else None,
         score_over=params.score_over if pull else "contact",
         hold_feared=params.hold_feared if pull else "never",
+        predict_held=predictor.held if simulate_hold else None,
     )
 
 

@@ -234,7 +234,14 @@ class Ch6TrialParams:
     6.7 (d) leaves out the held child, and taken when it then passes: any, whatever that box
     carries; free, only a box that carries nothing in the graph (what it carries would fall
     when it is let go). never: the candidate is rejected (thesis). Chosen on dev streams
-    (make dev-ch6-hold-feared)."""
+    (make dev-ch6-hold)."""
+    truth_hold: Literal["leave_out", "simulate"] = "leave_out"
+    """How the truth-map bimanual pull planners (`bimanual_pull_truth`, issue 50) score a
+    pull made holding a box: leave_out, the map of the unheld pull with the held box left
+    out (Fig. 6.7 (d), what the CP planners do: the network sees no hold); simulate, the map
+    of that very pull by the trials' executor, the held box held, let go and settled, and
+    judged as the others (the truth of the executed action). Chosen on dev streams (make
+    dev-ch6-hold)."""
     idle_hold_prob: float | None = bounded(None, gt=0.0, le=1.0)
     """The pixel probability threshold of the collapse area idle_hold_share's shares are
     taken of (null: the support rule's, as the edges' and aborts'). Chosen on dev streams."""

@@ -31,7 +31,7 @@ from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.pull import PullResult, SceneState, execute_pull, world_at
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.criteria import CollapseFreeConfig, box_motion, collapsed
+from clutterbench.trials.criteria import CollapseFreeConfig, box_motion, collapsed, moved
 
 
 class TruthCollapseMaps:
@@ -55,6 +55,7 @@ class TruthCollapseMaps:
         self._instance: np.ndarray | None = None
         self._held: tuple[int, ...] = ()
         self._cache: dict[int, np.ndarray] = {}
+        self._held_cache: dict[tuple[int, int], np.ndarray] = {}
         self.simulations = 0
         """Removals simulated so far (each a fresh world settled once)."""
 
@@ -65,7 +66,7 @@ class TruthCollapseMaps:
         self._state, self._instance = state, np.asarray(instance)
         if not mid_pull:  # a pull in progress is the one simulated: keep its answers
             self._held = tuple(sorted(int(k) for k in held))
-            self._cache = {}
+            self._cache, self._held_cache = {}, {}
 
     def moved_by_removing(self, box: int) -> np.ndarray:
         """(N,) bool: the boxes (not `box`, not held, not already out) that move beyond the
@@ -83,18 +84,49 @@ class TruthCollapseMaps:
                 moved = disp > self.threshold
             else:
                 result = pull_outcome(self.spec, state, self.physics, box, held, self.pull)
-                if self.collapse is None:
-                    disp = np.nan_to_num(result.displacement_m, nan=0.0)
-                    moved = (disp > self.threshold) | ~result.on_shelf
-                else:
-                    motion = box_motion(
-                        result.poses_start, result.poses_end, result.on_shelf, range(self.spec.n)
-                    )
-                    moved = np.array([collapsed(e, self.collapse) for e in motion])
+                moved = self._marked(result)
             self.simulations += 1
             moved[[box, *held, *sorted(state.removed)]] = False
             self._cache[box] = moved
         return self._cache[box]
+
+    def _marked(self, result: PullResult, hold: int | None = None) -> np.ndarray:
+        """(N,) bool: the boxes a simulated pull moves beyond the threshold or off the shelf
+        (`collapse`: that it collapses by that criterion). A released `hold` is judged as
+        the trials judge it: only leaving the shelf counts (it may settle lower)."""
+        if hold is None and self.collapse is None:
+            disp = np.nan_to_num(result.displacement_m, nan=0.0)
+            return (disp > self.threshold) | ~result.on_shelf
+        held = [] if hold is None else [hold]
+        others = [k for k in range(self.spec.n) if k not in held]
+        motion = box_motion(result.poses_start, result.poses_end, result.on_shelf, others, held)
+        if self.collapse is None:
+            return np.array([moved(e, self.threshold) or e["left_shelf"] for e in motion])
+        return np.array([collapsed(e, self.collapse) for e in motion])
+
+    def moved_by_held_pull(self, box: int, hold: int) -> np.ndarray:
+        """(N,) bool: as moved_by_removing with `pull`, for pulling `box` while `hold` is
+        held (then let go and settled, as the trials' executor does): the held box is
+        marked as any other."""
+        assert self.pull is not None, "a held pull's map is a map of the pull"
+        key = (box, hold)
+        if key not in self._held_cache:
+            state = self._state
+            assert state is not None, "the harness sets the present state first (at)"
+            result = pull_outcome(self.spec, state, self.physics, box, [hold], self.pull)
+            marked = self._marked(result, hold)
+            self.simulations += 1
+            marked[[box, *sorted(state.removed)]] = False
+            self._held_cache[key] = marked
+        return self._held_cache[key]
+
+    def held(self, depth_m: np.ndarray, mask: np.ndarray, held_mask: np.ndarray) -> np.ndarray:
+        """(H, W) float32 (planning/extraction.py PredictHeldFn): 1 on the visible pixels of
+        every box that pulling the box under `mask` while holding the one under `held_mask`
+        moves (moved_by_held_pull)."""
+        assert self._instance is not None, "the harness sets the present state first (at)"
+        moved = np.flatnonzero(self.moved_by_held_pull(self.box_of(mask), self.box_of(held_mask)))
+        return np.isin(self._instance, moved + 1).astype(np.float32)
 
     def box_of(self, mask: np.ndarray) -> int:
         """The box whose visible pixels `mask` (H, W) marks, in the present instance image."""
