@@ -414,3 +414,31 @@ def test_the_idle_arm_holds_nothing_where_the_held_pull_s_own_map_fails():
     assert decide(lambda d, m, h: np.zeros(m.shape, np.float32)).hold == 1
     idle = decide(lambda d, m, h: h.astype(np.float32))
     assert (idle.pull, idle.hold) == (0, None) and "idle_hold" not in idle.state
+
+
+def test_a_search_for_a_hold_tries_every_visible_box_after_the_feared_one():
+    """hold_feared search: target 0's pull fears for box 1 (a quarter, over cp_max 0.2);
+    on maps that know a held pull, holding box 1 still fails (it falls once let go) and
+    holding box 2 passes: search holds box 2, any gives up."""
+    obs, boxes = _scene(extra_leaf=True)
+    box1 = obs.instance == 2
+
+    def predict_held(depth, mask, held_mask):
+        fails = not (held_mask.astype(bool) & (obs.instance == 3)).any()
+        return box1.astype(np.float32) if fails else np.zeros(mask.shape, np.float32)
+
+    def planner(hold_feared):
+        return CollapseGraphPlanner(
+            _grazing_predictor(boxes, 0.25),
+            PARAMS,
+            0.2,
+            1,
+            True,
+            hold_feared=hold_feared,
+            predict_held=predict_held,
+        )
+
+    decision = planner("search").decide(obs, 0, frozenset())
+    assert (decision.pull, decision.hold, decision.state["feared_hold"]) == (0, 2, 2)
+    with pytest.raises(ValueError):
+        planner("any").decide(obs, 0, frozenset())

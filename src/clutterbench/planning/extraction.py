@@ -68,11 +68,13 @@ SCORE_OVER = ("contact", "visible")
 contact with the pulled box (eq. 6.2); visible, every visible object (what the pull drags
 along to a box it does not touch, through one between)."""
 
-HOLD_FEARED = ("never", "any", "free")
+HOLD_FEARED = ("never", "any", "free", "search")
 """Which box a bimanual planner may hold to save a candidate pulled with its second arm idle
 whose collapse score exceeds cp_max (issue 50): never (the candidate is rejected, thesis);
 any, the box that score fears for; free, that box only where it carries nothing in the graph
-(what a held box carries falls when it is let go)."""
+(what a held box carries falls when it is let go); search, that box and then every other
+visible one in id order, the first whose held pull passes (with maps that know a held pull,
+predict_held; without them, holding a box only removes its own share, so it is `any`)."""
 
 
 def visible_objects(obs: Observation, min_pixels: int) -> tuple[list[int], np.ndarray]:
@@ -301,21 +303,25 @@ class CollapseGraphPlanner:
     def _hold_feared(
         self, obs: Observation, plan: BimanualPlan, graph: Any
     ) -> tuple[float, BimanualPlan] | None:
-        """(score, plan) of `plan`'s pull holding the box its score over cp_max fears for,
-        where hold_feared allows that box and the score without it passes; else None, and
-        the threat of the unheld pull stands (what an abort-learning planner learns)."""
+        """(score, plan) of `plan`'s pull holding the box its score over cp_max fears for
+        (search: else the first other visible box, in id order, whose hold passes), where
+        hold_feared allows that box and the score with it held passes; else None, and the
+        threat of the unheld pull stands (what an abort-learning planner learns)."""
         threat = self._threat
         if self.hold_feared == "never" or threat is None:
             return None
-        feared = threat[1]
-        carries = graph.out_degree(feared) > 0 if feared in graph else False
-        if self.hold_feared == "free" and carries:
-            return None
-        cp = self.collapse_score(obs, plan.pull, feared)
-        if cp > self.cp_max:
-            self._threat = threat
-            return None
-        return cp, dataclasses.replace(plan, hold=feared)
+        holds = [threat[1]]
+        if self.hold_feared == "search":
+            ids = visible_objects(obs, self.min_pixels)[0]
+            holds += [j for j in ids if j not in (threat[1], plan.pull)]
+        for hold in holds:
+            if self.hold_feared == "free" and hold in graph and graph.out_degree(hold) > 0:
+                continue
+            cp = self.collapse_score(obs, plan.pull, hold)
+            if cp <= self.cp_max:
+                return cp, dataclasses.replace(plan, hold=hold)
+        self._threat = threat
+        return None
 
     def _idle_hold(self, obs: Observation, box: int, graph: Any) -> int | None:
         """The box the idle arm holds while `box` is pulled (idle_hold_share), or None."""

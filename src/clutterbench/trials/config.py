@@ -227,13 +227,15 @@ class Ch6TrialParams:
     largest predicted share (eq. 6.2's, below the edge threshold) above this, one that carries
     nothing in the graph; null: the arm stays idle (thesis Fig. 6.7). Chosen on dev streams
     (make dev-ch6-idle-hold)."""
-    hold_feared: Literal["never", "any", "free"] = "never"
+    hold_feared: Literal["never", "any", "free", "search"] = "never"
     """The bimanual planners on maps of the pull (`bimanual_pull*`, issue 50): a pull their
     plan makes with the second arm idle whose collapse score exceeds cp_max is tried again
     holding the box that score fears for (the largest share), left out of the score as Fig.
     6.7 (d) leaves out the held child, and taken when it then passes: any, whatever that box
     carries; free, only a box that carries nothing in the graph (what it carries would fall
-    when it is let go). never: the candidate is rejected (thesis). Chosen on dev streams
+    when it is let go); search, that box and then every other visible one, the first whose
+    held pull passes (differs from any only on maps that know a held pull: truth_hold
+    simulate). never: the candidate is rejected (thesis). Chosen on dev streams
     (make dev-ch6-hold)."""
     truth_hold: Literal["leave_out", "simulate"] = "leave_out"
     """How the truth-map bimanual pull planners (`bimanual_pull_truth`, issue 50) score a
