@@ -7,7 +7,7 @@
     python -m clutterbench.dev.ch6_pull ch6_no_plan_thresholds   # make dev-ch6-no-plan-thresholds
     python -m clutterbench.dev.ch6_pull ch6_idle_hold         # make dev-ch6-idle-hold
     python -m clutterbench.dev.ch6_pull ch6_clear             # make dev-ch6-clear
-    python -m clutterbench.dev.ch6_pull ch6_hold       # make dev-ch6-hold
+    python -m clutterbench.dev.ch6_pull ch6_hold              # make dev-ch6-hold
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
 rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull

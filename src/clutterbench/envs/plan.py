@@ -38,7 +38,7 @@ the observation of that moment (the first: the one the decision read); a score a
 stops the pull (an abort, as in the trials). With `set_monitor(..., decision=f)`, `f()`
 returns the policy's last planning.extraction.Decision (or None): when it is the action
 taken, its own abort threshold (`cp_max`, a least-risk pull's) and its notes
-(`trials.ch6.STEP_NOTES`) apply to that step, as in the trials.
+(`trials.protocol.STEP_NOTES`) apply to that step, as in the trials.
 """
 
 from __future__ import annotations

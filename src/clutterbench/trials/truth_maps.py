@@ -19,6 +19,11 @@ what rests on or leans against the pulled box, which deleting it never shows. Du
 the maps keep the decision's answers: the pull in progress is the very pull simulated, so
 the rest of it is already known (the monitor of a truth-pull planner never fires on its own
 choice).
+
+`held(depth_m, mask, held_mask)` answers for a pull made holding a box (trials.ch6.truth_hold
+simulate, planning/extraction.py PredictHeldFn): the boxes that pulling x while holding h
+collapses, h let go and settled at the end and judged as the trials judge a released box
+(only leaving the shelf counts for it), so a held pull's map agrees with its executed step.
 """
 
 from __future__ import annotations
@@ -81,13 +86,13 @@ class TruthCollapseMaps:
                 if held:
                     world.hold(held)
                 disp = np.nan_to_num(world.lift_out(box).displacement_m, nan=0.0)
-                moved = disp > self.threshold
+                marked = disp > self.threshold
             else:
                 result = pull_outcome(self.spec, state, self.physics, box, held, self.pull)
-                moved = self._marked(result)
+                marked = self._marked(result)
             self.simulations += 1
-            moved[[box, *held, *sorted(state.removed)]] = False
-            self._cache[box] = moved
+            marked[[box, *held, *sorted(state.removed)]] = False
+            self._cache[box] = marked
         return self._cache[box]
 
     def _marked(self, result: PullResult, hold: int | None = None) -> np.ndarray:
@@ -106,8 +111,8 @@ class TruthCollapseMaps:
 
     def moved_by_held_pull(self, box: int, hold: int) -> np.ndarray:
         """(N,) bool: as moved_by_removing with `pull`, for pulling `box` while `hold` is
-        held (then let go and settled, as the trials' executor does): the held box is
-        marked as any other."""
+        held (then let go and settled, as the trials' executor does): the held box marked as
+        the trials judge a released box (_marked)."""
         assert self.pull is not None, "a held pull's map is a map of the pull"
         key = (box, hold)
         if key not in self._held_cache:
@@ -125,8 +130,8 @@ class TruthCollapseMaps:
         every box that pulling the box under `mask` while holding the one under `held_mask`
         moves (moved_by_held_pull)."""
         assert self._instance is not None, "the harness sets the present state first (at)"
-        moved = np.flatnonzero(self.moved_by_held_pull(self.box_of(mask), self.box_of(held_mask)))
-        return np.isin(self._instance, moved + 1).astype(np.float32)
+        marked = self.moved_by_held_pull(self.box_of(mask), self.box_of(held_mask))
+        return np.isin(self._instance, np.flatnonzero(marked) + 1).astype(np.float32)
 
     def box_of(self, mask: np.ndarray) -> int:
         """The box whose visible pixels `mask` (H, W) marks, in the present instance image."""
