@@ -278,11 +278,10 @@ def test_with_no_plan_left_clear_pulls_a_safe_neighbour_of_the_rejected_first():
     assert decision.cp_max == pytest.approx(0.6, abs=0.1)
 
 
-def test_the_idle_arm_never_holds_a_box_that_carries_another_in_the_graph():
-    """Target 0 carries boxes 1 and 2, box 2 carries box 3: the bimanual plan keeps 2 (the
-    larger subtree) and pulls 1 first with the second arm idle. Box 1's pull grazes box 2
-    (a quarter) and box 4 (an eighth), both below the edge threshold: the idle arm would hold
-    box 2, the larger share, but box 2 carries box 3, so it holds box 4."""
+def _carrier_scene():
+    """Target 0 under boxes 1 and 2, box 3 on box 2, box 4 on box 1. Removing 0 collapses 1
+    and 2, removing 2 collapses 3; box 1's pull grazes a quarter of box 2 and an eighth of
+    box 4 (below the edge threshold)."""
     inst = np.zeros((30, 30), np.uint8)
     inst[20:28, 2:26] = 1  # box 0, the target, under 1 and 2
     inst[12:20, 2:10] = 2  # box 1
@@ -303,6 +302,16 @@ def test_the_idle_arm_never_holds_a_box_that_carries_another_in_the_graph():
                 out[k, 12:14] = inst[12:14] == 3  # a quarter of box 2
                 out[k, 4:5] = inst[4:5] == 5  # an eighth of box 4
         return out
+
+    return obs, predict
+
+
+def test_the_idle_arm_never_holds_a_box_that_carries_another_in_the_graph():
+    """Target 0 carries boxes 1 and 2, box 2 carries box 3: the bimanual plan keeps 2 (the
+    larger subtree) and pulls 1 first with the second arm idle. Box 1's pull grazes box 2
+    (a quarter) and box 4 (an eighth), both below the edge threshold: the idle arm would hold
+    box 2, the larger share, but box 2 carries box 3, so it holds box 4."""
+    obs, predict = _carrier_scene()
 
     planner = CollapseGraphPlanner(predict, PARAMS, 0.5, 1, bimanual=True, idle_hold_share=0.0)
     decision = planner.decide(obs, 0, frozenset())
@@ -340,26 +349,7 @@ def test_a_free_feared_hold_never_holds_a_box_that_carries_another():
     """The scene of the test above, cp_max 0.2: box 1's pull (first of the plan, the second
     arm idle) fears for box 2 (a quarter, the largest share), which carries box 3. any holds
     box 2 (box 4's eighth then passes); free does not, and box 1 is not pulled."""
-    inst = np.zeros((30, 30), np.uint8)
-    inst[20:28, 2:26] = 1
-    inst[12:20, 2:10] = 2
-    inst[12:20, 10:18] = 3
-    inst[4:12, 12:18] = 4
-    inst[4:12, 2:10] = 5
-    obs = Observation(np.ones((30, 30), np.float32), inst, CameraModel(np.eye(3), np.eye(4)))
-
-    def predict(depth, masks):
-        out = np.zeros(masks.shape, np.float32)
-        for k, m in enumerate(masks.astype(bool)):
-            box = int(np.bincount(inst[m]).argmax()) - 1
-            if box == 0:
-                out[k] = (inst == 2) | (inst == 3)
-            elif box == 2:
-                out[k] = inst == 4
-            elif box == 1:
-                out[k, 12:14] = inst[12:14] == 3
-                out[k, 4:5] = inst[4:5] == 5
-        return out
+    obs, predict = _carrier_scene()
 
     def decide(hold_feared: str):
         planner = CollapseGraphPlanner(predict, PARAMS, 0.2, 1, True, hold_feared=hold_feared)
