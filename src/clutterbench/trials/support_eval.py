@@ -44,11 +44,13 @@ from clutterbench.planning.support import (
     sweep_support,
 )
 from clutterbench.sim.config import CameraConfig
+from clutterbench.trials.config import PULL_MAP_HEADS
 
 SCENE_KEYS = ("scene_index", "n_objects", "family", "depth_m", "instance", "removal_m", "contact")
-PULL_HEADS = ("pull", "pull_collapse")
-"""The collapse predictor's heads of the trials' pull (data.labels.LABEL_KINDS); each gets
-its own methods, chosen and scored against its own truth."""
+PULL_HEADS = tuple(PULL_MAP_HEADS.values())
+"""The collapse predictor's heads of the trials' pull (data.labels.LABEL_KINDS; one per
+trials.ch6.pull_map_meaning); each gets its own methods, chosen and scored against its own
+truth."""
 
 
 def head_prefix(head: str) -> str:
