@@ -23,6 +23,7 @@ from clutterbench.report.extraction import (
     trial_params_note,
 )
 from clutterbench.report.fig_3_15 import fig_3_15_table
+from clutterbench.report.paired import paired_table
 from clutterbench.report.summary import summary_table
 from clutterbench.report.support import support_table
 from clutterbench.report.table_4_1 import table_4_1, table_4_1_target
@@ -114,6 +115,7 @@ def report(params: dict, base: BaseConfig) -> None:
         records, cfg.table_6_3, Path("reports/tables"), base.scale, [trial_note]
     )
     decomposition_table(records, Path("reports/tables"), base.scale, ch6.pull_map_meaning)
+    paired_table(records, Path("reports/tables"), base.scale)
     estimation_table(records, Path("reports/tables"), base.scale)
 
     by_condition: dict[str, list[dict]] = {}

@@ -17,7 +17,7 @@ from clutterbench.dev.ch6_pull import (
     trial_jobs,
     what_it_shows,
 )
-from clutterbench.dev.config import DevConfig
+from clutterbench.dev.config import Ch6PullConfig, DevConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.trials.ch6 import make_planner
 from clutterbench.trials.config import TrialsConfig
@@ -41,6 +41,10 @@ def _dev(**pull):
         (_dev(variants=V | {"c": {"abort_response": "pray"}}), r"variants\.c\.abort_response"),
         (_dev(variants=V | {"c": {"cp_max": 0.2}}), r"variants\.c\.cp_max: a variant sets"),
         (_dev(variants=V, planners=[]), "no planner"),
+        (
+            _dev(variants={"now": {}}, planners=["multi_step_pull"], against={"a": "b"}),
+            r"against: a is not among the planners",
+        ),
     ],
 )
 def test_bad_ch6_pull_params_are_one_line(data, message):
@@ -131,6 +135,35 @@ def test_report_pairs_variants_and_finds_each_planners_oracle():
     }
     text = markdown(result)
     assert "| dev_a | learn | bimanual_pull_truth | " in text and "| 10 / 10 |" in text
+
+
+def test_one_variant_compares_the_planners_it_is_told_to():
+    one = {"now": {}}
+    against = {"multi_step_pull": "physics_from_depth"}
+    cfg = parse(
+        Ch6PullConfig,
+        {
+            "streams": ["dev_a"],
+            "variants": one,
+            "planners": [*against.items()][0],
+            "against": against,
+        },
+        "ch6_pull",
+    )
+    assert cfg.against == against
+    records = []
+    for e in range(10):
+        records += [
+            _record("now:multi_step_pull/dev_a", e, e < 6),
+            _record("now:physics_from_depth/dev_a", e, 2 <= e < 7),
+        ]
+    comps = comparisons(records, list(one), cfg.planners, ["dev_a"], cfg.against)
+    assert [(c["name"], c["other"], c["only_piles"], c["only_against"]) for c in comps] == [
+        ("multi_step_pull", "physics_from_depth", 2, 1)
+    ] * 2
+    assert "multi_step_pull against physics_from_depth (now), success: 2 episodes won only" in (
+        what_it_shows(comps)
+    )
 
 
 def test_truth_planners_need_no_network_and_a_cp_planner_names_its_own(root, tmp_path, monkeypatch):

@@ -8,6 +8,7 @@
     python -m clutterbench.dev.ch6_pull ch6_idle_hold         # make dev-ch6-idle-hold
     python -m clutterbench.dev.ch6_pull ch6_clear             # make dev-ch6-clear
     python -m clutterbench.dev.ch6_pull ch6_hold              # make dev-ch6-hold
+    python -m clutterbench.dev.ch6_pull ch6_vs_pfd            # make dev-ch6-vs-pfd
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
 rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull
@@ -19,7 +20,8 @@ the rest of the episode), so the plan removes that box first or, bimanual, holds
 variant of dev.<section>.variants on the dev streams of dev.<section>.streams (own seeds, never
 a table's scenes), and both search oracles on the same scenes; every variant meets the same
 scenes and targets, so each is compared with the first, planner by planner and episode by
-episode (McNemar's exact test).
+episode (McNemar's exact test); planners named in dev.<section>.against are also compared
+with another planner under the same variant.
 
 Reads the support stage's chosen thresholds (reports/support/thresholds.json) and, where a
 planner reads the collapse predictor, models/<trials.ch6.model> (dvc repro trials' upstream
@@ -32,7 +34,9 @@ rule rejects every candidate, trials.ch6.when_no_plan), ch6_no_plan_thresholds (
 CP planners' thresholds once they do that), ch6_idle_hold (the bimanual pull planners' idle
 arm, trials.ch6.idle_hold_share), ch6_clear (whose shares their collapse score takes,
 trials.ch6.score_over, and when_no_plan clear), ch6_hold (how the bimanual pull
-planners score and choose a held pull, trials.ch6.truth_hold and hold_feared).
+planners score and choose a held pull, trials.ch6.truth_hold and hold_feared), ch6_vs_pfd
+(the pull-head CP planners against physics from depth, the params' own settings, on more
+episodes than a table has).
 """
 
 from __future__ import annotations
@@ -153,9 +157,11 @@ def comparisons(
     variants: Sequence[str],
     planners: Sequence[str],
     streams: Sequence[str],
+    against: Mapping[str, str] | None = None,
 ) -> list[dict[str, Any]]:
-    """Each variant against the first of `variants`, per stream, planner and criterion; paired."""
-    return [
+    """Each variant against the first of `variants`, per stream, planner and criterion; then,
+    under each variant, each planner of `against` against its planner there; paired."""
+    by_variant = [
         paired(records, condition_label(v, p), condition_label(variants[0], p), stream, key)
         | {"arm": p, "name": v, "other": variants[0]}
         for stream in streams
@@ -163,6 +169,15 @@ def comparisons(
         for v in variants[1:]
         for key in CRITERIA
     ]
+    by_planner = [
+        paired(records, condition_label(v, p), condition_label(v, q), stream, key)
+        | {"arm": v, "name": p, "other": q}
+        for stream in streams
+        for v in variants
+        for p, q in (against or {}).items()
+        for key in CRITERIA
+    ]
+    return by_variant + by_planner
 
 
 def what_it_shows(comps: Sequence[Mapping[str, Any]]) -> str:
@@ -203,6 +218,7 @@ TITLES = {
     "ch6_clear": "whose shares the ch. 6 pull planners' collapse score takes, and clearing "
     "around a rejected plan",
     "ch6_hold": "how the ch. 6 bimanual pull planners score and choose a held pull",
+    "ch6_vs_pfd": "the ch. 6 pull-head CP planners against physics from depth",
 }
 
 
@@ -236,8 +252,8 @@ def markdown(result: Mapping[str, Any]) -> str:
         "",
         "## Paired, episode by episode",
         "",
-        "| stream | planner | criterion | compared | won only by it | won only by the other "
-        "| difference (points) | McNemar p |",
+        "| stream | planner (variant) | criterion | compared | won only by it "
+        "| won only by the other | difference (points) | McNemar p |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for p in result["comparisons"]:
@@ -278,7 +294,7 @@ def ch6_pull(
     parallel = load_section(ParallelConfig, "parallel", params)
     results = run_episodes("dev ch6 pull", run_ch6_episode, jobs, trials.workers, parallel)
     records = [r.record for r in results]
-    comps = comparisons(records, list(cfg.variants), cfg.planners, cfg.streams)
+    comps = comparisons(records, list(cfg.variants), cfg.planners, cfg.streams, cfg.against)
     result = {
         "scale": base.scale,
         "seed": base.seed,

@@ -119,12 +119,22 @@ class Ch6PullConfig:
     """Episodes per variant, planner and stream."""
     oracle: bool = True
     """Also both search oracles on the same scenes (they read no variant): the ceilings."""
+    against: Mapping[str, str] = dataclasses.field(default_factory=dict)
+    """Planner -> the planner it is also compared with, under each variant, episode by
+    episode (both in `planners`); with it, one variant is enough."""
 
     def __post_init__(self) -> None:
         from clutterbench.trials.config import Ch6TrialParams
 
-        if len(self.variants) < 2:
-            raise ValueError("ch6_pull.variants: need two or more variants to compare")
+        if len(self.variants) < 2 and not (self.variants and self.against):
+            raise ValueError(
+                "ch6_pull.variants: need two or more variants to compare (or one, with "
+                "planners to compare in `against`)"
+            )
+        for a, b in self.against.items():
+            for name in (a, b):
+                if name not in self.planners:
+                    raise ValueError(f"ch6_pull.against: {name} is not among the planners")
         for name, over in self.variants.items():
             if not isinstance(over, Mapping):
                 raise ValueError(f"ch6_pull.variants.{name}: a mapping of trials.ch6 fields")
@@ -214,6 +224,15 @@ class DevConfig:
     )
     """How the bimanual pull planners score and choose a held pull (trials.ch6.truth_hold,
     hold_feared; python -m clutterbench.dev.ch6_pull ch6_hold)."""
+    ch6_vs_pfd: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(
+            variants={"current": {}},
+            planners=("multi_step_pull", "physics_from_depth"),
+            against={"multi_step_pull": "physics_from_depth"},
+        )
+    )
+    """The pull-head CP planners against physics from depth, episode by episode (`against`;
+    python -m clutterbench.dev.ch6_pull ch6_vs_pfd)."""
 
     def __post_init__(self) -> None:
         for name in self.streams:
@@ -231,6 +250,7 @@ class DevConfig:
             ("ch6_idle_hold", self.ch6_idle_hold.streams),
             ("ch6_clear", self.ch6_clear.streams),
             ("ch6_hold", self.ch6_hold.streams),
+            ("ch6_vs_pfd", self.ch6_vs_pfd.streams),
         ):
             for name in names:
                 if name not in self.streams:

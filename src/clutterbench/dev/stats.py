@@ -8,21 +8,12 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from clutterbench.errors import ClutterbenchError
+from clutterbench.report.paired import mcnemar_p
 
 CRITERIA = {"success": "success", "strict_success": "strict success"}
 """Record key -> its name in the report: collapse-free (the thesis' notion), strict."""
 ALPHA = 0.05
 """Family-wise level of the paired tests (Bonferroni over every stream and criterion)."""
-
-
-def mcnemar_p(b: int, c: int) -> float:
-    """Two-sided exact McNemar p of paired binary outcomes: b pairs won by the first only, c
-    by the second only (a binomial test of b against (b + c) / 2)."""
-    n = b + c
-    if n == 0:
-        return 1.0
-    tail = sum(math.comb(n, i) for i in range(min(b, c) + 1)) / 2**n
-    return min(1.0, 2 * tail)
 
 
 def paired(records: Sequence[Mapping[str, Any]], a: str, b: str, stream: str, key: str) -> dict:

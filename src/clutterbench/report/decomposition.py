@@ -80,7 +80,7 @@ COLUMNS = [
 ]
 
 
-def _by_planner_stream(
+def by_planner_stream(
     records_by_condition: Mapping[str, Sequence[Mapping[str, Any]]],
 ) -> dict[tuple[str, str], tuple[str, Sequence[Mapping[str, Any]]]]:
     out: dict[tuple[str, str], tuple[str, Sequence[Mapping[str, Any]]]] = {}
@@ -122,7 +122,7 @@ def decompose(
 ) -> list[dict[str, Any]]:
     """One row per (CP planner, stream, criterion) where the CP row, its truth row and its
     oracle all ran on that stream; sorted as the conditions were given."""
-    index = _by_planner_stream(records_by_condition)
+    index = by_planner_stream(records_by_condition)
     rows = []
     for (planner, stream), (cond, recs) in index.items():
         if planner not in TRUTH_OF:
