@@ -164,6 +164,13 @@ def test_one_variant_compares_the_planners_it_is_told_to():
     assert "multi_step_pull against physics_from_depth (now), success: 2 episodes won only" in (
         what_it_shows(comps)
     )
+    clear = [
+        _record(f"now:{p}/dev_a", e, (p == "multi_step_pull") == (e < 18))
+        for e in range(20)
+        for p in cfg.planners
+    ]
+    shows = what_it_shows(comparisons(clear, list(one), cfg.planners, ["dev_a"], cfg.against))
+    assert "multi_step_pull against physics_from_depth +80.0 points success, now on dev_a" in shows
 
 
 def test_truth_planners_need_no_network_and_a_cp_planner_names_its_own(root, tmp_path, monkeypatch):

@@ -200,8 +200,8 @@ def what_it_shows(comps: Sequence[Mapping[str, Any]]) -> str:
             f"{len(comps)}). Summed over streams: {pooled}."
         )
     cells = "; ".join(
-        f"{c['name']} {c['difference_points']:+.1f} points {CRITERIA[c['criterion']]}, "
-        f"{c['arm']} on {c['stream']} (p = {c['p']:.2g})"
+        f"{c['name']} against {c['other']} {c['difference_points']:+.1f} points "
+        f"{CRITERIA[c['criterion']]}, {c['arm']} on {c['stream']} (p = {c['p']:.2g})"
         for c in sig
     )
     return f"Beyond chance (McNemar, Bonferroni level {level:.3g}): {cells}. Summed: {pooled}."
