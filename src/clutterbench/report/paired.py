@@ -41,7 +41,7 @@ COLUMNS = [
     Column("only_cp", "won only by CP", "{:d}"),
     Column("only_baseline", "won only by physics from depth", "{:d}"),
     Column("difference_text", "CP - physics from depth (points)", "{}"),
-    Column("p", "McNemar p", "{:.3f}"),
+    Column("p", "McNemar p", "{:.2g}"),
     Column("episodes", "episodes", "{:d}"),
 ]
 
