@@ -125,6 +125,17 @@ def test_the_planner_sees_the_observation_only(stack3, physics):
         assert (da.pull, da.hold, da.state) == (db.pull, db.hold, db.state)
 
 
+def test_the_holding_planner_searches_with_oracle_hold_s_actions(stack3):
+    """physics_from_depth_hold runs the search of oracle_hold (a box may be held during any
+    pull) on its estimate; physics_from_depth the one-arm oracle's (no hold at all)."""
+    for name, holds_any in (("physics_from_depth", False), ("physics_from_depth_hold", True)):
+        model = PLANNERS[name](_job(name), stack3).search
+        search = model.search_cls(
+            stack3, model.physics, model.camera, model.params, model.holding, model.cf
+        )
+        assert (search.holding, search.hold_any_pull) == (holds_any, holds_any), name
+
+
 def test_an_episode_runs_and_records_its_estimates(stack3):
     """Through the harness: the top box of a 3-stack comes out first time, and the record
     scores the first estimate against the truth."""

@@ -5,6 +5,7 @@ pull-the-target) and the user planner modules loaded by name."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -205,8 +206,10 @@ def _bimanual_pull(job: dict[str, Any], spec: SceneSpec):
 
 def _physics_from_depth(job: dict[str, Any], spec: SceneSpec, holding: bool):
     """The physics-from-depth planner (planning/physics_depth.py): boxes fitted to each
-    observation, searched in SAPIEN by the oracle's code on that estimate. Of the episode's
-    spec it gets the shelf only (fixed, a robot knows it); of its stream the catalogue."""
+    observation, searched in SAPIEN by the oracle's code on that estimate, with the action
+    set of the oracle it mirrors (`holding`: oracle_hold's, a box may be held during any
+    pull). Of the episode's spec it gets the shelf only (fixed, a robot knows it); of its
+    stream the catalogue."""
     from clutterbench.planning.physics_depth import PhysicsFromDepthPlanner
     from clutterbench.trials.physics_model import EstimatedWorldModel, make_estimator
 
@@ -218,7 +221,7 @@ def _physics_from_depth(job: dict[str, Any], spec: SceneSpec, holding: bool):
         params,
         holding,
         job["collapse_free"],
-        SearchOracle,
+        functools.partial(SearchOracle, hold_any_pull=True),
     )
     estimate = make_estimator(job["stream_cfg"].catalogue, params.min_pixels)
     return PhysicsFromDepthPlanner(estimate, model, holding)
