@@ -108,13 +108,34 @@ def paired_parts(
         p = np.asarray(pull_truth, dtype=np.float64)
         assert len(p) == len(o), "paired outcomes of the same episodes"
         diffs |= {"planning": o - p, "meaning": p - t}
-    picks = np.random.default_rng(seed).integers(0, len(o), size=(resamples, len(o)))
+    return paired_points(diffs, resamples, seed)
+
+
+def paired_points(
+    diffs: Mapping[str, np.ndarray],
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    seed: int = BOOTSTRAP_SEED,
+) -> dict[str, Any]:
+    """Name -> points (100 x mean) of each per-episode difference of the same episodes,
+    `<name>_lo` / `<name>_hi` its 95% percentile interval from one seeded bootstrap over
+    episodes (the same resampled episodes for every difference)."""
+    n = len(next(iter(diffs.values())))
+    picks = np.random.default_rng(seed).integers(0, n, size=(resamples, n))
     out: dict[str, Any] = {}
     for name, d in diffs.items():
         boot = 100.0 * d[picks].mean(axis=1)
         lo, hi = np.percentile(boot, [2.5, 97.5])
         out |= {name: 100.0 * float(d.mean()), f"{name}_lo": float(lo), f"{name}_hi": float(hi)}
     return out
+
+
+def shared_outcomes(
+    runs: Sequence[Sequence[Mapping[str, Any]]], key: str
+) -> tuple[list[int], list[list[bool]]]:
+    """The episodes every run has an outcome `key` for, and each run's outcomes on them."""
+    sets = [{int(r["episode"]): bool(r[key]) for r in rs if key in r} for rs in runs]
+    shared = sorted(set.intersection(*(set(s) for s in sets)))
+    return shared, [[s[e] for e in shared] for s in sets]
 
 
 def decompose(
@@ -135,11 +156,10 @@ def decompose(
             continue
         for key, criterion in CRITERIA.items():
             runs = [oracle[1], truth[1], recs] + ([pull[1]] if pull is not None else [])
-            sets = [{int(r["episode"]): bool(r[key]) for r in rs if key in r} for rs in runs]
-            shared = sorted(set.intersection(*(set(s) for s in sets)))
+            shared, outcomes = shared_outcomes(runs, key)
             if not shared:
                 continue
-            o, t, c, *p = ([s[e] for e in shared] for s in sets)
+            o, t, c, *p = outcomes
             truth_pct = 100.0 * float(np.mean(t))
             row = {
                 "planner": planner,

@@ -19,7 +19,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from clutterbench.report.decomposition import CRITERIA, by_planner_stream
+from clutterbench.report.decomposition import (
+    CRITERIA,
+    by_planner_stream,
+    paired_points,
+    shared_outcomes,
+)
 from clutterbench.report.tables import Column, write_raw_csv, write_table
 from clutterbench.trials.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
 
@@ -70,17 +75,11 @@ def paired_rows(
         if baseline is None:
             continue
         for key, criterion in CRITERIA.items():
-            sets = [
-                {int(r["episode"]): bool(r[key]) for r in rs if key in r}
-                for rs in (recs, baseline[1])
-            ]
-            shared = sorted(set(sets[0]) & set(sets[1]))
+            shared, outcomes = shared_outcomes([recs, baseline[1]], key)
             if not shared:
                 continue
-            cp, base = (np.array([s[e] for e in shared], dtype=np.float64) for s in sets)
+            cp, base = (np.array(x, dtype=np.float64) for x in outcomes)
             d = cp - base
-            picks = np.random.default_rng(seed).integers(0, len(d), size=(resamples, len(d)))
-            lo, hi = np.percentile(100.0 * d[picks].mean(axis=1), [2.5, 97.5])
             only_cp, only_base = int((d > 0).sum()), int((d < 0).sum())
             rows.append(
                 {
@@ -95,11 +94,9 @@ def paired_rows(
                     "baseline_pct": 100.0 * float(base.mean()),
                     "only_cp": only_cp,
                     "only_baseline": only_base,
-                    "difference": 100.0 * float(d.mean()),
-                    "difference_lo": float(lo),
-                    "difference_hi": float(hi),
-                    "p": mcnemar_p(only_cp, only_base),
                 }
+                | paired_points({"difference": d}, resamples, seed)
+                | {"p": mcnemar_p(only_cp, only_base)}
             )
     return rows
 
