@@ -19,7 +19,7 @@ from clutterbench.dev.ch4_piles import (
     what_it_shows,
 )
 from clutterbench.dev.config import DevConfig, check_dev_streams
-from clutterbench.dev.stats import mcnemar_p, paired
+from clutterbench.dev.stats import mcnemar_p, paired, paired_cells
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import save_npz, write_json
 from clutterbench.trials.config import TrialsConfig
@@ -98,6 +98,13 @@ def test_mcnemar_exact_by_hand():
     assert mcnemar_p(0, 6) == pytest.approx(2 / 64)
     assert mcnemar_p(3, 1) == pytest.approx(2 * (1 + 4) / 16)
     assert mcnemar_p(4, 4) == 1.0
+
+
+def test_a_tiny_p_keeps_its_digits_in_the_dev_table():
+    cells = paired_cells(
+        {"only_piles": 34, "only_against": 87, "difference_points": -8.8, "p": mcnemar_p(34, 87)}
+    )
+    assert cells == "34 | 87 | -8.8 | 1.6e-06 |"  # printed as 0.000 before
 
 
 def _records(label: str, stream: str, wins: list[bool]) -> list[dict]:

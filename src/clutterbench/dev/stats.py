@@ -64,7 +64,7 @@ def below_oracle_text(row: Mapping[str, Any]) -> str:
 def paired_cells(p: Mapping[str, Any]) -> str:
     """A paired comparison's last table cells: won only by each side, the difference, p."""
     return (
-        f"{p['only_piles']} | {p['only_against']} | {p['difference_points']:+.1f} | {p['p']:.3f} |"
+        f"{p['only_piles']} | {p['only_against']} | {p['difference_points']:+.1f} | {p['p']:.2g} |"
     )
 
 
