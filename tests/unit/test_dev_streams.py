@@ -252,5 +252,5 @@ def test_rows_and_report_from_records():
     }
     text = markdown(result)
     assert "| dev_a | 10 | various | 6-6 | 2/4 = 50.0% [15.0, 85.0] |" in text
-    assert "| dev_a | success | 6-6 | 0 | 1 | -25.0 | 1.000 |" in text
+    assert "| dev_a | success | 6-6 | 0 | 1 | -25.0 | 1 |" in text
     assert "**What it shows.** Training on piles of 6-6 instead of 5-10" in text
