@@ -1,19 +1,20 @@
 """Table 6.2 (support test part) on two machines: device run vs committed (+ the local rerun's per-scene edges).
 
-python compare_table_6_2.py DEVICE_DIR LOCAL_JSONL > out.md
+python compare_table_6_2.py DEVICE_DIR LOCAL_JSONL REF_DIR > out.md   (from the repository root)
 DEVICE_DIR: holds support_scenes.jsonl and x/ (data/support, reports/support from support.tar.gz).
-Committed: /work/main/reports/support/scenes.csv, /work/repro57/data/support/truth.json, repro57 shards.
+Committed: reports/support/scenes.csv of this checkout; REF_DIR: the checkout whose run made
+the committed outputs; its data/support/ holds their truth.json and scenes shards.
 """
 import glob, io, json, os, sys
 import numpy as np
 import pandas as pd
 import yaml
 
-dev_dir, local_jsonl = sys.argv[1], sys.argv[2]
-COMMITTED_CSV = "/work/main/reports/support/scenes.csv"
-COMMITTED_TRUTH = "/work/repro57/data/support/truth.json"
-REF_SHARDS = "/work/repro57/data/support/scenes"
-labels = yaml.safe_load(open("/work/main/params.yaml"))["report"]["table_6_2_methods"]
+dev_dir, local_jsonl, ref_dir = sys.argv[1], sys.argv[2], sys.argv[3]
+COMMITTED_CSV = "reports/support/scenes.csv"
+COMMITTED_TRUTH = os.path.join(ref_dir, "data/support/truth.json")
+REF_SHARDS = os.path.join(ref_dir, "data/support/scenes")
+labels = yaml.safe_load(open("params.yaml"))["report"]["table_6_2_methods"]
 
 def jl(p):
     return {r["scene"]: r for r in map(json.loads, open(p))}
