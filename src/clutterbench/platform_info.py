@@ -2,7 +2,7 @@
 versions.
 
 Results are byte-identical only on the same CPU model and instruction set with the same
-thread count and network precision (README: Determinism). A model name such as "AMD EPYC"
+thread count and network precision (docs/determinism.md). A model name such as "AMD EPYC"
 names neither the instruction set nor whether bf16 runs natively, so every benchmark result,
 the report stage's metrics and the cross-check record torch's CPU capability (the kernel
 level it dispatches to) and the relevant CPU flags beside it. Nothing here imports SAPIEN

@@ -26,7 +26,8 @@ class DatasetConfig:
     pull_outcomes: bool = False
     """Also record what the trials' own pull of each box does (trials.ch6.pull_increment_m and
     grasp_lift_m, nothing held): every other box's displacement, drop, tilt and whether it
-    left the shelf (arrays pullout_*; issue 50: deletion labels miss what friction drags)."""
+    left the shelf (arrays pullout_*, the pull head's labels: deletion labels miss what
+    friction drags)."""
     moved_threshold_m: float = bounded(0.005, gt=0.0)
     """A box 'moved' when its centre moved more than this (thesis: 6.4 mm ch. 5, 5.0 mm
     ch. 6). Applied when labels are derived, so changing it regenerates nothing."""

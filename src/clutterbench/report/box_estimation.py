@@ -1,4 +1,4 @@
-"""The physics-from-depth planner's box estimates against the truth (issue 39): a table of
+"""The physics-from-depth planner's box estimates against the truth: a table of
 estimation errors per trial stream (reports/tables/box_estimation.{md,csv}) from the trial
 records' `estimate_start` (each episode's first observation, the canonical start, fitted by
 perception/box_fit.py and scored by the trials), and a figure of estimated vs true boxes
