@@ -151,7 +151,7 @@ dev-ch6-vs-pfd: setup
 # same bytes on every CPU), regenerated for the tiny and default profiles. Never run by a
 # stage: the new scenes are used once params.yaml pins the printed manifest hash.
 benchmark-scenes: setup
-	python -m clutterbench.trials.benchmark --scales tiny default
+	python -m clutterbench.cli.benchmark_scenes --scales tiny default
 
 clean-venv:
 	rm -rf $(VENV)

@@ -7,12 +7,12 @@ from clutterbench.collapse.config import EvaluateConfig
 from clutterbench.collapse.evaluate import SplitRef, evaluate_checkpoint, write_sweep_csv
 from clutterbench.collapse.figure import collapse_figure
 from clutterbench.config import BaseConfig, load_section
+from clutterbench.criteria import label_thresholds
 from clutterbench.data.config import GenerateConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json
 from clutterbench.precision import inference_from_params
 from clutterbench.stage import run_stage
-from clutterbench.trials.criteria import label_thresholds
 
 
 def evaluate(params: dict, base: BaseConfig) -> None:

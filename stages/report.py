@@ -32,8 +32,8 @@ from clutterbench.report.table_5_2 import table_5_2
 from clutterbench.report.tables import load_thesis_figures
 from clutterbench.stage import run_stage
 from clutterbench.trials.config import TrialsConfig
-from clutterbench.trials.records import read_records
-from clutterbench.trials.stats import aggregate_games
+from clutterbench.trials.core.records import read_records
+from clutterbench.trials.core.stats import aggregate_games
 
 
 def _json_key(path: Path, key: str):

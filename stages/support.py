@@ -7,23 +7,21 @@ import pandas as pd
 
 from clutterbench.collapse.predict import CollapsePredictor
 from clutterbench.config import BaseConfig, as_dict, load_section
+from clutterbench.criteria import label_thresholds
 from clutterbench.data.config import DatasetConfig, GenerateConfig
 from clutterbench.data.generate import generate_dataset
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json, write_text
 from clutterbench.models.checkpoint import checkpoint_heads, load_checkpoint
 from clutterbench.parallel import ParallelConfig
-from clutterbench.planning.support import oracle_heatmaps
+from clutterbench.planning.ch6.support import oracle_heatmaps
 from clutterbench.precision import inference_from_params
 from clutterbench.progress import progress_bar
 from clutterbench.report.support_figure import SupportPanel, support_figure
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
-from clutterbench.trials.config import SupportEvalConfig, TrialsConfig
-from clutterbench.trials.criteria import label_thresholds
-from clutterbench.trials.physics_model import SUPPORT_METHOD, SUPPORT_RULE, PhysicsDepthSupport
-from clutterbench.trials.scenes import stream_key
-from clutterbench.trials.support_eval import (
+from clutterbench.support.config import SupportEvalConfig
+from clutterbench.support.evaluate import (
     PULL_HEADS,
     all_scenes,
     choose_all,
@@ -37,6 +35,9 @@ from clutterbench.trials.support_eval import (
     sweep_all,
     val_metrics_at,
 )
+from clutterbench.trials.ch6.physics_model import SUPPORT_METHOD, SUPPORT_RULE, PhysicsDepthSupport
+from clutterbench.trials.config import TrialsConfig
+from clutterbench.trials.core.scenes import stream_key
 
 OUT = Path("reports/support")
 SCENES = Path("data/support")

@@ -6,10 +6,10 @@ from pathlib import Path
 from clutterbench.collapse.config import TrainConfig
 from clutterbench.collapse.train import TrainPaths, train_model
 from clutterbench.config import BaseConfig, load_section
+from clutterbench.criteria import label_thresholds
 from clutterbench.data.config import GenerateConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.stage import run_stage
-from clutterbench.trials.criteria import label_thresholds
 
 
 def train(params: dict, base: BaseConfig) -> None:

@@ -15,9 +15,9 @@ from clutterbench.parallel import ParallelConfig
 from clutterbench.precision import inference_from_params
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
-from clutterbench.trials.ch6 import condition_jobs, load_planners, run_ch6_episode
+from clutterbench.trials.ch6.episodes import condition_jobs, load_planners, run_ch6_episode
 from clutterbench.trials.config import TrialsConfig
-from clutterbench.trials.harness import run_episodes, write_condition
+from clutterbench.trials.core.harness import run_episodes, write_condition
 
 THRESHOLDS = Path("reports/support/thresholds.json")
 OUT = Path("reports/trials")
@@ -61,7 +61,7 @@ def trials(params: dict, base: BaseConfig) -> None:
     pfd = [c for c in conditions.values() if c.planner.startswith("physics_from_depth")]
     if pfd:  # estimated vs true boxes of a few scenes of the first such stream
         from clutterbench.report.box_estimation import estimation_figure
-        from clutterbench.trials.physics_model import estimate_panels
+        from clutterbench.trials.ch6.physics_model import estimate_panels
 
         panels = estimate_panels(
             pfd[0].stream,

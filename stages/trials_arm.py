@@ -18,11 +18,11 @@ from clutterbench.parallel import ParallelConfig
 from clutterbench.precision import inference_from_params
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
-from clutterbench.trials.arm import run_arm_episode
-from clutterbench.trials.ch4 import ch4_jobs
-from clutterbench.trials.ch6 import condition_jobs, load_planners
+from clutterbench.trials.arm.episodes import run_arm_episode
+from clutterbench.trials.ch4.episodes import ch4_jobs
+from clutterbench.trials.ch6.episodes import condition_jobs, load_planners
 from clutterbench.trials.config import TrialsConfig
-from clutterbench.trials.harness import run_episodes, write_condition
+from clutterbench.trials.core.harness import run_episodes, write_condition
 
 THRESHOLDS = Path("reports/support/thresholds.json")
 OUT = Path("reports/trials_arm")

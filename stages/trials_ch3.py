@@ -7,16 +7,16 @@ same piles, drawn from their own seed stream (ch3_games), never a dataset's."""
 from pathlib import Path
 
 from clutterbench.config import BaseConfig, load_section
+from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.data.slides import pile_seed
 from clutterbench.io import write_json, write_text
 from clutterbench.parallel import ParallelConfig
 from clutterbench.stage import run_stage
-from clutterbench.trials.ch3 import ch3_jobs, run_ch3_game, slide_rows
-from clutterbench.trials.ch3_config import CONVNET_VARIANTS, Ch3Config
-from clutterbench.trials.criteria import CollapseFreeConfig
-from clutterbench.trials.harness import run_episodes, write_mcap
-from clutterbench.trials.records import write_records
-from clutterbench.trials.stats import aggregate_games
+from clutterbench.trials.ch3.config import CONVNET_VARIANTS, Ch3Config
+from clutterbench.trials.ch3.games import ch3_jobs, run_ch3_game, slide_rows
+from clutterbench.trials.core.harness import run_episodes, write_mcap
+from clutterbench.trials.core.records import write_records
+from clutterbench.trials.core.stats import aggregate_games
 
 OUT = Path("reports/trials_ch3")
 DATA = Path("data/trials_ch3")

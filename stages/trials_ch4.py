@@ -16,11 +16,11 @@ from clutterbench.precision import inference_from_params
 from clutterbench.report.risk_figure import draw_figure
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
-from clutterbench.trials.ch4 import ch4_jobs, run_ch4_episode
+from clutterbench.trials.ch4.episodes import ch4_jobs, run_ch4_episode
 from clutterbench.trials.config import TrialsConfig
-from clutterbench.trials.harness import run_episodes, write_mcap
-from clutterbench.trials.records import write_records
-from clutterbench.trials.stats import aggregate
+from clutterbench.trials.core.harness import run_episodes, write_mcap
+from clutterbench.trials.core.records import write_records
+from clutterbench.trials.core.stats import aggregate
 
 OUT = Path("reports/trials_ch4")
 DATA = Path("data/trials_ch4")

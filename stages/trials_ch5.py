@@ -14,16 +14,16 @@ from clutterbench.parallel import ParallelConfig
 from clutterbench.precision import inference_from_params
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
-from clutterbench.trials.ch5 import (
+from clutterbench.trials.ch5.episodes import (
     ch5_jobs,
     check_models,
     collapse_threshold,
     run_ch5_episode,
 )
 from clutterbench.trials.config import TrialsConfig
-from clutterbench.trials.harness import run_episodes, write_mcap
-from clutterbench.trials.records import write_records
-from clutterbench.trials.stats import aggregate
+from clutterbench.trials.core.harness import run_episodes, write_mcap
+from clutterbench.trials.core.records import write_records
+from clutterbench.trials.core.stats import aggregate
 
 OUT = Path("reports/trials_ch5")
 DATA = Path("data/trials_ch5")

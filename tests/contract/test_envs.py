@@ -19,7 +19,7 @@ gym = pytest.importorskip("gymnasium")
 from clutterbench.envs import ENV_IDS, NO_BOX, PLAN_ENV_ID  # noqa: E402
 from clutterbench.errors import ActionError, ClutterbenchError  # noqa: E402
 from clutterbench.sim.spec import SceneSpec  # noqa: E402
-from clutterbench.trials.protocol import STEP_FIELDS  # noqa: E402
+from clutterbench.trials.core.protocol import STEP_FIELDS  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 STACK3 = ROOT / "tests" / "data" / "stack3.json"
@@ -455,7 +455,7 @@ class _AbortAfterFirstIncrement:
     cp_max = 0.5
 
     def decide(self, obs, target, blocked):
-        from clutterbench.planning.extraction import Decision
+        from clutterbench.planning.ch6.extraction import Decision
 
         self.seen = obs
         return Decision(target, None, {"policy": "toy_abort"})
@@ -470,7 +470,7 @@ class _AbortAfterFirstIncrement:
 
 
 def _trials_records(env, planner: str, episodes: int, support, cp_max: float, cp: Path):
-    from clutterbench.trials.ch6 import ch6_jobs, run_ch6_episode
+    from clutterbench.trials.ch6.episodes import ch6_jobs, run_ch6_episode
     from clutterbench.trials.config import ConditionConfig
 
     src = env.unwrapped.source
@@ -503,7 +503,7 @@ def test_a_cp_planner_as_an_agent_gives_the_trials_records(
     from clutterbench.envs.agents import PlannerAgent
     from clutterbench.envs.evaluate import run_agent
     from clutterbench.parallel import worker_init
-    from clutterbench.planning.support import SupportParams
+    from clutterbench.planning.ch6.support import SupportParams
 
     worker_init(1)
     support = SupportParams("coverage", prob_threshold, 0.3, 2, 0.0)
@@ -521,7 +521,7 @@ def test_a_monitored_pull_aborts_in_the_env_as_in_the_trials():
     """A policy's collapse score stops its pull in the env exactly as the trials' monitor
     stops a planner's (aborted after motion, blocked, the episode goes on)."""
     from clutterbench.envs.evaluate import run_agent
-    from clutterbench.trials.ch6 import PLANNERS, register_planner
+    from clutterbench.trials.ch6.episodes import PLANNERS, register_planner
 
     if "toy_abort" not in PLANNERS:
         register_planner("toy_abort")(lambda job, spec: _AbortAfterFirstIncrement())

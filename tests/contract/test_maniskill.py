@@ -10,13 +10,13 @@ import pytest
 
 gym = pytest.importorskip("gymnasium")
 
+from clutterbench.criteria import CollapseFreeConfig  # noqa: E402
 from clutterbench.maniskill.config import ArmConfig  # noqa: E402
 from clutterbench.maniskill.executor import ArmExecutor  # noqa: E402
 from clutterbench.sim.pull import SceneState, execute_pull, world_at  # noqa: E402
 from clutterbench.sim.spec import SceneSpec  # noqa: E402
 from clutterbench.trials.config import TrialsConfig  # noqa: E402
-from clutterbench.trials.criteria import CollapseFreeConfig  # noqa: E402
-from clutterbench.trials.protocol import judge_pull  # noqa: E402
+from clutterbench.trials.core.protocol import judge_pull  # noqa: E402
 
 STACK3 = Path(__file__).resolve().parents[1] / "data" / "stack3.json"
 THR = 0.005
@@ -140,8 +140,8 @@ def test_an_arm_that_gave_up_after_moving_a_box_is_a_judged_failure():
     failed step (the episode ends in collapse), never an abort that disturbed nothing; one
     that moved nothing is the abort."""
     from clutterbench.sim.pull import PullResult
-    from clutterbench.trials.executors import judge_arm_step
-    from clutterbench.trials.protocol import episode_end
+    from clutterbench.trials.core.executors import judge_arm_step
+    from clutterbench.trials.core.protocol import episode_end
 
     still = np.zeros(3)
     knocked = np.array([0.0, 0.03, 0.0])

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from clutterbench.perception.box_fit import fit_boxes
-from clutterbench.planning.physics_depth import PhysicsFromDepthPlanner
-from clutterbench.planning.support import SupportParams
+from clutterbench.planning.ch6.physics_depth import PhysicsFromDepthPlanner
+from clutterbench.planning.ch6.support import SupportParams
 from clutterbench.sim.catalog import box_extents_m
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.estimated import estimated_scene, resolve_overlaps
@@ -20,9 +20,9 @@ from clutterbench.sim.pull import SceneState, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.shelf import Shelf
 from clutterbench.sim.spec import SceneSpec, deepest_overlap
-from clutterbench.trials.ch6 import PLANNERS, ch6_jobs, run_extraction
+from clutterbench.trials.ch6.episodes import PLANNERS, ch6_jobs, run_extraction
+from clutterbench.trials.ch6.physics_model import box_errors
 from clutterbench.trials.config import ConditionConfig, SceneStreamConfig, TrialsConfig
-from clutterbench.trials.physics_model import box_errors
 
 CAM = CameraConfig(image_size=128)
 VARIOUS = box_extents_m("various")  # (D, W, H) of the five types
@@ -152,7 +152,7 @@ def test_support_from_the_estimated_scene_finds_the_stack(stack3, physics):
     """Table 6.2's physics-from-depth row: removals simulated in the boxes fitted to the
     depth image of a 3-stack: taking out the bottom box moves the two above it, taking out
     the top one moves nothing."""
-    from clutterbench.trials.physics_model import estimated_moved
+    from clutterbench.trials.ch6.physics_model import estimated_moved
 
     obs = _observe(stack3, physics)
     moved, info = estimated_moved(obs, [0, 1, 2], "same", 20, Shelf(), CAM, physics, 0.5, 0.005)
@@ -169,7 +169,7 @@ def _refuse(*args, **kwargs):
 def test_a_perception_failure_is_recorded_in_the_episode_not_raised(stack3, monkeypatch):
     """Issue 53: an observation the world model cannot make a scene of ends nothing: the
     step records the failure, the planner pulls the target, the record counts it."""
-    import clutterbench.trials.physics_model as physics_model
+    import clutterbench.trials.ch6.physics_model as physics_model
 
     monkeypatch.setattr(physics_model, "estimated_scene", _refuse)
     rec = run_extraction(stack3, _job("physics_from_depth"), target=2).record
@@ -180,7 +180,7 @@ def test_a_perception_failure_is_recorded_in_the_episode_not_raised(stack3, monk
 
 def test_a_perception_failure_in_table_6_2_is_a_row_not_an_end(stack3, physics, monkeypatch):
     """The support stage's physics-from-depth row records a scene whose estimate failed."""
-    import clutterbench.trials.physics_model as physics_model
+    import clutterbench.trials.ch6.physics_model as physics_model
 
     with pytest.raises(physics_model.PerceptionError, match="outside"):
         monkeypatch.setattr(physics_model, "estimated_scene", _refuse)

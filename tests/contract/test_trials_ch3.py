@@ -5,11 +5,11 @@ import dataclasses
 
 import pytest
 
+from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.data.slides import pile_seed
 from clutterbench.parallel import worker_init
-from clutterbench.trials.ch3 import ch3_jobs, run_ch3_game
-from clutterbench.trials.ch3_config import Ch3Config
-from clutterbench.trials.criteria import CollapseFreeConfig
+from clutterbench.trials.ch3.config import Ch3Config
+from clutterbench.trials.ch3.games import ch3_jobs, run_ch3_game
 
 
 @pytest.fixture(scope="module")
@@ -55,10 +55,10 @@ def test_every_slide_carries_the_named_fields_and_per_piece_motion(games, cfg, t
     """Every slide record has the named outcome every chapter carries and, for every other
     piece on the board, its motion; re-judged from those alone at the game's threshold,
     each game's outcome is the record's."""
+    from clutterbench.criteria import MOTION_FIELDS
     from clutterbench.trials import rejudge
-    from clutterbench.trials.criteria import MOTION_FIELDS
-    from clutterbench.trials.protocol import STEP_FIELDS
-    from clutterbench.trials.records import read_records, write_records
+    from clutterbench.trials.core.protocol import STEP_FIELDS
+    from clutterbench.trials.core.records import read_records, write_records
 
     named = set(STEP_FIELDS) - {"others_still_held", "success_held"}
     slides = [s for g in games for s in g["steps"]]

@@ -9,26 +9,26 @@ import numpy as np
 import pytest
 import torch
 
+from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.data.labels import CLASS_B, CLASS_C, CLASS_E, CLASS_S, ch4_class_map
 from clutterbench.observation import Observation
 from clutterbench.perception.masks import masks_from_instance
-from clutterbench.planning.risk import risk_index, soft_collapse
-from clutterbench.planning.risk_planner import plan_risk
+from clutterbench.planning.ch4.risk import risk_index, soft_collapse
+from clutterbench.planning.ch4.risk_planner import plan_risk
 from clutterbench.report.risk_figure import draw_figure
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import ensure_renderer, observe
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.ch4 import ch4_jobs, run_ch4_episode
-from clutterbench.trials.ch4_execution import plan_oracle, pull_outcome
+from clutterbench.trials.ch4.episodes import ch4_jobs, run_ch4_episode
+from clutterbench.trials.ch4.execution import plan_oracle, pull_outcome
 from clutterbench.trials.config import (
     Ch4ConditionConfig,
     Ch4TrialParams,
     SceneStreamConfig,
     TrialsConfig,
 )
-from clutterbench.trials.criteria import CollapseFreeConfig
-from clutterbench.trials.harness import load_predictor
+from clutterbench.trials.core.harness import load_predictor
 
 STACK3 = Path(__file__).resolve().parents[1] / "data" / "stack3.json"
 CAM = CameraConfig(image_size=64)
@@ -188,7 +188,7 @@ def test_every_planner_gives_a_judged_record(cond, tiny_ch4, physics):
     assert rec == again  # deterministic
     assert rec["planner"] == cond["planner"] and rec["mode"] == cond.get("mode", "pair")
     assert rec["n_objects"] == 5 and rec["family"] == "pile"
-    # collapse-free: out, and no other box left the shelf, dropped or tipped (trials/criteria.py)
+    # collapse-free: out, and no other box left the shelf, dropped or tipped (criteria.py)
     assert rec["success"] == (rec["target_out"] and rec["collapse_free"])
     assert rec["collapse_free"] == (rec["n_left_shelf"] == 0 and rec["n_collapsed"] == 0)
     assert rec["strict_success"] == (rec["success"] and rec["n_disturbed"] == 0)
@@ -227,8 +227,8 @@ def test_the_mcap_shows_the_scene_and_the_camera(tmp_path):
     from mcap.reader import make_reader
     from mcap_protobuf.decoder import DecoderFactory
 
-    from clutterbench.trials.harness import write_mcap
-    from clutterbench.trials.scenes import draw_trial_spec
+    from clutterbench.trials.core.harness import write_mcap
+    from clutterbench.trials.core.scenes import draw_trial_spec
 
     job = _jobs(Path("unused"), planner="random")[1]
     result = run_ch4_episode(job)

@@ -8,18 +8,18 @@ import dataclasses
 import numpy as np
 import pytest
 
-import clutterbench.trials.ch5 as ch5
-import clutterbench.trials.ch5_execution as ch5_execution
-import clutterbench.trials.ch5_perception as ch5_perception
+import clutterbench.trials.ch5.episodes as ch5
+import clutterbench.trials.ch5.execution as ch5_execution
+import clutterbench.trials.ch5.perception as ch5_perception
+from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.logs.mcap_episode import read_episode
-from clutterbench.planning.replenish import ReplenishParams, ReplenishPlanner
+from clutterbench.planning.ch5.replenish import ReplenishParams, ReplenishPlanner
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.pull import SceneState, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.config import Ch5ConditionConfig, SceneStreamConfig, TrialsConfig
-from clutterbench.trials.criteria import CollapseFreeConfig
-from clutterbench.trials.harness import write_mcap
+from clutterbench.trials.core.harness import write_mcap
 
 CAM = CameraConfig(image_size=64)
 STANDING = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]  # width up, thickness across
@@ -124,8 +124,8 @@ def test_the_planner_and_the_oracle_carry_a_blocker_by_the_params_rule(scene, mo
     """Both move a blocker by the rule of trials.ch5.blocker_goal: by the candidate it fills
     (planning.replenish.move_goal given the candidate's rectangle) or by eq. (5.6)'s fixed
     distance (no candidate given)."""
-    import clutterbench.planning.replenish as replenish
-    import clutterbench.trials.ch5_oracle as ch5_oracle
+    import clutterbench.planning.ch5.replenish as replenish
+    import clutterbench.trials.ch5.oracle as ch5_oracle
 
     spec, _, obs, dets, _ = scene
     given = []
@@ -271,7 +271,7 @@ def test_a_leaning_box_is_planned_with_its_upright_footprint(lean_deg):
     plans its goal and its way with its thickness across and its length up, from its front
     face alone, standing on the floor (at 35 degrees its centre is lower than half its
     length: turned upright about it, the box would dip into the floor)."""
-    from clutterbench.planning.replenish import box_points, carried, place_clusters
+    from clutterbench.planning.ch5.replenish import box_points, carried, place_clusters
     from clutterbench.sim.geometry import quat_from_axis_angle, quat_mul
 
     quat = quat_mul(quat_from_axis_angle([1, 0, 0], np.deg2rad(-lean_deg)), STANDING)
@@ -300,8 +300,8 @@ def test_a_leaning_box_is_planned_with_its_upright_footprint(lean_deg):
 def test_the_planner_and_the_oracle_plan_moves_with_the_upright_footprint_when_asked(
     scene, monkeypatch, upright
 ):
-    import clutterbench.planning.replenish as replenish
-    import clutterbench.trials.ch5_oracle as ch5_oracle
+    import clutterbench.planning.ch5.replenish as replenish
+    import clutterbench.trials.ch5.oracle as ch5_oracle
 
     spec, _, obs, dets, _ = scene
     calls = []
@@ -349,7 +349,7 @@ def test_the_new_box_is_carried_in_from_the_front_and_pushes_what_is_in_its_way(
     """Placing at the place behind the front box (forced: the planner calls it occupied)
     carries the new box through the front box, which is pushed and fails the step; a box
     made to appear at its place would leave the front box alone."""
-    from clutterbench.planning.replenish import Plan, candidates, place_clusters
+    from clutterbench.planning.ch5.replenish import Plan, candidates, place_clusters
 
     spec = row_with_a_box_in_front()
     physics = PhysicsConfig()
@@ -381,7 +381,7 @@ def test_without_prediction_skips_only_the_collapse_tests(scene):
     removed and nothing else (thesis 5.3.2): a collapse map that flags every cluster makes
     the R_s test (eq. 5.5) refuse every blocker with prediction, while without it the map is
     never asked and a blocker whose way is clear is carried aside."""
-    from clutterbench.planning.replenish import rect_mask
+    from clutterbench.planning.ch5.replenish import rect_mask
 
     spec, _, obs, dets, _ = scene
     calls = []
@@ -449,8 +449,8 @@ def test_a_planner_may_push_only_as_the_contact_rows_and_only_a_movable_blocker(
     stands in its way is pushed) if its collapse region passes eq. (5.5), never one it
     predicts unsafe; the thesis' rows (with and without prediction) keep the no-contact rule.
     The oracle's action set holds the same carry, so it stays the ceiling."""
-    from clutterbench.planning.replenish import rect_mask
-    from clutterbench.trials.ch5_oracle import action_set
+    from clutterbench.planning.ch5.replenish import rect_mask
+    from clutterbench.trials.ch5.oracle import action_set
 
     spec = walled_row()
     physics = PhysicsConfig()
@@ -494,7 +494,7 @@ def test_the_no_contact_oracle_keeps_exactly_the_moves_the_thesis_planner_may_ta
     row (every blocker's way blocked) no carry and no placement at an occupied candidate is
     left, while the full action set has them; on the crowded row the thesis' planner's carry
     is in it."""
-    from clutterbench.trials.ch5_oracle import action_set
+    from clutterbench.trials.ch5.oracle import action_set
 
     rp = ReplenishParams(finger_m=0.012)
     spec = walled_row()
@@ -523,7 +523,7 @@ def test_the_no_contact_oracle_keeps_exactly_the_moves_the_thesis_planner_may_ta
 
 @pytest.mark.parametrize("planner", ["oracle", "oracle_no_contact"])
 def test_each_oracle_searches_its_own_action_set(scene, monkeypatch, planner):
-    import clutterbench.trials.ch5_oracle as ch5_oracle
+    import clutterbench.trials.ch5.oracle as ch5_oracle
 
     spec, state, obs, dets, physics = scene
     asked = []

@@ -7,13 +7,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.logs.mcap_episode import read_episode
-from clutterbench.planning.extraction import Decision
-from clutterbench.planning.support import SupportParams
+from clutterbench.planning.ch6.extraction import Decision
+from clutterbench.planning.ch6.support import SupportParams
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.pull import SceneState, execute_pull, world_at
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.ch6 import (
+from clutterbench.trials.ch6.episodes import (
     PLANNERS,
     SearchOracle,
     ch6_jobs,
@@ -28,11 +29,10 @@ from clutterbench.trials.config import (
     SceneStreamConfig,
     TrialsConfig,
 )
-from clutterbench.trials.criteria import CollapseFreeConfig
-from clutterbench.trials.harness import run_episodes, write_mcap
-from clutterbench.trials.protocol import judge_pull
-from clutterbench.trials.records import read_records, write_records
-from clutterbench.trials.scenes import truth_moved_contact
+from clutterbench.trials.core.harness import run_episodes, write_mcap
+from clutterbench.trials.core.protocol import judge_pull
+from clutterbench.trials.core.records import read_records, write_records
+from clutterbench.trials.core.scenes import truth_moved_contact
 
 STACK3 = Path(__file__).resolve().parents[1] / "data" / "stack3.json"
 TOWER6 = Path(__file__).resolve().parents[1] / "data" / "tower6.json"
@@ -224,8 +224,8 @@ def test_rejudging_the_records_at_their_thresholds_gives_the_records(stack3, tmp
     """trials/rejudge.py recomputes both criteria from the per-box fields alone; at the
     thresholds the harness ran under it gives the records' outcomes exactly; every step
     carries the per-box fields and consistent flags."""
+    from clutterbench.criteria import MOTION_FIELDS
     from clutterbench.trials import rejudge
-    from clutterbench.trials.criteria import MOTION_FIELDS
 
     records = [
         run_extraction(stack3, _job(p)[0], target=t).record
@@ -286,9 +286,9 @@ def test_the_mcap_shows_the_scene_and_the_camera(stack3, tmp_path):
 def test_a_truth_map_covers_exactly_the_boxes_its_removal_moves(spec_path, physics):
     """The perception ceiling's map of removing x: the visible pixels of the boxes that move
     beyond the label threshold when x is lifted out (the labels' physics), and nothing else."""
-    from clutterbench.planning.extraction import visible_objects
+    from clutterbench.planning.ch6.extraction import visible_objects
     from clutterbench.sim.render import observe
-    from clutterbench.trials.truth_maps import TruthCollapseMaps
+    from clutterbench.trials.ch6.truth_maps import TruthCollapseMaps
 
     spec = SceneSpec.load(spec_path)
     state = SceneState.start(spec)
@@ -309,10 +309,10 @@ def test_a_pull_truth_map_is_what_executing_the_whole_pull_moves(spec_path, phys
     """Issue 50: the map of pulling x is the boxes that executing the trials' whole pull of x
     moves beyond the label threshold or off the shelf, bit for bit (the same executor, the
     same increments, from the same state)."""
-    from clutterbench.planning.extraction import visible_objects
+    from clutterbench.planning.ch6.extraction import visible_objects
     from clutterbench.sim.labelling import pull_outcomes
     from clutterbench.sim.render import observe
-    from clutterbench.trials.truth_maps import TruthCollapseMaps, pull_outcome
+    from clutterbench.trials.ch6.truth_maps import TruthCollapseMaps, pull_outcome
 
     spec = SceneSpec.load(spec_path)
     state = SceneState.start(spec)
@@ -344,10 +344,10 @@ def test_a_collapse_meaning_pull_map_marks_what_the_judge_calls_collapsed(spec_p
     """trials.ch6.pull_map_meaning collapse: the map of pulling x marks the boxes that the
     collapse-free criterion judges collapsed after executing that pull (dropped, tipped or
     off the shelf), a subset of the boxes the moved-meaning map marks."""
-    from clutterbench.planning.extraction import visible_objects
+    from clutterbench.criteria import CollapseFreeConfig, box_motion, collapsed
+    from clutterbench.planning.ch6.extraction import visible_objects
     from clutterbench.sim.render import observe
-    from clutterbench.trials.criteria import CollapseFreeConfig, box_motion, collapsed
-    from clutterbench.trials.truth_maps import TruthCollapseMaps
+    from clutterbench.trials.ch6.truth_maps import TruthCollapseMaps
 
     spec = SceneSpec.load(spec_path)
     state = SceneState.start(spec)
@@ -374,8 +374,8 @@ def test_a_held_pull_truth_map_marks_what_the_judge_calls_collapsed(spec_path, p
     """trials.ch6.truth_hold simulate: the map of pulling x while holding h marks exactly the
     boxes the judge of that executed step calls collapsed, the released h included (it only
     fails by leaving the shelf: it may settle lower)."""
-    from clutterbench.trials.criteria import collapsed
-    from clutterbench.trials.truth_maps import TruthCollapseMaps
+    from clutterbench.criteria import collapsed
+    from clutterbench.trials.ch6.truth_maps import TruthCollapseMaps
 
     spec = SceneSpec.load(spec_path)
     state = SceneState.start(spec)
@@ -400,7 +400,7 @@ def test_collapse_meaning_pull_planners_read_the_pull_collapse_head(
     and run with the thresholds chosen for it; the record says both."""
     import dataclasses
 
-    import clutterbench.trials.ch6_planners as planners
+    import clutterbench.trials.ch6.planners as planners
 
     heads: list[str] = []
     real = planners.load_predictor
@@ -493,11 +493,11 @@ def test_a_planner_module_registers_planners_for_the_conditions(tmp_path, monkey
     """One module + its params entry: trials.planner_modules is imported, then every
     condition's planner must be registered (one line naming the first that is not)."""
     from clutterbench.errors import ClutterbenchError
-    from clutterbench.trials.ch6 import load_planners
+    from clutterbench.trials.ch6.episodes import load_planners
 
     (tmp_path / "my_planners.py").write_text(
-        "from clutterbench.planning.extraction import TargetFirstPlanner\n"
-        "from clutterbench.trials.ch6 import register_planner\n"
+        "from clutterbench.planning.ch6.extraction import TargetFirstPlanner\n"
+        "from clutterbench.trials.ch6.episodes import register_planner\n"
         "register_planner('my_pull')(lambda job, spec: TargetFirstPlanner())\n"
     )
     monkeypatch.syspath_prepend(str(tmp_path))

@@ -157,7 +157,7 @@ def test_lift_happens_once_per_pull_and_increments_still_compose(stack3, physics
 def test_camera_points_of_a_stored_depth_match_the_rendering_camera(stack3, physics):
     """Support evaluation back-projects stored depth images with the configured pinhole; its
     points must be the rendering camera's up to a rigid motion (same distances)."""
-    from clutterbench.trials.support_eval import camera_points
+    from clutterbench.support.evaluate import camera_points
 
     obs = observe(BoxWorld.from_spec(stack3, physics, render=True), CAM)
     ours = camera_points(obs.depth_m, CAM)[obs.instance > 0]

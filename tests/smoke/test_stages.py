@@ -32,9 +32,9 @@ from clutterbench.models.vgg import VGGConfig
 from clutterbench.precision import resolve_precision
 from clutterbench.report.config import ReportConfig
 from clutterbench.sim.config import SimConfig
-from clutterbench.trials.ch3_config import Ch3Config
+from clutterbench.trials.ch3.config import Ch3Config
 from clutterbench.trials.config import TrialsConfig
-from clutterbench.trials.records import read_records
+from clutterbench.trials.core.records import read_records
 
 pytestmark = pytest.mark.slow
 

@@ -126,7 +126,7 @@ def test_the_ch5_workload_is_the_stages_jobs_of_its_network_free_conditions():
 
     from clutterbench.bench.workloads import ch5_network_free
     from clutterbench.sim.config import SimConfig
-    from clutterbench.trials.ch5 import ch5_jobs, run_ch5_episode
+    from clutterbench.trials.ch5.episodes import ch5_jobs, run_ch5_episode
 
     params = scale_params("tiny")
     trials = load_section(TrialsConfig, "trials", params)
@@ -164,7 +164,7 @@ def test_the_ch3_workload_is_the_stages_games_without_the_convnet():
     ConvNet, game g of each on the pile of the bench's seed stream, round-robin."""
     from clutterbench.bench.workloads import CH3_NETWORK_FREE
     from clutterbench.data.slides import pile_seed
-    from clutterbench.trials.ch3 import run_ch3_game
+    from clutterbench.trials.ch3.games import run_ch3_game
 
     fn, jobs, units = workload_jobs("trials_ch3", "tiny", 0, 0, 4)
     assert fn is run_ch3_game and units == len(jobs) == 4
@@ -191,7 +191,7 @@ def test_the_arm_workload_runs_the_arm_conditions_whose_network_exists(bare):
     import importlib.util
 
     from clutterbench.bench.workloads import unavailable
-    from clutterbench.trials.arm import run_arm_episode
+    from clutterbench.trials.arm.episodes import run_arm_episode
 
     if importlib.util.find_spec("mani_skill") is None:
         pytest.skip("ManiSkill is not installed (the workload is skipped without it)")

@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from clutterbench.cli.benchmark_scenes import scale_jobs, start_of, target_key
 from clutterbench.config import load_params
 from clutterbench.errors import ClutterbenchError
 from clutterbench.sim import benchmark, labelling, pile
-from clutterbench.trials.benchmark import scale_jobs, start_of, target_key
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -65,7 +65,7 @@ def test_every_table_start_and_target_is_in_the_artifact(scale, at_root, no_live
 
 def test_a_stage_starts_from_the_artifact_not_from_physics(at_root, monkeypatch):
     """Change a stored start: the trial and the environment start from the change."""
-    from clutterbench.trials.streams import stream_source
+    from clutterbench.trials.core.streams import stream_source
 
     job = next(
         j
@@ -85,7 +85,7 @@ def test_a_stage_starts_from_the_artifact_not_from_physics(at_root, monkeypatch)
     monkeypatch.setitem(at_root.entries, key, moved)
     again = start_of(job, target=False)
     assert again.poses[0, 1] == spec.poses[0, 1] + 0.001
-    from clutterbench.trials import streams
+    from clutterbench.trials.core import streams
 
     monkeypatch.setattr(streams, "_SPECS", {})
     assert np.array_equal(source.spec(job["index"]).poses, again.poses)

@@ -410,7 +410,7 @@ def test_yamakuzushi_validate_plays_each_threshold_on_validation_piles(tmp_path:
         SlideConvNetConfig,
         save_slide_convnet,
     )
-    from clutterbench.trials.ch3_config import Ch3Config
+    from clutterbench.trials.ch3.config import Ch3Config
 
     size = Ch3Config().scan.crop_px
     model = tmp_path / "slide.pt"

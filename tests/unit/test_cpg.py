@@ -5,7 +5,7 @@ from __future__ import annotations
 import networkx as nx
 import pytest
 
-from clutterbench.planning.cpg import (
+from clutterbench.planning.ch6.cpg import (
     BimanualPlan,
     bimanual_plan,
     build_cpg,
@@ -14,7 +14,7 @@ from clutterbench.planning.cpg import (
     next_extractable,
     single_arm_plan,
 )
-from clutterbench.planning.support import SupportEdge
+from clutterbench.planning.ch6.support import SupportEdge
 
 
 def edges(*triples: tuple[int, int, float]) -> list[SupportEdge]:

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-import clutterbench.trials.ch5 as ch5
+import clutterbench.trials.ch5.episodes as ch5
 from clutterbench.config import load_params, load_section, parse
 from clutterbench.dev.ch5_planner import (
     comparisons,

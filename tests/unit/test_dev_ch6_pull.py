@@ -19,7 +19,7 @@ from clutterbench.dev.ch6_pull import (
 )
 from clutterbench.dev.config import Ch6PullConfig, DevConfig
 from clutterbench.errors import ClutterbenchError
-from clutterbench.trials.ch6 import make_planner
+from clutterbench.trials.ch6.episodes import make_planner
 from clutterbench.trials.config import TrialsConfig
 
 STREAM = {"families": {"random": 1}, "n_objects": [3, 5], "catalogue": "various"}
@@ -194,7 +194,7 @@ def test_pull_thresholds_reach_only_the_pull_head_planners(root, tmp_path, monke
     stage's condition_jobs and the dev recheck's section alike."""
     import dataclasses
 
-    from clutterbench.trials.ch6 import condition_jobs, planner_support
+    from clutterbench.trials.ch6.episodes import condition_jobs, planner_support
     from clutterbench.trials.config import ConditionConfig
 
     params = load_params(root / "params.yaml")

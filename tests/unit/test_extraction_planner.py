@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from clutterbench.observation import CameraModel, Observation
-from clutterbench.planning.extraction import CollapseGraphPlanner
-from clutterbench.planning.support import SupportParams
+from clutterbench.planning.ch6.extraction import CollapseGraphPlanner
+from clutterbench.planning.ch6.support import SupportParams
 
 PARAMS = SupportParams("coverage", 0.5, 0.3, 2, 0.0)
 
@@ -143,7 +143,7 @@ def test_a_watched_pull_stops_when_a_neighbour_moves_in_depth():
     """pull_watch_m: box 1 comes 6 mm closer on its pixels seen in both images (box 0, the
     pulled one, hides part of it: occlusion alone is no motion) -> the pull stops, naming
     box 1; 2 mm of motion, or no watch, leaves the prediction (nothing) alone."""
-    from clutterbench.planning.extraction import depth_changes
+    from clutterbench.planning.ch6.extraction import depth_changes
 
     obs, boxes = _scene(extra_leaf=False)
     phase = {"mid": False}  # the prediction never fears anything here

@@ -273,7 +273,7 @@ def test_camera_rotation_round_trips(tmp_path: Path, angle: float, axis) -> None
 
 def _tiny_trial_episode():
     from clutterbench.observation import CameraModel
-    from clutterbench.trials.harness import EpisodeLog, EpisodeResult
+    from clutterbench.trials.core.harness import EpisodeLog, EpisodeResult
 
     log = EpisodeLog()
     log.scene(0.0, SIZES, BOARDS, CameraModel(K=K, T_world_from_cam=_camera_pose()), (H, W))
@@ -292,7 +292,7 @@ def _tiny_trial_episode():
 def test_trial_mcap_shows_the_scene_and_camera(tmp_path: Path) -> None:
     """write_mcap (every trial's MCAP): the scene at each episode's start, cubes of the
     boxes' sizes, the camera beside every depth image, removed boxes taken off /scene."""
-    from clutterbench.trials.harness import EPISODE_GAP_S, write_mcap
+    from clutterbench.trials.core.harness import EPISODE_GAP_S, write_mcap
 
     path = tmp_path / "episodes.mcap"
     write_mcap(path, [_tiny_trial_episode(), _tiny_trial_episode()], {"condition": "c"})
@@ -330,7 +330,7 @@ def test_camera_frame_projects_as_the_camera_model(tmp_path: Path) -> None:
     """A world point through the MCAP's camera transform and K lands on the pixel
     CameraModel.world_to_pixel gives: the frame is OpenCV's, as Foxglove expects."""
     from clutterbench.observation import CameraModel
-    from clutterbench.trials.harness import write_mcap
+    from clutterbench.trials.core.harness import write_mcap
 
     write_mcap(tmp_path / "e.mcap", [_tiny_trial_episode()], {})
     _, _, tf = _decoded(tmp_path / "e.mcap", "/camera/tf")[0]
@@ -347,7 +347,7 @@ def test_camera_frame_projects_as_the_camera_model(tmp_path: Path) -> None:
 
 
 def test_the_saved_foxglove_layout_names_topics_the_trials_write(tmp_path: Path) -> None:
-    from clutterbench.trials.harness import write_mcap
+    from clutterbench.trials.core.harness import write_mcap
 
     layout = json.loads(
         (Path(__file__).resolve().parents[2] / "docs/foxglove-layout.json").read_text()

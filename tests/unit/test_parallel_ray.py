@@ -130,8 +130,8 @@ def episodes(tmp_path_factory):
     from clutterbench.models.checkpoint import save_checkpoint
     from clutterbench.models.collapse_map import CollapseMapConfig
     from clutterbench.models.vgg import VGGConfig
-    from clutterbench.planning.support import SupportParams
-    from clutterbench.trials.ch6 import ch6_jobs
+    from clutterbench.planning.ch6.support import SupportParams
+    from clutterbench.trials.ch6.episodes import ch6_jobs
     from clutterbench.trials.config import ConditionConfig, SceneStreamConfig, TrialsConfig
 
     torch.manual_seed(0)
@@ -151,9 +151,9 @@ def episodes(tmp_path_factory):
 
 
 def _written(out: Path, jobs: list[dict], parallel: ParallelConfig | None, fn=None) -> dict:
-    from clutterbench.trials.ch6 import run_ch6_episode
-    from clutterbench.trials.harness import run_episodes, write_mcap
-    from clutterbench.trials.records import write_records
+    from clutterbench.trials.ch6.episodes import run_ch6_episode
+    from clutterbench.trials.core.harness import run_episodes, write_mcap
+    from clutterbench.trials.core.records import write_records
 
     results = run_episodes("t", fn or run_ch6_episode, jobs, 2, parallel)
     write_records(out / "records.jsonl", [r.record for r in results])
@@ -168,7 +168,7 @@ def test_episodes_are_byte_identical_on_either_backend(local_ray, episodes, tmp_
 
 def _killed_once(job: dict):
     """Episode 1's worker process dies (SIGKILL) the first time it runs it."""
-    from clutterbench.trials.ch6 import run_ch6_episode
+    from clutterbench.trials.ch6.episodes import run_ch6_episode
 
     marker = Path(job["markers"]) / str(job["index"])
     if job["index"] == 1 and not marker.exists():

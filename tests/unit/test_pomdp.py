@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from clutterbench.planning.pomdp import (
+from clutterbench.planning.ch3.pomdp import (
     BASIC_POSES,
     E_TH_M,
     N_STATES,

@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.sim.pull import PullResult
-from clutterbench.trials.criteria import CollapseFreeConfig
-from clutterbench.trials.protocol import judge_episode, judge_pull
-from clutterbench.trials.stats import aggregate
+from clutterbench.trials.core.protocol import judge_episode, judge_pull
+from clutterbench.trials.core.stats import aggregate
 
 CF = CollapseFreeConfig()
 UP = [1.0, 0.0, 0.0, 0.0]

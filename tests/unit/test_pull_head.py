@@ -15,6 +15,7 @@ from clutterbench.collapse.config import TrainConfig
 from clutterbench.collapse.predict import CollapsePredictor, forward_logits
 from clutterbench.collapse.train import TrainPaths, train_model
 from clutterbench.config import parse
+from clutterbench.criteria import CollapseFreeConfig, collapsed
 from clutterbench.data.dataset import CollapseDataset, open_pairs
 from clutterbench.data.labels import collapse_mask, pull_collapse_matrix, pull_moved_matrix
 from clutterbench.data.split import Fractions, split_dataset
@@ -22,7 +23,6 @@ from clutterbench.data.synthetic import write_synthetic_dataset
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import load_npz, read_json
 from clutterbench.models.checkpoint import checkpoint_heads, load_checkpoint
-from clutterbench.trials.criteria import CollapseFreeConfig, collapsed
 
 SIZE, THRESHOLD = 64, 0.005  # 64: a batch of one still has 2x2 maps at 1/32
 NET = {
@@ -254,7 +254,7 @@ def test_a_deletion_network_records_no_heads_and_has_no_pull_head(data, tmp_path
 
 
 def test_pull_planners_read_the_pull_heads_thresholds():
-    from clutterbench.trials.ch6_planners import PLANNERS as REGISTERED
+    from clutterbench.trials.ch6.planners import PLANNERS as REGISTERED
     from clutterbench.trials.config import PLANNERS, support_method
 
     for planner in ("multi_step_pull", "bimanual_pull"):
@@ -267,7 +267,7 @@ def test_pull_planners_read_the_pull_heads_thresholds():
 
 
 def test_a_method_name_says_its_head_and_rule():
-    from clutterbench.trials.support_eval import head_prefix, method_head
+    from clutterbench.support.evaluate import head_prefix, method_head
 
     for head in ("deletion", "pull", "pull_collapse"):
         for rule in ("coverage", "oracle_coverage_gap", "random"):
@@ -301,8 +301,8 @@ def test_the_decomposition_has_a_pull_chain_beside_the_deletion_chain():
 
 
 def test_support_scenes_carry_the_pull_truth_and_pull_rows_draw_no_random_edges():
-    from clutterbench.planning.support import SupportParams
-    from clutterbench.trials.support_eval import evaluate_scene, scene_from_arrays
+    from clutterbench.planning.ch6.support import SupportParams
+    from clutterbench.support.evaluate import evaluate_scene, scene_from_arrays
 
     instance = np.zeros((1, 16, 16), np.uint8)
     instance[0, 8:16, 0:6], instance[0, 8:16, 6:12], instance[0, 0:8, 0:12] = 1, 2, 3

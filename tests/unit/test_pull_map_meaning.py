@@ -7,10 +7,10 @@ import types
 
 import numpy as np
 
-import clutterbench.trials.truth_maps as truth_maps
+import clutterbench.trials.ch6.truth_maps as truth_maps
+from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.sim.pull import PullResult, SceneState
-from clutterbench.trials.criteria import CollapseFreeConfig
-from clutterbench.trials.truth_maps import TruthCollapseMaps
+from clutterbench.trials.ch6.truth_maps import TruthCollapseMaps
 
 UP = [1.0, 0.0, 0.0, 0.0]
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from clutterbench.trials.criteria import CollapseFreeConfig
+from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.trials.rejudge import rejudge, summarize
 
 CF = CollapseFreeConfig(drop_m=0.010, tilt_deg=15.0)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from clutterbench.planning.replenish import (
+from clutterbench.planning.ch5.replenish import (
     WorkingSpace,
     candidate_rect,
     in_working_space,

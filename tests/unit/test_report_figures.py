@@ -6,7 +6,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from clutterbench.planning.risk import CLASSES
+from clutterbench.planning.ch4.risk import CLASSES
 from clutterbench.report.risk_figure import COLOURS, risk_figure, risk_figure_fig
 from clutterbench.report.support_figure import SupportPanel, support_figure_fig
 

@@ -21,7 +21,7 @@ from clutterbench.report.support import mutual_support_note, support_table, thre
 from clutterbench.report.support_figure import SupportPanel, support_figure
 from clutterbench.report.tables import load_thesis_figures, thesis_row
 from clutterbench.trials.config import Ch6TrialParams
-from clutterbench.trials.stats import cluster_bootstrap_interval
+from clutterbench.trials.core.stats import cluster_bootstrap_interval
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from clutterbench.data.labels import PULL_CLASSES
-from clutterbench.planning.risk import (
+from clutterbench.planning.ch4.risk import (
     CLASSES,
     PairChoice,
     candidate_pairs,

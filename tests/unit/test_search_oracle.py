@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from clutterbench.trials.ch6_oracle import SearchOracle
+from clutterbench.trials.ch6.oracle import SearchOracle
 from clutterbench.trials.config import Ch6TrialParams
 
 

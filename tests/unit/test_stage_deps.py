@@ -50,3 +50,43 @@ def test_stage_deps_cover_its_imports(stage):
     assert not missing, f"{stage} imports modules its dvc deps do not list: {missing}"
     if stage in NO_SAPIEN:
         assert not got["sapien"], f"{stage} imports SAPIEN"
+
+
+CHAPTER_STAGES = {
+    "trials/ch3": {"trials_ch3"},
+    "planning/ch3": {"trials_ch3"},
+    "trials/ch4": {"trials_ch4", "trials_arm"},
+    # the thesis' single-step row of Table 6.3 is ch. 4's planner
+    "planning/ch4": {"trials_ch4", "trials_arm", "trials"},
+    "trials/ch5": {"trials_ch5"},
+    "planning/ch5": {"trials_ch5"},
+    "trials/ch6": {"trials", "trials_arm"},
+    "planning/ch6": {"trials", "trials_arm"},
+    "trials/arm": {"trials_arm"},
+}
+"""A chapter's code -> the stages an edit of it reruns (the arm-level stage executes ch. 4's and
+ch. 6's steps). Table 6.2's support stage also reads two ch. 6 files, named below."""
+SUPPORT_READS = {"trials/ch6/physics_model.py", "planning/ch6/support.py"}
+
+
+def stages_depending_on(path: str) -> set[str]:
+    """The stages one of whose deps is `path` or a folder above it."""
+    out = set()
+    for name, stage in STAGES.items():
+        body = stage.get("do", stage)
+        for d in body["deps"]:
+            d = str(d).rstrip("/")
+            if "$" not in d and (path == d or path.startswith(d + "/")):
+                out.add(name)
+    return out
+
+
+@pytest.mark.parametrize("chapter", sorted(CHAPTER_STAGES))
+def test_an_edit_of_one_chapter_reruns_only_its_stages(chapter):
+    files = sorted((ROOT / "src" / "clutterbench" / chapter).rglob("*.py"))
+    assert files, f"no chapter code in {chapter}"
+    for f in files:
+        rel = str(f.relative_to(ROOT / "src" / "clutterbench"))
+        want = CHAPTER_STAGES[chapter] | ({"support"} if rel in SUPPORT_READS else set())
+        got = stages_depending_on(f"src/clutterbench/{rel}")
+        assert got == want, f"an edit of {rel} reruns {sorted(got)}, not {sorted(want)}"

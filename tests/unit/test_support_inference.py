@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from clutterbench.planning.support import (
+from clutterbench.planning.ch6.support import (
     SceneEvidence,
     SupportEdge,
     SupportParams,
@@ -269,7 +269,7 @@ def test_the_held_object_does_not_count_in_the_collapse_score():
     """Eq. 6.2 during a bimanual pull: the object the other arm holds cannot collapse, so its
     share of R_C is left out (Fig. 6.7 (d))."""
     from clutterbench.observation import CameraModel, Observation
-    from clutterbench.planning.extraction import CollapseGraphPlanner
+    from clutterbench.planning.ch6.extraction import CollapseGraphPlanner
 
     instance = np.zeros(HW, np.uint8)
     instance[2:6, 0:4] = 1  # box 0: pulled

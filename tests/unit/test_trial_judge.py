@@ -1,15 +1,16 @@
-"""The episode protocol's judge (trials/protocol.py) and the disturbance, on hand-made motions."""
+"""The episode protocol's judge (trials/core/protocol.py) and the disturbance, on hand-made
+motions."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from clutterbench.criteria import CollapseFreeConfig, tilt_change_deg
 from clutterbench.sim.pull import PullResult
-from clutterbench.trials.criteria import CollapseFreeConfig, tilt_change_deg
-from clutterbench.trials.judge import disturbance
-from clutterbench.trials.protocol import STEP_FIELDS, counted, episode_end, judge_episode
-from clutterbench.trials.protocol import judge_pull as _judge_pull
+from clutterbench.trials.core.judge import disturbance
+from clutterbench.trials.core.protocol import STEP_FIELDS, counted, episode_end, judge_episode
+from clutterbench.trials.core.protocol import judge_pull as _judge_pull
 
 THR = 0.005
 CF = CollapseFreeConfig(drop_m=0.010, tilt_deg=15.0)
@@ -174,7 +175,7 @@ def test_a_box_that_slid_8_mm_is_collapse_free_but_not_a_strict_success():
 
 
 def test_every_step_carries_the_per_box_fields():
-    from clutterbench.trials.criteria import MOTION_FIELDS
+    from clutterbench.criteria import MOTION_FIELDS
 
     r = _result([np.nan, 0.0, 0.001], [np.nan, 0.03, 0.001])
     step = judge_pull(r, box=0, hold=1, gone=frozenset(), threshold_m=THR)
@@ -195,7 +196,7 @@ def test_the_strict_episode_is_the_prefix_up_to_its_first_strict_failure():
 
 
 def test_strict_step_counts_stop_at_the_first_strict_failure():
-    from clutterbench.trials.stats import aggregate
+    from clutterbench.trials.core.stats import aggregate
 
     slid = _step(2, True, strict=False)
     rec = {"condition": "c", "episode": 0, "success": True, "strict_success": False}
@@ -207,7 +208,7 @@ def test_strict_step_counts_stop_at_the_first_strict_failure():
 
 
 def test_an_executed_judged_step_is_never_aborted_before_motion():
-    from clutterbench.trials.executors import judge_arm_step
+    from clutterbench.trials.core.executors import judge_arm_step
 
     # an arm that gave up before pulling but knocked a box off its bed
     r = _result([np.nan, 0.03], [np.nan, 0.03], increments=0, aborted=True, extracted=False)
@@ -221,7 +222,7 @@ def test_an_executed_judged_step_is_never_aborted_before_motion():
 
 
 def test_an_invalid_ch4_action_is_never_counted_a_success():
-    from clutterbench.trials.ch4 import OUTCOMES, count_if_valid
+    from clutterbench.trials.ch4.episodes import OUTCOMES, count_if_valid
 
     clean = dict.fromkeys(OUTCOMES, True) | {"others_still": True}
     assert not any(count_if_valid(clean, valid=False)[k] for k in OUTCOMES)

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.trials.stats import (
+from clutterbench.trials.core.stats import (
     Rate,
     aggregate,
     cluster_bootstrap_interval,

@@ -38,7 +38,7 @@ def bench_arm(out_dir: Path = Path("reports/bench")) -> dict:
     from clutterbench.sim.config import SimConfig
     from clutterbench.sim.pull import SceneState, execute_pull, world_at
     from clutterbench.trials.config import TrialsConfig
-    from clutterbench.trials.scenes import draw_trial_spec
+    from clutterbench.trials.core.scenes import draw_trial_spec
 
     params = load_params("params.yaml")
     params = {**params, "base": {**params["base"], "scale": "default"}}

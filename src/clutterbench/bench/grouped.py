@@ -33,11 +33,11 @@ from clutterbench.collapse.config import TrainConfig
 from clutterbench.collapse.predict import CollapsePredictor, predict_collapse
 from clutterbench.collapse.train import loss_fn, model_seed, train_step
 from clutterbench.config import load_params, load_section
+from clutterbench.criteria import label_thresholds
 from clutterbench.data.config import GenerateConfig
 from clutterbench.data.dataset import PairDataset, open_pairs
 from clutterbench.models import build_model
 from clutterbench.platform_info import cpu_description
-from clutterbench.trials.criteria import label_thresholds
 
 TRAIN_MODELS = ("cp_focal", "cmn_bs32", "ch4_various")
 """One network per chapter's data: ch. 6, ch. 5, ch. 4 (pairs of masks)."""
@@ -197,10 +197,10 @@ def bench_trial_cp(params: dict[str, Any], episodes: int) -> dict[str, float]:
     """Collapse-prediction seconds per multi-step trial (ch6_3_10, the same episodes) and
     per ch. 4 plan of a 10-box pile (all ordered pairs), per-pair vs grouped."""
     from clutterbench.io import read_json
-    from clutterbench.planning.support import SupportParams
+    from clutterbench.planning.ch6.support import SupportParams
     from clutterbench.sim.config import SimConfig
     from clutterbench.sim.render import ensure_renderer
-    from clutterbench.trials.ch6 import ch6_jobs, run_ch6_episode
+    from clutterbench.trials.ch6.episodes import ch6_jobs, run_ch6_episode
     from clutterbench.trials.config import ConditionConfig, TrialsConfig
 
     sim = load_section(SimConfig, "sim", params)
@@ -271,8 +271,8 @@ def _use_predictor(model: Path, image_size: int, new: bool) -> CollapsePredictor
     """Make the trials' workers (trials.harness.load_predictor) use the predictor of this path:
     new = the scene encoded once, BatchNorm folded, a decision's heatmaps reused for its
     collapse scores; old = none of these (the code before them)."""
-    from clutterbench.planning.extraction import CollapseGraphPlanner
-    from clutterbench.trials import harness
+    from clutterbench.planning.ch6.extraction import CollapseGraphPlanner
+    from clutterbench.trials.core import harness
 
     predictor = CollapsePredictor.from_checkpoint(
         model, image_size=image_size, encode_once=new, fold_bn=new
@@ -284,10 +284,10 @@ def _use_predictor(model: Path, image_size: int, new: bool) -> CollapsePredictor
 
 def _ch4_plan(params: dict[str, Any], sim: Any, trials: Any, piles: int) -> dict[str, float]:
     from clutterbench.perception.masks import masks_from_instance
-    from clutterbench.planning.risk_planner import plan_risk
+    from clutterbench.planning.ch4.risk_planner import plan_risk
     from clutterbench.sim.physics import BoxWorld
     from clutterbench.sim.render import observe
-    from clutterbench.trials.scenes import draw_trial_spec
+    from clutterbench.trials.core.scenes import draw_trial_spec
 
     model = Path(f"models/{trials.ch6.ch4_model}/best.pt")
     scenes = []

@@ -22,6 +22,7 @@ import torch
 from clutterbench.collapse.config import TrainConfig, TrainModelConfig
 from clutterbench.collapse.train import loss_fn, train_step
 from clutterbench.config import load_section
+from clutterbench.criteria import label_thresholds
 from clutterbench.data.config import GenerateConfig
 from clutterbench.data.dataset import CollapseDataset, GroupedLoader
 from clutterbench.data.split import SplitConfig, split_dataset
@@ -29,7 +30,6 @@ from clutterbench.io import load_npz
 from clutterbench.models import build_model
 from clutterbench.platform_info import cpu_description
 from clutterbench.sim.config import SimConfig
-from clutterbench.trials.criteria import label_thresholds
 
 DATASET = "ch6"
 MODEL = "cp_focal"

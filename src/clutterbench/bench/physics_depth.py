@@ -23,10 +23,9 @@ EPISODES = 8
 def bench_physics_depth(out_dir: Path = Path("reports/bench"), episodes: int = EPISODES) -> dict:
     import torch
 
-    from clutterbench.planning import physics_depth
+    from clutterbench.planning.ch6 import physics_depth
     from clutterbench.sim.config import SimConfig
-    from clutterbench.trials import physics_model
-    from clutterbench.trials.ch6 import ch6_jobs, run_ch6_episode
+    from clutterbench.trials.ch6.episodes import ch6_jobs, physics_model, run_ch6_episode
     from clutterbench.trials.config import ConditionConfig, TrialsConfig
 
     torch.set_num_threads(1)
@@ -93,7 +92,7 @@ def bench_physics_depth(out_dir: Path = Path("reports/bench"), episodes: int = E
     # the box fit alone, on the bench scenes' first observations
     from clutterbench.sim.pull import SceneState, world_at
     from clutterbench.sim.render import observe
-    from clutterbench.trials.scenes import draw_trial_spec
+    from clutterbench.trials.core.scenes import draw_trial_spec
 
     fit = physics_model.make_estimator(trials.streams["ch6_3_10"].catalogue, trials.ch6.min_pixels)
     fits, fits_cpu = [], []

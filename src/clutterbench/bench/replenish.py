@@ -38,13 +38,14 @@ def bench_ch5(out_dir: Path = Path("reports/bench")) -> dict:
 
     from clutterbench.errors import ClutterbenchError
     from clutterbench.parallel import worker_init
-    from clutterbench.planning.replenish import ReplenishPlanner, place_clusters
+    from clutterbench.planning.ch5.replenish import ReplenishPlanner, place_clusters
     from clutterbench.sim.config import SimConfig
     from clutterbench.sim.pull import SceneState, world_at
     from clutterbench.sim.render import ensure_renderer, observe
-    from clutterbench.trials import ch5, ch5_perception
+    from clutterbench.trials.ch5.episodes import episodes as ch5
+    from clutterbench.trials.ch5.episodes import perception as ch5_perception
     from clutterbench.trials.config import TrialsConfig
-    from clutterbench.trials.scenes import draw_trial_spec
+    from clutterbench.trials.core.scenes import draw_trial_spec
 
     params = load_params("params.yaml")
     params = {**params, "base": {**params["base"], "scale": "default"}}

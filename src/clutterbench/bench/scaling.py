@@ -250,8 +250,9 @@ def stage_jobs(scale: str) -> dict[str, int]:
     """The jobs each simulation stage fans out at `scale` (params.yaml)."""
     from clutterbench.data.config import GenerateConfig
     from clutterbench.data.slides import SlideDataConfig
-    from clutterbench.trials.ch3_config import Ch3Config
-    from clutterbench.trials.config import SupportEvalConfig, TrialsConfig
+    from clutterbench.support.config import SupportEvalConfig
+    from clutterbench.trials.ch3.config import Ch3Config
+    from clutterbench.trials.config import TrialsConfig
 
     params = scale_params(scale)
     gen = load_section(GenerateConfig, "generate", params)

@@ -15,17 +15,17 @@ import torch
 from clutterbench.bench import header, measure_table, write_result
 from clutterbench.config import load_params, load_section
 from clutterbench.io import read_json
-from clutterbench.planning.cpg import build_cpg
-from clutterbench.planning.extraction import CollapseGraphPlanner
-from clutterbench.planning.support import SupportParams
+from clutterbench.planning.ch6.cpg import build_cpg
+from clutterbench.planning.ch6.extraction import CollapseGraphPlanner
+from clutterbench.planning.ch6.support import SupportParams
 from clutterbench.platform_info import cpu_description
 from clutterbench.sim.config import SimConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import ensure_renderer, observe
-from clutterbench.trials.ch6 import ch6_jobs, run_ch6_episode
+from clutterbench.trials.ch6.episodes import ch6_jobs, run_ch6_episode
 from clutterbench.trials.config import ConditionConfig, TrialsConfig
-from clutterbench.trials.harness import load_predictor
-from clutterbench.trials.scenes import draw_trial_spec
+from clutterbench.trials.core.harness import load_predictor
+from clutterbench.trials.core.scenes import draw_trial_spec
 
 THRESHOLDS = Path("reports/support/thresholds.json")
 
@@ -34,8 +34,8 @@ def bench_ch4(trials: TrialsConfig, sim: SimConfig, scenes: int) -> dict:
     """Ch. 4 planning latency: every ordered pair of a 10-box pile through the network
     (thesis eqs. 4.1, 4.2), and the median wall time of one trial per ch. 4 planner."""
     from clutterbench.perception.masks import masks_from_instance
-    from clutterbench.planning.risk_planner import plan_risk
-    from clutterbench.trials.ch4 import ch4_jobs, run_ch4_episode
+    from clutterbench.planning.ch4.risk_planner import plan_risk
+    from clutterbench.trials.ch4.episodes import ch4_jobs, run_ch4_episode
     from clutterbench.trials.config import Ch4ConditionConfig
 
     out: dict = {}

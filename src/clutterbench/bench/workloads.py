@@ -141,8 +141,8 @@ def _generate_jobs(
 
 def _trials_jobs(trials: Any, sim: Any, episodes: int) -> tuple[Any, list[dict[str, Any]], int]:
     """The trials stage's mix: ch. 6 episodes of its network-free conditions, round-robin."""
-    from clutterbench.planning.support import SupportParams
-    from clutterbench.trials.ch6 import ch6_jobs, run_ch6_episode
+    from clutterbench.planning.ch6.support import SupportParams
+    from clutterbench.trials.ch6.episodes import ch6_jobs, run_ch6_episode
     from clutterbench.trials.config import ConditionConfig
 
     names = mix_conditions(trials)
@@ -201,7 +201,7 @@ def _ch4_jobs(
     params: dict[str, Any], trials: Any, sim: Any, episodes: int
 ) -> tuple[Any, list[dict[str, Any]], int]:
     """The trials_ch4 stage's network-free conditions, `episodes` trials round-robin."""
-    from clutterbench.trials.ch4 import run_ch4_episode
+    from clutterbench.trials.ch4.episodes import run_ch4_episode
 
     names = [k for k, c in trials.ch4_conditions.items() if c.planner in CH4_NETWORK_FREE]
     if not names:
@@ -219,7 +219,7 @@ def _ch4_jobs(
 def _bench_ch4_jobs(name: str, cond: Any, trials: Any, sim: Any) -> list[dict[str, Any]]:
     """Ch. 4 condition `cond`'s jobs on the bench's seed, without MCAP images, as the
     trials_ch4 (kinematic) and trials_arm (cond.executor "arm") stages build them."""
-    from clutterbench.trials.ch4 import ch4_jobs
+    from clutterbench.trials.ch4.episodes import ch4_jobs
 
     return ch4_jobs(
         f"bench_{name}",
@@ -239,7 +239,7 @@ def _bench_ch4_jobs(name: str, cond: Any, trials: Any, sim: Any) -> list[dict[st
 def ch5_network_free(cond: Any) -> bool:
     """A ch. 5 condition that reads no network: its planner predicts no collapse (no collapse
     map network) and it perceives the generator's clusters (no detector)."""
-    from clutterbench.trials.ch5 import COLLAPSE_PLANNERS
+    from clutterbench.trials.ch5.episodes import COLLAPSE_PLANNERS
 
     return cond.planner not in COLLAPSE_PLANNERS and cond.perception != "detector"
 
@@ -249,7 +249,7 @@ def _ch5_jobs(trials: Any, sim: Any, episodes: int) -> tuple[Any, list[dict[str,
     oracles do not also simulate the actions seen through the detector (the stage's do,
     `oracle_detector`, since its other conditions perceive with the detector): that needs the
     detector network."""
-    from clutterbench.trials.ch5 import ch5_jobs, run_ch5_episode
+    from clutterbench.trials.ch5.episodes import ch5_jobs, run_ch5_episode
 
     names = [k for k, c in trials.ch5_conditions.items() if ch5_network_free(c)]
     if not names:
@@ -289,10 +289,10 @@ convnet_no_pomdp read the slide ConvNet)."""
 def _ch3_jobs(params: dict[str, Any], games: int) -> tuple[Any, list[dict[str, Any]], int]:
     """The trials_ch3 stage's network-free variants, `games` games round-robin (game g of
     every variant on the pile of the bench's seed stream ch3_games, g)."""
+    from clutterbench.criteria import CollapseFreeConfig
     from clutterbench.data.slides import pile_seed
-    from clutterbench.trials.ch3 import ch3_jobs, run_ch3_game
-    from clutterbench.trials.ch3_config import Ch3Config
-    from clutterbench.trials.criteria import CollapseFreeConfig
+    from clutterbench.trials.ch3.config import Ch3Config
+    from clutterbench.trials.ch3.games import ch3_jobs, run_ch3_game
 
     cfg = load_section(Ch3Config, "yamakuzushi", params)
     collapse_free = load_section(CollapseFreeConfig, "trials.collapse_free", params)
@@ -318,7 +318,7 @@ def _arm_condition_jobs(
     """Arm condition `name`'s first `episodes` episodes on the bench's seed, built as the
     trials_arm stage builds them; a ClutterbenchError when its network (or a ch. 6
     condition's support thresholds) is missing."""
-    from clutterbench.trials.ch6 import condition_jobs, load_planners
+    from clutterbench.trials.ch6.episodes import condition_jobs, load_planners
 
     if arm.of in trials.conditions:
         cond = dataclasses.replace(trials.conditions[arm.of], executor="arm", episodes=episodes)
@@ -351,7 +351,7 @@ def arm_conditions(trials: Any, sim: Any) -> tuple[list[str], dict[str, str]]:
 def _arm_jobs(trials: Any, sim: Any, episodes: int) -> tuple[Any, list[dict[str, Any]], int]:
     """The trials_arm stage's conditions whose networks exist, `episodes` episodes
     round-robin; none: a ClutterbenchError naming what is missing."""
-    from clutterbench.trials.arm import run_arm_episode
+    from clutterbench.trials.arm.episodes import run_arm_episode
 
     names, why = arm_conditions(trials, sim)
     if not names:

@@ -35,9 +35,9 @@ def bench_ch3(out_dir: Path = Path("reports/bench")) -> dict:
     from clutterbench.data.slide_crops import height_image, piece_under, raster_candidates
     from clutterbench.data.slides import pile_seed
     from clutterbench.parallel import worker_init
-    from clutterbench.planning import pomdp
+    from clutterbench.planning.ch3 import pomdp
     from clutterbench.sim.pile import PileWorld, generate_pile, slide, top_observation
-    from clutterbench.trials.ch3_config import Ch3Config
+    from clutterbench.trials.ch3.config import Ch3Config
 
     params = load_params("params.yaml")
     params = {**params, "base": {**params["base"], "scale": "default"}}
@@ -64,7 +64,7 @@ def bench_ch3(out_dir: Path = Path("reports/bench")) -> dict:
     }
     if MODEL.exists():
         from clutterbench.models.slide_convnet import load_slide_convnet
-        from clutterbench.planning.yamakuzushi import convnet_targets
+        from clutterbench.planning.ch3.yamakuzushi import convnet_targets
 
         model, _ = load_slide_convnet(MODEL)
         result["convnet_scan_s"] = _per_call(

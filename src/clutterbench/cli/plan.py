@@ -69,17 +69,17 @@ def plan(
 
         from clutterbench.config import load_section
         from clutterbench.io import read_json
-        from clutterbench.planning.cpg import bimanual_plan, build_cpg, extraction_order
-        from clutterbench.planning.extraction import CollapseGraphPlanner
-        from clutterbench.planning.support import SupportParams
+        from clutterbench.planning.ch6.cpg import bimanual_plan, build_cpg, extraction_order
+        from clutterbench.planning.ch6.extraction import CollapseGraphPlanner
+        from clutterbench.planning.ch6.support import SupportParams
         from clutterbench.sim.physics import BoxWorld
         from clutterbench.sim.render import observe
         from clutterbench.sim.spec import SceneSpec
-        from clutterbench.trials.ch6 import ch6_jobs, run_extraction
-        from clutterbench.trials.ch6_planners import PLANNERS
+        from clutterbench.trials.ch6.episodes import ch6_jobs, run_extraction
+        from clutterbench.trials.ch6.planners import PLANNERS
         from clutterbench.trials.config import ConditionConfig, TrialsConfig
-        from clutterbench.trials.harness import load_predictor, write_mcap
-        from clutterbench.trials.scenes import truth_moved_contact
+        from clutterbench.trials.core.harness import load_predictor, write_mcap
+        from clutterbench.trials.core.scenes import truth_moved_contact
 
         if planner not in PLANNERS:  # the registry (built-in planners and registered ones)
             raise ClutterbenchError(f"--planner {planner}: not one of {', '.join(PLANNERS)}")

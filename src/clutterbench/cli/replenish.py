@@ -63,19 +63,20 @@ def replenish(
         import numpy as np
 
         from clutterbench.config import load_section
-        from clutterbench.planning.replenish import ReplenishPlanner
+        from clutterbench.planning.ch5.replenish import ReplenishPlanner
         from clutterbench.sim.physics import BoxWorld
         from clutterbench.sim.pull import SceneState
         from clutterbench.sim.render import observe
         from clutterbench.sim.spec import SceneSpec
-        from clutterbench.trials import ch5, ch5_perception
+        from clutterbench.trials.ch5.episodes import episodes as ch5
+        from clutterbench.trials.ch5.episodes import perception as ch5_perception
         from clutterbench.trials.config import (
             CH5_PLANNERS,
             Ch5ConditionConfig,
             SceneStreamConfig,
             TrialsConfig,
         )
-        from clutterbench.trials.harness import write_mcap
+        from clutterbench.trials.core.harness import write_mcap
 
         try:
             w, d, h = (float(v) / 1000.0 for v in box.split(","))

@@ -42,11 +42,11 @@ def yamakuzushi(
     the game ended, as JSON lines. Params: `yamakuzushi` of the project's params.yaml."""
     with user_errors():
         from clutterbench.config import load_section
+        from clutterbench.criteria import CollapseFreeConfig
         from clutterbench.parallel import worker_init
-        from clutterbench.trials.ch3 import run_ch3_game
-        from clutterbench.trials.ch3_config import VARIANTS, Ch3Config
-        from clutterbench.trials.criteria import CollapseFreeConfig
-        from clutterbench.trials.harness import write_mcap
+        from clutterbench.trials.ch3.config import VARIANTS, Ch3Config
+        from clutterbench.trials.ch3.games import run_ch3_game
+        from clutterbench.trials.core.harness import write_mcap
 
         if variant not in VARIANTS:
             raise ClutterbenchError(f"--variant {variant!r}: not one of {', '.join(VARIANTS)}")
@@ -111,10 +111,10 @@ def yamakuzushi_validate(
 
         from clutterbench.config import BaseConfig, load_section
         from clutterbench.data.slides import pile_seed
-        from clutterbench.trials.ch3 import ch3_jobs, run_ch3_game
-        from clutterbench.trials.ch3_config import Ch3Config
-        from clutterbench.trials.harness import run_episodes
-        from clutterbench.trials.stats import aggregate_games
+        from clutterbench.trials.ch3.config import Ch3Config
+        from clutterbench.trials.ch3.games import ch3_jobs, run_ch3_game
+        from clutterbench.trials.core.harness import run_episodes
+        from clutterbench.trials.core.stats import aggregate_games
 
         for p in min_probability:
             if not 0.0 <= p <= 1.0:

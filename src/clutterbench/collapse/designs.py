@@ -35,13 +35,13 @@ from clutterbench.collapse.train import (
     train_model,
 )
 from clutterbench.config import as_dict, bounded, load_base, load_section
+from clutterbench.criteria import label_thresholds
 from clutterbench.data.config import GenerateConfig
 from clutterbench.data.dataset import GroupedLoader, open_pairs
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import atomic_path, read_json, write_text
 from clutterbench.models import build_model, parse_net_config
 from clutterbench.stage import run_stage
-from clutterbench.trials.criteria import label_thresholds
 
 OUT = Path("reports/learning_curve")
 

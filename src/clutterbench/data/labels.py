@@ -49,7 +49,7 @@ def pull_moved_matrix(
 ) -> np.ndarray:
     """M[x, y] = box y moved more than `threshold_m` or left the shelf when the trials'
     executor pulled x out (x == y: False). The definition of the truth maps of the pull
-    (trials/truth_maps.py), so a pull label and a pull-truth map mean the same thing; a NaN
+    (trials/ch6/truth_maps.py), so a pull label and a pull-truth map mean the same thing; a NaN
     displacement is no move."""
     assert displacement_m.ndim == 2 and displacement_m.shape[0] == displacement_m.shape[1]
     assert left_shelf.shape == displacement_m.shape and left_shelf.dtype == bool
@@ -68,7 +68,7 @@ def pull_collapse_matrix(
     """M[x, y] = box y collapsed when the trials' executor pulled x out: it left the shelf,
     or its centre dropped more than `collapse_free`[0] metres, or it tipped more than
     `collapse_free`[1] degrees (x == y: False). The collapse-free criterion's notion
-    (trials/criteria.py `collapsed`, thresholds trials.collapse_free), so these labels mean
+    (criteria.py `collapsed`, thresholds trials.collapse_free), so these labels mean
     what a trial calls a collapse; a NaN is no collapse."""
     assert drop_m.ndim == 2 and drop_m.shape[0] == drop_m.shape[1]
     assert tilt_deg.shape == drop_m.shape == left_shelf.shape and left_shelf.dtype == bool

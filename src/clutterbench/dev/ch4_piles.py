@@ -148,7 +148,7 @@ def trial_jobs(
     """Stage trials_ch4's jobs: the risk planner with each candidate's network, and the
     oracle, on every dev stream of the recheck (conditions '<piles>/<stream>')."""
     from clutterbench.sim.config import SimConfig
-    from clutterbench.trials.ch4 import ch4_jobs
+    from clutterbench.trials.ch4.episodes import ch4_jobs
     from clutterbench.trials.config import Ch4ConditionConfig, TrialsConfig
 
     cfg: Ch4PilesConfig = dev.ch4_piles
@@ -181,7 +181,7 @@ def trial_jobs(
 def summary_rows(records: Sequence[Mapping[str, Any]], dev: DevConfig) -> list[dict[str, Any]]:
     """One row per condition: success and strict success with Wilson 95% intervals, the mean
     disturbed boxes, and the points below the oracle on the same stream."""
-    from clutterbench.trials.stats import aggregate
+    from clutterbench.trials.core.stats import aggregate
 
     frame = aggregate(records)
     rows = []
@@ -321,7 +321,7 @@ def markdown(result: Mapping[str, Any]) -> str:
         "",
         f"**What it shows.** {result['shows']}",
         "",
-        "- success: collapse-free (the thesis' trial notion, trials/criteria.py); strict: also "
+        "- success: collapse-free (the thesis' trial notion, criteria.py); strict: also "
         "no other box moved more than trials.ch4.moved_threshold_m. Both judged after the "
         "support's release, as in Table 4.1.",
         "- The networks share the training seed; the ranges share the number of scenes, so "
@@ -346,10 +346,10 @@ def ch4_piles(
     from clutterbench.data.config import GenerateConfig
     from clutterbench.platform_info import cpu_description
     from clutterbench.precision import inference_from_params
-    from clutterbench.trials.ch4 import run_ch4_episode
+    from clutterbench.trials.ch4.episodes import run_ch4_episode
     from clutterbench.trials.config import TrialsConfig
-    from clutterbench.trials.harness import run_episodes
-    from clutterbench.trials.records import write_records
+    from clutterbench.trials.core.harness import run_episodes
+    from clutterbench.trials.core.records import write_records
 
     started = time.perf_counter()
     base = load_section(BaseConfig, "base", params)

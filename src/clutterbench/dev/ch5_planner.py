@@ -58,7 +58,7 @@ def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]
     ground-truth clusters (and the detector's actions, as in trials_ch5), each with trials.ch5
     as params set it but for the variant's overrides."""
     from clutterbench.sim.config import SimConfig
-    from clutterbench.trials.ch5 import ch5_jobs, check_models, collapse_threshold
+    from clutterbench.trials.ch5.episodes import ch5_jobs, check_models, collapse_threshold
     from clutterbench.trials.config import Ch5ConditionConfig, TrialsConfig
 
     base = load_section(BaseConfig, "base", params)
@@ -101,7 +101,7 @@ def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]
 def summary_rows(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     """One row per condition: success and strict success (Wilson 95%), how the episodes
     ended, and the points below the oracle of the same variant and stream."""
-    from clutterbench.trials.stats import aggregate
+    from clutterbench.trials.core.stats import aggregate
 
     rows = []
     for r in aggregate(records).to_dict("records"):
@@ -222,7 +222,7 @@ def markdown(result: Mapping[str, Any]) -> str:
         "",
         f"**What it shows.** {result['shows']}",
         "",
-        "- success: collapse-free (the thesis' trial notion, trials/criteria.py); strict: also "
+        "- success: collapse-free (the thesis' trial notion, criteria.py); strict: also "
         "no other box moved beyond trials.ch5.moved_threshold_m. Each variant's oracle "
         "simulates the action set built the same way.",
         f"- {result['n_trials']} trials in {result['seconds'] / 60:.1f} min.",
@@ -239,9 +239,9 @@ def _variants(variants: Mapping[str, Mapping[str, Any]]) -> str:
 
 def ch5_planner(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
     """Run the recheck of dev.ch5_planner; writes out_dir/ch5_planner.{json,md}."""
-    from clutterbench.trials.ch5 import run_ch5_episode
+    from clutterbench.trials.ch5.episodes import run_ch5_episode
     from clutterbench.trials.config import TrialsConfig
-    from clutterbench.trials.harness import run_episodes
+    from clutterbench.trials.core.harness import run_episodes
 
     started = time.perf_counter()
     base = load_section(BaseConfig, "base", params)

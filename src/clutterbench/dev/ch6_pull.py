@@ -16,7 +16,7 @@ rejects the box. `trials.ch6.abort_response` says what the planners on maps of t
 an episode whose every candidate is skipped gives up), `learn` takes the box the score
 feared for as carried by the box being pulled (an edge of the collapse prediction graph for
 the rest of the episode), so the plan removes that box first or, bimanual, holds it
-(planning/extraction.py). This recheck runs each planner of dev.<section>.planners under each
+(planning/ch6/extraction.py). This recheck runs each planner of dev.<section>.planners under each
 variant of dev.<section>.variants on the dev streams of dev.<section>.streams (own seeds, never
 a table's scenes), and both search oracles on the same scenes; every variant meets the same
 scenes and targets, so each is compared with the first, planner by planner and episode by
@@ -83,7 +83,7 @@ def trial_jobs(
     """Every (stream, variant, planner) episode's job, condition "<variant>:<planner>/<stream>",
     with trials.ch6 as params set it but for the variant's overrides, and both oracles'."""
     from clutterbench.sim.config import SimConfig
-    from clutterbench.trials.ch6 import (
+    from clutterbench.trials.ch6.episodes import (
         CP_PLANNERS,
         ch6_jobs,
         load_planners,
@@ -130,7 +130,7 @@ def trial_jobs(
 def summary_rows(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     """One row per condition: success and strict success (Wilson 95%), the episodes that gave
     up, and the points below the oracle of the planner's action set on the same stream."""
-    from clutterbench.trials.stats import aggregate
+    from clutterbench.trials.core.stats import aggregate
 
     rows = []
     for r in aggregate(records).to_dict("records"):
@@ -265,7 +265,7 @@ def markdown(result: Mapping[str, Any]) -> str:
         "",
         f"**What it shows.** {result['shows']}",
         "",
-        "- success: collapse-free (the thesis' trial notion, trials/criteria.py); strict: also "
+        "- success: collapse-free (the thesis' trial notion, criteria.py); strict: also "
         "no other box moved beyond trials.ch6.moved_threshold_m. The oracles search with the "
         "trials' own pull; a bimanual planner's oracle is oracle_hold.",
         f"- {result['n_episodes']} episodes in {result['seconds'] / 60:.1f} min.",
@@ -278,9 +278,9 @@ def ch6_pull(
 ) -> dict[str, Any]:
     """Run the recheck of dev.<section>; writes out_dir/<section>.{json,md}."""
     from clutterbench.parallel import ParallelConfig
-    from clutterbench.trials.ch6 import run_ch6_episode
+    from clutterbench.trials.ch6.episodes import run_ch6_episode
     from clutterbench.trials.config import TrialsConfig
-    from clutterbench.trials.harness import run_episodes
+    from clutterbench.trials.core.harness import run_episodes
 
     started = time.perf_counter()
     base = load_section(BaseConfig, "base", params)

@@ -59,9 +59,9 @@ def repair_counts(records: Sequence[Mapping[str, Any]]) -> dict[str, int]:
 def artifact_targets(scale: str = "default") -> dict[tuple[str, int], int]:
     """(stream, episode) -> the benchmark scenes' target of every ch. 6 episode the trials of
     `scale` run (this project's params.yaml and data/benchmark/, pin checked)."""
+    from clutterbench.cli.benchmark_scenes import scale_jobs, start_of, target_key
     from clutterbench.config import load_params, project_params_path
     from clutterbench.sim import benchmark
-    from clutterbench.trials.benchmark import scale_jobs, start_of, target_key
 
     out = {}
     entries = benchmark.store().entries

@@ -32,7 +32,7 @@ from clutterbench.dev.command import OUT, run_command, save
 from clutterbench.dev.config import DevConfig, check_dev_streams
 from clutterbench.errors import ClutterbenchError, PerceptionError
 from clutterbench.observation import Observation
-from clutterbench.trials.ch6_planners import register_planner
+from clutterbench.trials.ch6.planners import register_planner
 
 NAME = "perturbed_fit"
 PLANNERS = ("physics_from_depth", "physics_from_depth_hold")
@@ -48,7 +48,7 @@ def perturbed(obs: Observation, sigma_m: float, rng: np.random.Generator) -> Obs
 def _noisy_estimator(job: dict[str, Any]):
     """make_estimator's fit, of the observation with this job's depth noise (seeded per
     scene and decision)."""
-    from clutterbench.trials.physics_model import make_estimator
+    from clutterbench.trials.ch6.physics_model import make_estimator
 
     fit = make_estimator(job["stream_cfg"].catalogue, job["params"].min_pixels)
     rng = np.random.default_rng([job["seed"], job["index"], 53])
@@ -57,7 +57,7 @@ def _noisy_estimator(job: dict[str, Any]):
 
 def _perturbed_planner(holding: bool):
     def factory(job: dict[str, Any], spec: Any):
-        from clutterbench.trials.ch6_planners import _physics_from_depth
+        from clutterbench.trials.ch6.planners import _physics_from_depth
 
         planner = _physics_from_depth(job, spec, holding)
         planner.estimate = _noisy_estimator(job)
@@ -74,8 +74,8 @@ def run_job(job: dict[str, Any]) -> dict[str, Any]:
     """One scene: Table 6.2's row on its perturbed first image, then each planner's episode."""
     from clutterbench.sim.pull import SceneState, world_at
     from clutterbench.sim.render import observe
-    from clutterbench.trials.ch6 import job_spec, run_extraction
-    from clutterbench.trials.physics_model import estimated_moved
+    from clutterbench.trials.ch6.episodes import job_spec, run_extraction
+    from clutterbench.trials.ch6.physics_model import estimated_moved
 
     spec = job_spec(job)
     obs = observe(
@@ -114,8 +114,9 @@ def run_job(job: dict[str, Any]) -> dict[str, Any]:
 
 def jobs_of(dev: Any, params: Mapping[str, Any]) -> list[dict[str, Any]]:
     from clutterbench.sim.config import SimConfig
-    from clutterbench.trials.ch6 import ch6_jobs
-    from clutterbench.trials.config import ConditionConfig, SupportEvalConfig, TrialsConfig
+    from clutterbench.support.config import SupportEvalConfig
+    from clutterbench.trials.ch6.episodes import ch6_jobs
+    from clutterbench.trials.config import ConditionConfig, TrialsConfig
 
     trials = load_section(TrialsConfig, "trials", params)
     check_dev_streams(dev, trials)

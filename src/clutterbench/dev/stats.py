@@ -46,7 +46,7 @@ def plain(v: Any) -> Any:
 
 
 def rate_text(row: Mapping[str, Any], key: str) -> str:
-    from clutterbench.trials.stats import Rate
+    from clutterbench.trials.core.stats import Rate
 
     return Rate(row[f"{key}_k"], row[f"{key}_n"]).text()
 

@@ -44,7 +44,7 @@ class PlannerAgent:
     ):
         """`support`, `cp_max`, `model_path`, `ch4_model_path`: instead of the project's
         (the support stage's thresholds, trials.ch6.cp_max, models/<trials.ch6.model>/...)."""
-        from clutterbench.trials.ch6_planners import chosen_support
+        from clutterbench.trials.ch6.planners import chosen_support
         from clutterbench.trials.config import support_method
 
         if planner not in OBSERVATION_PLANNERS:
@@ -84,7 +84,7 @@ class PlannerAgent:
             self.collapse_score = None  # nothing to monitor the pulls with
 
     def _make(self, index: int) -> Any:
-        from clutterbench.trials.ch6_planners import make_planner
+        from clutterbench.trials.ch6.planners import make_planner
 
         self.job = self.job | {"index": index, "stream": self.env.source.name}
         return make_planner(self.job, None)
@@ -121,7 +121,7 @@ class PlannerAgent:
 
 
 def _project_root() -> Path:
-    from clutterbench.trials.streams import project_params_path
+    from clutterbench.trials.core.streams import project_params_path
 
     return project_params_path().parent
 

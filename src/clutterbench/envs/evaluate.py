@@ -119,7 +119,7 @@ def evaluate_agent(
     import clutterbench.envs  # noqa: F401  (registers the envs)
     from clutterbench.envs import PLAN_ENV_ID
     from clutterbench.parallel import worker_init
-    from clutterbench.trials.harness import write_condition
+    from clutterbench.trials.core.harness import write_condition
 
     if episodes < 1 or first < 0:
         raise ClutterbenchError(f"--episodes {episodes} / --first {first}: need >= 1 / >= 0")

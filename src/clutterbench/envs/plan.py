@@ -52,11 +52,11 @@ from gymnasium import spaces
 
 from clutterbench.errors import ActionError, ClutterbenchError
 from clutterbench.observation import CameraModel, Observation
-from clutterbench.planning.extraction import Decision
+from clutterbench.planning.ch6.extraction import Decision
 from clutterbench.sim import benchmark
-from clutterbench.trials.harness import EpisodeResult
-from clutterbench.trials.protocol import STEP_FIELDS, STEP_NOTES, judge_episode
-from clutterbench.trials.streams import StreamSource, stream_source
+from clutterbench.trials.core.harness import EpisodeResult
+from clutterbench.trials.core.protocol import STEP_FIELDS, STEP_NOTES, judge_episode
+from clutterbench.trials.core.streams import StreamSource, stream_source
 
 MAX_BOXES = 30
 """Box indices an action can name (SceneStreamConfig allows at most 30 boxes)."""
@@ -201,7 +201,7 @@ class ClutterShelfPlanEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Episode `seed` (an int >= 0; None: the next one) of the stream; options may name
         another stream (`stream`, or `family` / `n_objects` / `catalogue`)."""
-        from clutterbench.trials.ch6 import Extraction
+        from clutterbench.trials.ch6.episodes import Extraction
 
         super().reset(seed=seed)
         options = dict(options or {})
@@ -301,7 +301,7 @@ class ClutterShelfPlanEnv(gym.Env):
         self._obs = self._observation()
         info: dict[str, Any] = {"action_mask": self.action_mask(), "end": ep.end}
         if step is not None:
-            from clutterbench.trials.ch6 import _rounded
+            from clutterbench.trials.ch6.episodes import _rounded
 
             record = _rounded(step)
             info |= {k: record[k] for k in STEP_FIELDS} | {"step": record}
@@ -319,7 +319,8 @@ class ClutterShelfPlanEnv(gym.Env):
         made = self.decision_of() if self.decision_of is not None else None
         if made is None or (made.pull, made.hold) != (pull, hold):
             return Decision(pull, hold, {"policy": self.name})
-        # the decision's notes the trials' step record carries (trials/ch6.py execute_decision)
+        # the decision's notes the trials' step record carries
+        # (trials/ch6/episodes.py execute_decision)
         note = {k: made.state[k] for k in STEP_NOTES if k in made.state}
         return Decision(pull, hold, {"policy": self.name} | note, made.cp_max)
 

@@ -11,7 +11,7 @@ lengthened: rod_robot), standing in front of the shelf, on the CPU backend.
                    reward_mode="none", render_backend="none")   # one scene of your own
 
 With no `spec`, `reset(seed=i)` draws episode i of a named stream (DEFAULT_SCENE_SOURCE,
-trials/streams.py: the pipeline's scene i of that stream, its canonical settled start and its
+trials/core/streams.py: the pipeline's scene i of that stream, its canonical settled start and its
 target; `scene_source=` plugs in another); the stream is
 `stream=` (a key of trials.streams, default ch6_3_10) or `family=` / `n_objects=` /
 `catalogue=`, as make kwargs or reset options (`scale=`: the params' scale profile). Box
@@ -21,7 +21,7 @@ get_state_dict). Obs modes: SUPPORTED_OBS_MODES (the sensor modes, and render_mo
 "rgb_array" / "sensors", render on the CPU backend). An action holding NaN is refused
 (ValueError). Every id's observation, action, info and episode end: docs/environments.md.
 
-`evaluate()` judges the scene as the project's judge does (trials/protocol.py), with the
+`evaluate()` judges the scene as the project's judge does (trials/core/protocol.py), with the
 same function: `target_out` (the target is out of the shelf, in front of its opening),
 `others_still` (no box but the target and the held one moved beyond the threshold or left
 the shelf, measured from the episode's start), `released` (no tool holds a box),
@@ -184,7 +184,7 @@ def _sapien_physx_defaults() -> SceneConfig:
     )
 
 
-DEFAULT_SCENE_SOURCE = "clutterbench.trials.streams:stream_source"
+DEFAULT_SCENE_SOURCE = "clutterbench.trials.core.streams:stream_source"
 """What draws a spec-less env's scenes: a factory `(stream, family, n_objects, catalogue,
 scale) -> source`, the source giving `.episode(i) -> (spec, target)`, `.physics` and `.trials`
 (its `arm` and `ch6.moved_threshold_m`). The default is the pipeline's named streams, named as

@@ -1,5 +1,5 @@
 """Boxes from one observation: each visible box fitted as an oriented box in the shelf frame
-(the physics-from-depth planner's scene estimate, planning/physics_depth.py).
+(the physics-from-depth planner's scene estimate, planning/ch6/physics_depth.py).
 
 From the depth image, the instance masks and the camera model only (numpy; no simulator):
 

@@ -12,7 +12,7 @@ import pandas as pd
 
 from clutterbench.errors import ClutterbenchError
 from clutterbench.report.tables import write_table
-from clutterbench.trials.stats import Rate
+from clutterbench.trials.core.stats import Rate
 
 TABLE = "arm_vs_kinematic"
 FAILURES = ("unreachable", "planning_failed", "no_contact")

@@ -2,7 +2,7 @@
 (the collapse predictor) and how much planning (Algorithm 1 itself).
 
 On one stream, three rows see the same scenes and targets: the CP planner (collapse maps
-from the network), the same planner fed physics-truth maps (`*_truth`, trials/truth_maps.py)
+from the network), the same planner fed physics-truth maps (`*_truth`, trials/ch6/truth_maps.py)
 and its matching search oracle. Per episode and under each criterion:
 
     oracle - CP  =  (oracle - truth)  +  (truth - CP)
@@ -36,7 +36,7 @@ import pandas as pd
 
 from clutterbench.report.tables import Column, write_raw_csv, write_table
 from clutterbench.trials.config import PULL_MAP_HEADS
-from clutterbench.trials.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
+from clutterbench.trials.core.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
 
 TABLE = "table_6_3_decomposition"
 

@@ -26,7 +26,7 @@ from clutterbench.report.tables import (
     write_raw_csv,
     write_table,
 )
-from clutterbench.trials.stats import aggregate
+from clutterbench.trials.core.stats import aggregate
 
 if TYPE_CHECKING:
     from clutterbench.trials.config import Ch6TrialParams

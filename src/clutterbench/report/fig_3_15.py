@@ -17,7 +17,7 @@ import pandas as pd  # noqa: E402
 
 from clutterbench.io import atomic_path  # noqa: E402
 from clutterbench.report.tables import thesis_row, write_raw_csv, write_table  # noqa: E402
-from clutterbench.trials.stats import Rate  # noqa: E402
+from clutterbench.trials.core.stats import Rate  # noqa: E402
 
 TABLE = "fig_3_15"
 VARIANTS = {

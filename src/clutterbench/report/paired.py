@@ -2,7 +2,7 @@
 
 Both read one depth image per decision and nothing else of the world: the CP planner through
 the collapse predictor, physics from depth through boxes fitted to the image and simulated
-(planning/physics_depth.py). Their Table 6.3 rows ran the same scenes and targets, so they
+(planning/ch6/physics_depth.py). Their Table 6.3 rows ran the same scenes and targets, so they
 compare episode by episode, under each criterion: the episodes won only by one row and only
 by the other, the difference in points with a paired 95% bootstrap interval over episodes,
 and McNemar's exact p. The rows that hold a box meet the physics-from-depth row that may
@@ -26,7 +26,7 @@ from clutterbench.report.decomposition import (
     shared_outcomes,
 )
 from clutterbench.report.tables import Column, write_raw_csv, write_table
-from clutterbench.trials.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
+from clutterbench.trials.core.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
 
 TABLE = "table_6_3_paired"
 

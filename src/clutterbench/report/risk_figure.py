@@ -19,7 +19,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
 from clutterbench.io import atomic_path  # noqa: E402
-from clutterbench.planning.risk import CLASSES, PIXEL_THRESHOLD  # noqa: E402
+from clutterbench.planning.ch4.risk import CLASSES, PIXEL_THRESHOLD  # noqa: E402
 
 COLOURS = {"E": (0.1, 0.8, 0.2), "S": (0.2, 0.4, 1.0), "C": (1.0, 0.1, 0.1)}
 """Thesis Fig. 4.8: green extracted, blue supported, red collapsing region."""
@@ -148,12 +148,12 @@ def draw_figure(job: dict[str, Any], out_path: Path) -> None:
     The simulator and the trials' helpers load only when it is called, so the report stage
     that imports this module loads no SAPIEN and the trials import nothing of the report."""
     from clutterbench.errors import ClutterbenchError
-    from clutterbench.planning.risk_planner import plan_risk
+    from clutterbench.planning.ch4.risk_planner import plan_risk
     from clutterbench.sim.physics import BoxWorld
     from clutterbench.sim.render import ensure_renderer
-    from clutterbench.trials.ch4 import observe_and_segment, target_segment
-    from clutterbench.trials.harness import load_predictor
-    from clutterbench.trials.scenes import draw_target, draw_trial_spec
+    from clutterbench.trials.ch4.episodes import observe_and_segment, target_segment
+    from clutterbench.trials.core.harness import load_predictor
+    from clutterbench.trials.core.scenes import draw_target, draw_trial_spec
 
     cond, params = job["cond"], job["params"]
     ensure_renderer()

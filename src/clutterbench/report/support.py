@@ -18,7 +18,7 @@ from clutterbench.report.tables import Column, comparison_frame, thesis_row, wri
 
 TABLE = "table_6_2"
 PULL_PREFIX = "pull_"
-"""Methods on the CP's pull head, scored against the pull truth (trials/support_eval.py)."""
+"""Methods on the CP's pull head, scored against the pull truth (support/evaluate.py)."""
 THESIS_METHOD = "iou"
 """The rule the thesis evaluated (6.2.2: IoU of object and collapse area); its Table 6.2
 mean sits beside this row only."""

@@ -30,7 +30,7 @@ from clutterbench.report.tables import (
     write_raw_csv,
     write_table,
 )
-from clutterbench.trials.stats import aggregate, rate
+from clutterbench.trials.core.stats import aggregate, rate
 
 TABLE = "table_4_1"
 TARGET_TABLE = "table_4_1_target"

@@ -18,7 +18,7 @@ import pandas as pd
 
 from clutterbench.errors import ClutterbenchError
 from clutterbench.report.tables import thesis_row, write_raw_csv, write_table
-from clutterbench.trials.stats import Rate, rate
+from clutterbench.trials.core.stats import Rate, rate
 
 TABLE = "table_5_2"
 BRANCH_TABLE = f"{TABLE}_branches"

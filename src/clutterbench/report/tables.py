@@ -17,7 +17,7 @@ import yaml
 
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_text
-from clutterbench.trials.stats import Rate
+from clutterbench.trials.core.stats import Rate
 
 
 def load_thesis_figures(path: Path) -> dict[str, Any]:

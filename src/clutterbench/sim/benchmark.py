@@ -1,5 +1,5 @@
 """Benchmark scenes: the settled starts (and targets) of every table's test streams, made once
-by an explicit command (`make benchmark-scenes`, trials/benchmark.py) and read by every stage,
+by an explicit command (`make benchmark-scenes`, cli/benchmark_scenes.py) and read by every stage,
 environment and agent evaluation, so that episode i starts from the same bytes on any CPU.
 
 Settling a drawn placement is physics, and PhysX differs in the last bits across CPUs: drawn

@@ -382,7 +382,7 @@ def pull_outcomes(
 ) -> PullOutcomes:
     """Pull every box out of the canonical start with the trials' executor (`pull`:
     increment_m, lift_m) -> PullOutcomes. The one code path of these labels, the truth maps
-    of the pull (trials/truth_maps.py) and executed steps."""
+    of the pull (trials/ch6/truth_maps.py) and executed steps."""
     from clutterbench.sim.geometry import tilt_change_deg
     from clutterbench.sim.pull import SceneState, execute_pull, world_at
 

@@ -1,6 +1,6 @@
 """The kinematic executor of every simulated step (ARCHITECTURE "one canonical start for every
 action"): the state between two steps, a fresh world built at it, one pull executed in it, and
-which other boxes the pull moved. The trials' protocol (trials/protocol.py) judges what this
+which other boxes the pull moved. The trials' protocol (trials/core/protocol.py) judges what this
 executes; the arm-level executor (maniskill/executor.py) returns the same `PullResult` and is
 judged by the same `moved_others`, so both executors share one judgement."""
 

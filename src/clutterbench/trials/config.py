@@ -1,4 +1,4 @@
-"""Params of the support-graph evaluation (`support`) and the simulated trials (`trials`).
+"""Params of the simulated trials (the `trials` section of params.yaml).
 
 Imports no SAPIEN and no torch, so that the report stage can read them.
 """
@@ -10,9 +10,9 @@ from collections.abc import Mapping
 from typing import Literal
 
 from clutterbench.config import bounded
+from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.data.config import DatasetConfig
 from clutterbench.maniskill.config import ArmConfig
-from clutterbench.trials.criteria import CollapseFreeConfig
 
 PLANNERS = (
     "pull_target",
@@ -35,12 +35,12 @@ PLANNERS = (
 target at once, nothing held; the thesis' single-step method (its previous work, ch. 4: pull
 the target while holding the support of least risk); Algorithm 1 with one arm; Algorithm 1
 with the bimanual option (Fig. 6.7); the same two fed physics-truth collapse maps instead of
-the predictor's (the perception ceiling, trials/truth_maps.py), of deletion (the labels'
+the predictor's (the perception ceiling, trials/ch6/truth_maps.py), of deletion (the labels'
 meaning) and of the trials' own pull; the same two on the collapse predictor's pull head
 (`*_pull`: maps of the trials' pull, learnt from pull labels); the search oracles with one
 arm and with a holding arm; a uniformly random visible box each step; the search on boxes
 fitted to each observation instead of the true scene, one arm and holding
-(planning/physics_depth.py)."""
+(planning/ch6/physics_depth.py)."""
 
 
 PULL_HEAD_PLANNERS = ("multi_step_pull", "bimanual_pull")
@@ -81,45 +81,6 @@ class SceneStreamConfig:
             catalogue=self.catalogue,
             n_objects=self.n_objects,
         )
-
-
-@dataclasses.dataclass(frozen=True)
-class SupportEvalConfig:
-    """Table 6.2: support relations inferred from one depth image against physics."""
-
-    model: str = "cp_focal"
-    """Collapse predictor (a key of train.models): models/<model>/best.pt."""
-    val_dataset: str = "ch6"
-    """Dataset whose val split chooses every threshold (never the test scenes)."""
-    val_scenes: int = bounded(150, ge=1)
-    """At most this many val scenes are swept (the first ones of the split)."""
-    test: SceneStreamConfig = dataclasses.field(
-        default_factory=lambda: SceneStreamConfig(families={"random": 1.0})
-    )
-    """Test scenes: their own seed stream, family mix and box counts."""
-    test_scenes: int = bounded(200, ge=1)
-    """Number of test scenes (thesis: 15 real scenes)."""
-    moved_threshold_m: float = bounded(0.005, gt=0.0)
-    """SUPP(X, Y) needs Y to move more than this when X is removed (thesis 6.2.1: 5 mm)."""
-    min_pixels: int = bounded(20, ge=1)
-    """A box is an object of the scene when at least this many pixels of it are visible."""
-    prob_thresholds: tuple[float, ...] = (0.3, 0.4, 0.5)
-    """Swept: R_C is where the heatmap exceeds this."""
-    score_thresholds: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5)
-    """Swept: an edge when the rule's score exceeds this."""
-    bbox_margins_px: tuple[int, ...] = (2, 4)
-    """Swept: each object's bounding box is grown by this many pixels (pseudo-direct contact)."""
-    adjacency_ious: tuple[float, ...] = (0.0, 0.05)
-    """Swept: grown boxes in pseudo-direct contact when their IoU exceeds this."""
-    max_gaps_m: tuple[float | None, ...] = (None,)
-    """Swept: ... and when their closest visible surface points (back-projected depth) are
-    nearer than this; null: no such test (the thesis' rule alone)."""
-    figure_scenes: int = bounded(6, ge=1)
-    """Test scenes drawn in the figure (thesis Fig. 6.8: six)."""
-    workers: int = bounded(2, ge=1)
-    """Worker processes simulating the test scenes' truth."""
-    max_attempts: int = bounded(30, ge=1)
-    """A test scene is redrawn at most this often."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -191,7 +152,7 @@ class Ch6TrialParams:
     """What the planners on maps of the pull (`*_pull*`, issue 50) do after a collapse score
     over cp_max: block skips the box until a step succeeds (Algorithm 1, what the deletion
     planners do); learn also takes the box the score feared for as carried by it, so the
-    plan removes that box first or, bimanual, holds it (planning/extraction.py)."""
+    plan removes that box first or, bimanual, holds it (planning/ch6/extraction.py)."""
     pull_prob_threshold: float | None = bounded(None, gt=0.0, le=1.0)
     """The pull-head CP planners' (PULL_HEAD_PLANNERS) collapse area R_C = heatmap > this;
     null: the support stage's choice on validation scenes (the support graph's F-measure
@@ -213,7 +174,7 @@ class Ch6TrialParams:
     aborting only when the score grows beyond that one; least_risk_unmonitored pulls it
     without abort checks; clear first pulls a box the rule passes from around the rejected
     ones (a contact neighbour of a rejected candidate or of a box its score feared for; the
-    lowest score), least_risk when there is none (planning/extraction.py NO_PLAN_RESPONSES).
+    lowest score), least_risk when there is none (planning/ch6/extraction.py NO_PLAN_RESPONSES).
     Chosen on dev streams (make dev-ch6-no-plan, make dev-ch6-clear)."""
     score_over: Literal["contact", "visible"] = "contact"
     """Whose shares the collapse score of the planners on maps of the pull (`*_pull*`, issue
@@ -387,7 +348,7 @@ class TrialsConfig:
     ch6: Ch6TrialParams = Ch6TrialParams()
     """Chapter 6 execution and judging."""
     collapse_free: CollapseFreeConfig = CollapseFreeConfig()
-    """Thresholds of the collapse-free criterion, every chapter's (trials/criteria.py)."""
+    """Thresholds of the collapse-free criterion, every chapter's (criteria.py)."""
     conditions: Mapping[str, ConditionConfig] = dataclasses.field(default_factory=dict)
     """Condition name -> planner on a stream; stage trials runs them all in one pool."""
     ch4: Ch4TrialParams = Ch4TrialParams()

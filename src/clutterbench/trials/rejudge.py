@@ -3,7 +3,7 @@
     python -m clutterbench.trials.rejudge reports/trials/multi_step/records.jsonl \\
         --drop-m 0.01 --tilt-deg 15 --moved-m 0.005
 
-Every step record carries `box_motion` (trials/criteria.py), so both criteria can be
+Every step record carries `box_motion` (criteria.py), so both criteria can be
 recomputed for any thresholds: per episode, collapse-free `success` and `strict_success`,
 and per condition their counts (the tables' k/n). With the thresholds the harness ran under,
 the output equals the records (and so the tables; tested). An episode ends at its first
@@ -26,8 +26,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from clutterbench.trials import criteria
-from clutterbench.trials.criteria import CollapseFreeConfig
+from clutterbench import criteria
+from clutterbench.criteria import CollapseFreeConfig
 
 CRITERIA = ("success", "strict_success")
 
@@ -119,7 +119,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     ap.add_argument("--episodes", action="store_true", help="print every episode too")
     args = ap.parse_args(argv)
-    from clutterbench.trials.records import read_records
+    from clutterbench.trials.core.records import read_records
 
     cf = CollapseFreeConfig(drop_m=args.drop_m, tilt_deg=args.tilt_deg)
     report: dict[str, Any] = {"drop_m": cf.drop_m, "tilt_deg": cf.tilt_deg, "files": {}}

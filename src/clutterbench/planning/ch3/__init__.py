@@ -1,0 +1,1 @@
+"""Chapter 3's planning: slide selection and the POMDP of Yamakuzushi."""

@@ -1,0 +1,50 @@
+"""Params of the support-graph evaluation (the `support` section of params.yaml, Table 6.2).
+
+Imports no SAPIEN and no torch, so that the report stage can read them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from clutterbench.config import bounded
+from clutterbench.trials.config import SceneStreamConfig
+
+
+@dataclasses.dataclass(frozen=True)
+class SupportEvalConfig:
+    """Table 6.2: support relations inferred from one depth image against physics."""
+
+    model: str = "cp_focal"
+    """Collapse predictor (a key of train.models): models/<model>/best.pt."""
+    val_dataset: str = "ch6"
+    """Dataset whose val split chooses every threshold (never the test scenes)."""
+    val_scenes: int = bounded(150, ge=1)
+    """At most this many val scenes are swept (the first ones of the split)."""
+    test: SceneStreamConfig = dataclasses.field(
+        default_factory=lambda: SceneStreamConfig(families={"random": 1.0})
+    )
+    """Test scenes: their own seed stream, family mix and box counts."""
+    test_scenes: int = bounded(200, ge=1)
+    """Number of test scenes (thesis: 15 real scenes)."""
+    moved_threshold_m: float = bounded(0.005, gt=0.0)
+    """SUPP(X, Y) needs Y to move more than this when X is removed (thesis 6.2.1: 5 mm)."""
+    min_pixels: int = bounded(20, ge=1)
+    """A box is an object of the scene when at least this many pixels of it are visible."""
+    prob_thresholds: tuple[float, ...] = (0.3, 0.4, 0.5)
+    """Swept: R_C is where the heatmap exceeds this."""
+    score_thresholds: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5)
+    """Swept: an edge when the rule's score exceeds this."""
+    bbox_margins_px: tuple[int, ...] = (2, 4)
+    """Swept: each object's bounding box is grown by this many pixels (pseudo-direct contact)."""
+    adjacency_ious: tuple[float, ...] = (0.0, 0.05)
+    """Swept: grown boxes in pseudo-direct contact when their IoU exceeds this."""
+    max_gaps_m: tuple[float | None, ...] = (None,)
+    """Swept: ... and when their closest visible surface points (back-projected depth) are
+    nearer than this; null: no such test (the thesis' rule alone)."""
+    figure_scenes: int = bounded(6, ge=1)
+    """Test scenes drawn in the figure (thesis Fig. 6.8: six)."""
+    workers: int = bounded(2, ge=1)
+    """Worker processes simulating the test scenes' truth."""
+    max_attempts: int = bounded(30, ge=1)
+    """A test scene is redrawn at most this often."""

@@ -1,0 +1,1 @@
+"""Arm-level trials: ch. 4 and ch. 6 steps executed by ManiSkill's Pandas (Table arm)."""

@@ -1,0 +1,20 @@
+"""Arm-level trials (Table arm): a ch. 6 extraction or a ch. 4 trial whose steps the Pandas
+execute (trials/core/executors.py), one episode function for both chapters."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def run_arm_episode(job: dict[str, Any]):
+    """One episode of an arm-level condition: a ch. 6 extraction or a ch. 4 trial (the job
+    says which), executed by the Pandas."""
+    import time
+
+    from clutterbench.trials.ch4.episodes import run_ch4_episode
+    from clutterbench.trials.ch6.episodes import run_ch6_episode
+
+    start = time.perf_counter()
+    result = (run_ch4_episode if job["chapter"] == 4 else run_ch6_episode)(job)
+    result.wall_s = time.perf_counter() - start
+    return result

@@ -1,0 +1,291 @@
+"""Chapter 4 trials: pull one box toward the camera while a second arm holds another
+(thesis 4.2.3, 4.3.3, Table 4.1).
+
+An episode: draw a scene from the condition's stream and settle it (the canonical start),
+observe it, segment it (simulator instance masks, or depth alone), let the planner choose an
+(extract, support) pair of segments, map the segments to the boxes the robot would grasp,
+then execute the pull from the canonical start exactly as the ch. 4 labels were made
+(`act_on_spec(..., "pull", extract, support)`) and judge it from physics:
+
+- success (collapse-free, the thesis' trial notion; criteria.py): no box other than
+  the pulled one left the shelf, and none but the support dropped or tipped beyond the
+  `trials.collapse_free` thresholds;
+- strict success: also no box but the support moved more than `moved_threshold_m`;
+
+both judged after the support was released and the scene settled (trials/core/protocol.py), and
+as while the support is still held (`success_held`: no other box left the shelf,
+`strict_success_held`: nor moved). An invalid action (a segment of no box, or the support
+the pulled box itself) is executed as chosen but never counted a success.
+
+The risk planner sees only the depth image and the masks; the oracle reads the world.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from clutterbench.criteria import CollapseFreeConfig
+from clutterbench.maniskill.config import ArmConfig
+from clutterbench.observation import Observation
+from clutterbench.perception.depth_segmentation import shelf_roi
+from clutterbench.perception.masks import Segmentation, match_segments, segment
+from clutterbench.planning.ch4.risk import (
+    candidate_pairs,
+    random_pair,
+)
+from clutterbench.planning.ch4.risk_planner import plan_risk
+from clutterbench.sim import benchmark
+from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.physics import BoxWorld
+from clutterbench.sim.render import observe
+from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.ch4.execution import arm_pull_outcome, plan_oracle, pull_outcome
+from clutterbench.trials.config import Ch4ConditionConfig, Ch4TrialParams, SceneStreamConfig
+from clutterbench.trials.core.harness import (
+    DECISION_TOPIC,
+    EpisodeLog,
+    EpisodeResult,
+    load_predictor,
+)
+from clutterbench.trials.core.scenes import draw_target, draw_trial_spec, policy_rng
+
+RISKS_LOGGED = 8
+"""The decision message lists the candidates of least risk, this many."""
+
+
+# -- one episode ---------------------------------------------------------------------------
+def observe_and_segment(
+    world: BoxWorld, spec: SceneSpec, job: dict[str, Any]
+) -> tuple[Observation, Segmentation]:
+    cond: Ch4ConditionConfig = job["cond"]
+    params: Ch4TrialParams = job["params"]
+    obs = observe(world, job["camera"])
+    seg = segment(obs, cond.perception, min_pixels=params.min_pixels, roi=shelf_roi(spec.shelf))
+    return obs, seg
+
+
+def target_segment(seg: Segmentation, instance: np.ndarray, box: int) -> int | None:
+    """The segment the user points at for box `box`: the one covering most of its pixels."""
+    overlap = [int(np.sum(m & (instance == box + 1))) for m in seg.masks]
+    if not overlap or max(overlap) == 0:
+        return None
+    return int(np.argmax(overlap))
+
+
+def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
+    """One ch. 4 trial on scene `job["index"]` of its stream."""
+    cond: Ch4ConditionConfig = job["cond"]
+    params: Ch4TrialParams = job["params"]
+    physics: PhysicsConfig = job["physics"]
+    spec = draw_trial_spec(
+        cond.stream,
+        job["stream_cfg"],
+        job["seed"],
+        job["index"],
+        physics,
+        job["camera"],
+        job["max_attempts"],
+    )
+    world = BoxWorld.from_spec(spec, physics, render=True)
+    obs, seg = observe_and_segment(world, spec, job)
+    log = EpisodeLog(record_images=job["record_images"])
+    log.scene(0.0, spec.sizes_m, spec.shelf.boards(), obs.camera, obs.depth_m.shape)
+    log.observation(0.0, obs.depth_m, obs.instance)
+    log.poses(0.0, world.poses())
+    boxes = match_segments(seg, obs.instance)  # the harness's, never the planner's
+    target_box = target_k = None
+    if cond.mode == "target":
+        target_box = draw_target(
+            job["seed"], cond.stream, job["index"], obs, params.min_target_pixels, spec
+        )
+        target_k = target_segment(seg, obs.instance, target_box)
+    decision: dict[str, Any] = {"candidates": 0}
+    chosen: tuple[int | None, int | None] = (None, None)  # segment indices
+    risk, ties = None, None
+    if len(seg.ids) >= 2 and (cond.mode == "pair" or target_k is not None):
+        pairs = (
+            candidate_pairs(list(range(len(seg.ids))))
+            if target_k is None
+            else [(target_k, s) for s in range(len(seg.ids)) if s != target_k]
+        )
+        decision["candidates"] = len(pairs)
+        if cond.planner == "risk":
+            predictor = load_predictor(job["model_path"], job["camera"].image_size)
+            choice, pairs, risks, _ = plan_risk(
+                predictor, obs, seg, target_k, params.pixel_threshold
+            )
+            chosen, risk = (choice.extract, choice.support), choice.risk
+            # How many candidates share the least risk: above 1, the tie-break decided.
+            ties = int(np.sum(risks == choice.risk))
+            top = np.argsort(risks, kind="stable")[:RISKS_LOGGED]
+            decision["least_risk"] = [
+                [*pairs[k], round(float(risks[k]), 4) if np.isfinite(risks[k]) else None]
+                for k in top
+            ]
+        elif cond.planner == "random":
+            rng = policy_rng(job["seed"], cond.stream, job["index"], f"ch4_{cond.mode}_random")
+            chosen = random_pair(pairs, rng)
+        else:
+            box_pairs = [(boxes[x], boxes[s]) for x, s in pairs]
+            # valid actions only: an invalid one is never a success
+            usable = [
+                k
+                for k, (x, s) in enumerate(box_pairs)
+                if x is not None and s is not None and x != s
+            ]
+            rng = policy_rng(job["seed"], cond.stream, job["index"], f"ch4_{cond.mode}_oracle")
+            if usable:
+                k, tried, _ = plan_oracle(
+                    spec,
+                    physics,
+                    [box_pairs[k] for k in usable],
+                    params.moved_threshold_m,
+                    job["collapse_free"],
+                    rng,
+                )
+                chosen = pairs[usable[k]]
+                decision["simulated"] = tried
+    x_box = boxes[chosen[0]] if chosen[0] is not None else None
+    s_box = boxes[chosen[1]] if chosen[1] is not None else None
+    valid = x_box is not None and s_box is not None and x_box != s_box
+    decision |= {"extract": chosen[0], "support": chosen[1], "boxes": [x_box, s_box]}
+    finite = risk is not None and np.isfinite(risk)
+    log.json(0.0, DECISION_TOPIC, decision | {"risk": round(risk, 4) if finite else None})
+    if x_box is not None and cond.executor == "arm":
+        out = arm_pull_outcome(
+            spec,
+            physics,
+            x_box,
+            s_box if s_box != x_box else None,
+            params.moved_threshold_m,
+            job["collapse_free"],
+            job,
+            log,
+        )
+    elif x_box is not None:
+        out = pull_outcome(
+            spec,
+            physics,
+            x_box,
+            s_box if s_box != x_box else None,
+            params.moved_threshold_m,
+            job["collapse_free"],
+            world=world,
+        )
+    else:  # nothing graspable chosen (no pair, or a segment of no box): nothing was pulled
+        out = {
+            "executed": False,
+            "aborted_before_motion": True,
+            "aborted_after_motion": False,
+            "extracted": False,
+            "target_out": False,
+            "others_still": True,
+            "collapse_free": True,
+            "judged": False,
+            "counted": True,
+            "strict_counted": True,
+            "n_left_shelf": 0,
+            "n_disturbed": 0,
+            "n_collapsed": 0,
+            "disturbance_m": 0.0,
+            "box_motion": [],
+            "success": False,
+            "strict_success": False,
+            "success_held": False,
+            "strict_success_held": False,
+        }
+    if cond.executor != "arm" or x_box is None:  # the arm's pull logged its own poses
+        log.poses(world.steps_taken * physics.timestep_s, world.poses(), world.removed)
+    out.pop("displacement_m", None)
+    out.pop("displacement_held_m", None)
+    valid = bool(valid and (target_box is None or x_box == target_box))
+    out = count_if_valid(out, valid)
+    record = {
+        "condition": job["condition"],
+        "episode": job["index"],
+        "seed": job["seed"],
+        "stream": cond.stream,
+        "family": spec.family,
+        **benchmark.scene_fields(spec),
+        "catalogue": job["stream_cfg"].catalogue,
+        "n_objects": spec.n,
+        "planner": cond.planner,
+        "mode": cond.mode,
+        "model": cond.model,
+        "perception": cond.perception,
+        "n_segments": len(seg.ids),
+        "n_candidates": decision["candidates"],
+        "target": target_box,
+        "extract": x_box,
+        "support": s_box,
+        # r_c is +inf where the network claims no region at all: no evidence, written null
+        "risk": None if risk is None or not np.isfinite(risk) else round(risk, 6),
+        "risk_ties": ties,
+        "valid": valid,
+        "collapse_free_params": {
+            "drop_m": job["collapse_free"].drop_m,
+            "tilt_deg": job["collapse_free"].tilt_deg,
+        },
+        "moved_threshold_m": params.moved_threshold_m,
+    } | {k: _plain(v) for k, v in out.items()}
+    if cond.executor == "arm":  # kinematic records keep their old fields
+        record["executor"] = "arm"
+    return EpisodeResult(record, log)
+
+
+OUTCOMES = ("target_out", "success", "strict_success", "success_held", "strict_success_held")
+"""A ch. 4 trial's outcome flags, all false for an invalid action."""
+
+
+def count_if_valid(out: dict[str, Any], valid: bool) -> dict[str, Any]:
+    """The judged pull `out` with every outcome flag false unless the action was valid (both
+    segments grasp boxes, two different ones, and with a given target the pulled box is it):
+    an invalid action is executed as chosen, but never counted a success."""
+    return out | {k: bool(out[k] and valid) for k in OUTCOMES}
+
+
+def _plain(v: Any) -> Any:
+    """JSON-plain values; floats to 1e-6 so records read cleanly (bits stay deterministic)."""
+    if isinstance(v, bool | np.bool_):
+        return bool(v)
+    if isinstance(v, float | np.floating):
+        return round(float(v), 6)
+    return v
+
+
+def ch4_jobs(
+    condition: str,
+    cond: Ch4ConditionConfig,
+    params: Ch4TrialParams,
+    stream_cfg: SceneStreamConfig,
+    seed: int,
+    physics: PhysicsConfig,
+    camera: CameraConfig,
+    max_attempts: int,
+    record_images: bool,
+    arm: ArmConfig | None = None,
+    collapse_free: CollapseFreeConfig | None = None,
+) -> list[dict[str, Any]]:
+    """One job per episode (`collapse_free`: trials.collapse_free; None: its defaults)."""
+    model_path = Path(f"models/{cond.model}/best.pt") if cond.model is not None else None
+    return [
+        {
+            "condition": condition,
+            "cond": cond,
+            "params": params,
+            "stream_cfg": stream_cfg,
+            "index": i,
+            "seed": seed,
+            "physics": physics,
+            "camera": camera,
+            "model_path": model_path,
+            "max_attempts": max_attempts,
+            "record_images": record_images,
+            "arm": arm or ArmConfig(),
+            "collapse_free": collapse_free or CollapseFreeConfig(),
+        }
+        for i in range(cond.episodes)
+    ]

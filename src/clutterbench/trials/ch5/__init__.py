@@ -1,0 +1,1 @@
+"""Chapter 5's trials: replenishment (Table 5.2)."""

@@ -1,0 +1,450 @@
+"""Chapter 6 trials: extract a chosen visible target from a pile (thesis 6.3.2, Table 6.3).
+
+An episode: draw a scene from the condition's stream and settle it (the canonical start),
+observe, choose the target, then repeat (Algorithm 1) observe -> plan -> pull in increments
+(re-observing between them when the planner monitors the collapse score) -> release -> judge
+the step from physics, under the episode protocol of trials/core/protocol.py (the episode ends
+at its first failed step). This module is the one place that holds both the world and a
+planner.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from clutterbench.criteria import CollapseFreeConfig
+from clutterbench.errors import ClutterbenchError
+from clutterbench.maniskill.config import ArmConfig
+from clutterbench.observation import Observation
+from clutterbench.planning.ch6.extraction import (
+    Decision,
+)
+from clutterbench.planning.ch6.support import SupportParams
+from clutterbench.sim import benchmark
+from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.physics import BoxWorld
+from clutterbench.sim.pull import SceneState, execute_pull, world_at
+from clutterbench.sim.render import observe
+from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.ch6.oracle import SearchOracle
+from clutterbench.trials.ch6.planners import (  # noqa: F401  (register_planner, PLANNERS: the documented entry points)
+    CP_PLANNERS,
+    PLANNERS,
+    chosen_support,
+    load_planners,
+    make_planner,
+    reads_truth_maps,
+    register_planner,
+    truth_maps_of,
+)
+from clutterbench.trials.config import (
+    PULL_HEAD_PLANNERS,
+    PULL_MAP_HEADS,
+    Ch6TrialParams,
+    SceneStreamConfig,
+    support_method,
+)
+from clutterbench.trials.core.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
+from clutterbench.trials.core.judge import disturbance
+from clutterbench.trials.core.protocol import episode_end, judge_episode, judge_pull, step_notes
+from clutterbench.trials.core.scenes import draw_target, draw_trial_spec
+
+
+def execute_decision(
+    world: BoxWorld,
+    obs: Observation,
+    decision: Decision,
+    planner: Any,
+    camera: CameraConfig,
+    params: Ch6TrialParams,
+    cp_max: float,
+    gone: frozenset[int],
+    log: EpisodeLog,
+    cf: CollapseFreeConfig,
+    t0: float = 0.0,
+    arm: tuple[SceneSpec, SceneState, ArmConfig] | None = None,
+) -> tuple[dict[str, Any], SceneState, float]:
+    """Execute one decision from the step's canonical start (`world`, fresh) and judge it:
+    pull in increments, checking the planner's collapse score before each (the first check
+    reads the observation the planner decided on, so a box its own rule rejects is never
+    picked and then aborted before motion), release, settle, judge. `arm`: (spec, state,
+    Pandas) to execute it arm-level instead (trials/arm/episodes.py; `world` then only pictures).
+    -> the step's record, the state it left, its duration (s)."""
+    box, hold = decision.pull, decision.hold
+    dt = world.cfg.timestep_s
+    monitor = getattr(planner, "collapse_score", None)
+    max_cp = 0.0
+
+    truth = truth_maps_of(planner)
+    limit = cp_max if decision.cp_max is None else decision.cp_max  # a least-risk pull's own
+
+    def score(done: int, now: Observation | None, t: float) -> bool:
+        nonlocal max_cp
+        if monitor is None:
+            return True
+        if truth is not None and done:  # truth maps of the present, mid-pull state
+            assert arm is None and now is not None, "truth maps run on the kinematic executor"
+            truth.at(SceneState.of(world), now.instance, world.held())
+        cp = float(monitor(obs if done == 0 else now, box, hold))
+        max_cp = max(max_cp, cp)
+        log.json(t, DECISION_TOPIC, {"box": box, "cp": round(cp, 4)})
+        return cp <= limit
+
+    arm_fields: dict[str, Any] = {}
+    if arm is None:
+        result = execute_pull(
+            world,
+            box,
+            hold,
+            params.pull_increment_m,
+            params.grasp_lift_m,
+            go_on=lambda done: score(
+                done,
+                observe(world, camera) if done and monitor else None,
+                t0 + world.steps_taken * dt,
+            ),
+        )
+        state, elapsed = SceneState.of(world), world.steps_taken * dt
+    else:
+        from clutterbench.trials.core.executors import arm_pull
+
+        spec, start, arm_cfg = arm
+        done_by_arm = arm_pull(
+            spec,
+            start,
+            box,
+            hold,
+            params.pull_increment_m,
+            params.grasp_lift_m,
+            world.cfg,
+            arm_cfg,
+            log,
+            t0,
+            go_on=lambda done, now: score(done, now, t0),
+            camera=camera,
+        )
+        result, arm_fields = done_by_arm.result, done_by_arm.fields
+        state, elapsed = done_by_arm.state, done_by_arm.elapsed_s
+    if arm is None:
+        step = judge_pull(result, box, hold, gone, params.moved_threshold_m, cf)
+    else:
+        from clutterbench.trials.core.executors import judge_arm_step
+
+        step = judge_arm_step(result, box, hold, gone, params.moved_threshold_m, cf)
+    record = {
+        "box": box,
+        "hold": hold,
+        "increments": result.increments,
+        "max_cp": round(max_cp, 4),
+    } | step
+    return record | step_notes(decision.state) | arm_fields, state, elapsed
+
+
+def job_spec(job: dict[str, Any]) -> SceneSpec:
+    """The settled scene `job["index"]` of the job's stream."""
+    return draw_trial_spec(
+        job["stream"],
+        job["stream_cfg"],
+        job["seed"],
+        job["index"],
+        job["physics"],
+        job["camera"],
+        job["max_attempts"],
+    )
+
+
+def run_ch6_episode(job: dict[str, Any]) -> EpisodeResult:
+    """One ch. 6 extraction episode on scene `job["index"]` of its stream."""
+    return run_extraction(job_spec(job), job)
+
+
+def run_extraction(
+    spec: SceneSpec, job: dict[str, Any], target: int | None = None
+) -> EpisodeResult:
+    """Extract `target` (None: drawn from the stream's target stream) from the settled `spec`
+    with the job's planner under the episode protocol (trials/core/protocol.py) -> the episode's
+    record and MCAP events."""
+    episode = Extraction(spec, job, target)
+    planner = make_planner(job, spec)
+    while not episode.done:
+        episode.before_decision(planner)
+        try:
+            decision = planner.decide(episode.obs, episode.target, frozenset(episode.blocked))
+        except ValueError:  # every action the planner would take is rejected by its own rule
+            episode.give_up()
+            break
+        episode.step(decision, planner)
+    return episode.result(planner)
+
+
+class Extraction:
+    """One ch. 6 extraction episode as a stepping object: the canonical start, then one
+    `step(decision, planner)` per decision under the episode protocol (trials/core/protocol.py)
+    until `done`; `result()` is the episode's record. The trials' loop (run_extraction) and
+    the planning env (envs/plan.py) both drive it, so both run one protocol. `planner` is
+    whatever made the decision: its `collapse_score` (if any) monitors the pull, as
+    Algorithm 1 does; a planner that reads the world (oracle, truth maps) is handed the
+    state in `before_decision`."""
+
+    def __init__(self, spec: SceneSpec, job: dict[str, Any], target: int | None = None):
+        self.spec, self.job = spec, job
+        self.physics: PhysicsConfig = job["physics"]
+        self.camera: CameraConfig = job["camera"]
+        self.params: Ch6TrialParams = job["params"]
+        self.state = SceneState.start(spec)
+        self.world = world_at(spec, self.state, self.physics, render=True)
+        self.log = EpisodeLog(record_images=job["record_images"])
+        self.obs = observe(self.world, self.camera)
+        self.log.scene(
+            0.0, spec.sizes_m, spec.shelf.boards(), self.obs.camera, self.obs.depth_m.shape
+        )
+        if target is None:
+            target = draw_target(
+                job["seed"],
+                job["stream"],
+                job["index"],
+                self.obs,
+                self.params.min_target_pixels,
+                spec,
+            )
+        self.target = target
+        self.steps: list[dict[str, Any]] = []
+        self.blocked: set[int] = set()
+        """Boxes whose last pull aborted (planners skip them until a step succeeds)."""
+        self.end: str | None = None
+        """Why the episode ended (protocol.EPISODE_ENDS), None while it goes on."""
+        self.t = 0.0
+
+    @property
+    def done(self) -> bool:
+        return self.end is not None
+
+    def before_decision(self, planner: Any) -> None:
+        """Log the observation the next decision reads; give world-reading planners the
+        state (the oracle's search, physics-truth maps)."""
+        self.log.observation(self.t, self.obs.depth_m, self.obs.instance)
+        self.log.poses(self.t, self.state.poses, self.state.removed)
+        if isinstance(planner, SearchOracle):
+            planner.state = self.state
+        truth = truth_maps_of(planner)
+        if truth is not None:
+            truth.at(self.state, self.obs.instance)
+
+    def give_up(self) -> None:
+        """The planner has no action left: the episode ends."""
+        self.end = "gave_up"
+
+    def step(self, decision: Decision, planner: Any) -> dict[str, Any]:
+        """Execute `decision` from the step's canonical start, judge it, and decide whether
+        the episode goes on (then the next step's canonical start is built) -> the step."""
+        assert not self.done, "the episode has ended"
+        job, params, spec = self.job, self.params, self.spec
+        t = self.t
+        self.log.json(
+            t, DECISION_TOPIC, {"pull": decision.pull, "hold": decision.hold} | decision.state
+        )
+        arm = job.get("executor", "kinematic") == "arm"
+        step, self.state, elapsed = execute_decision(
+            self.world,
+            self.obs,
+            decision,
+            planner,
+            self.camera,
+            params,
+            job["cp_max"],
+            self.state.removed,
+            self.log,
+            job["collapse_free"],
+            t,
+            arm=(spec, self.state, job["arm"]) if arm else None,
+        )
+        self.steps.append(step)
+        self.t = t + elapsed
+        if step["aborted_before_motion"] or step["aborted_after_motion"]:
+            self.blocked.add(decision.pull)
+        else:
+            self.blocked.clear()
+        target = self.target
+        target_out = target in self.state.removed
+        on_shelf = bool(spec.shelf.contains(self.state.poses[target : target + 1])[0])
+        self.end = episode_end(step, target_out, target_out or on_shelf)
+        if self.end is None:
+            # the next step's canonical start
+            self.world = world_at(spec, self.state, self.physics, render=True)
+            self.obs = observe(self.world, self.camera)
+            if len(self.steps) >= params.max_steps:
+                self.end = "max_steps"
+        return step
+
+    def result(self, planner: Any) -> EpisodeResult:
+        """The episode's record (trials/core/records.py) and its MCAP events."""
+        assert self.done, "the episode has not ended"
+        job, params, spec, state, steps = self.job, self.params, self.spec, self.state, self.steps
+        truth = truth_maps_of(planner)
+        log = self.log
+        log.poses(self.t, state.poses, state.removed)
+        touched = {s["box"] for s in steps}
+        overall = disturbance(
+            np.asarray(spec.poses)[:, :3],
+            state.poses[:, :3],
+            touched,
+            set(state.removed) - touched,
+            params.moved_threshold_m,
+        )
+        record = {
+            "condition": job["condition"],
+            "episode": job["index"],
+            "seed": job["seed"],
+            "stream": job["stream"],
+            "family": spec.family,
+            **benchmark.scene_fields(spec),
+            "n_objects": spec.n,
+            "target": self.target,
+            "planner": job["planner"],
+            "perception": "instance",
+            "rule": job["rule"] if job["planner"] in CP_PLANNERS else None,
+            "support_method": support_method(
+                job["planner"], job["rule"], job["params"].pull_map_meaning
+            )
+            if job["planner"] in CP_PLANNERS
+            else None,
+            "collapse_maps": None
+            if job["planner"] not in CP_PLANNERS
+            else (
+                (
+                    f"predicted by the {PULL_MAP_HEADS[job['params'].pull_map_meaning]} head"
+                    if job["planner"] in PULL_HEAD_PLANNERS
+                    else "predicted"
+                )
+                if truth is None
+                else ("physics truth of the pull" if truth.pull else "physics truth")
+            ),
+            "rejected_starts": dict(spec.meta.get("rejected", {})),
+            "collapse_free_params": {
+                "drop_m": job["collapse_free"].drop_m,
+                "tilt_deg": job["collapse_free"].tilt_deg,
+            },
+            "moved_threshold_m": params.moved_threshold_m,
+            "steps": [_rounded(s) for s in steps],
+            "n_disturbed": overall.n_disturbed,
+            "disturbance_m": overall.disturbance_m,
+        } | judge_episode(steps, self.end, self.target)
+        if job.get("executor", "kinematic") == "arm":  # kinematic records keep their old fields
+            record["executor"] = "arm"
+        if truth is not None:
+            record["truth_simulations"] = truth.simulations
+        if isinstance(planner, SearchOracle):
+            record |= {
+                "search_nodes": planner.nodes,
+                "search_exhausted": planner.exhausted,
+                "search_replanned": planner.replanned,
+                # what the first search proved possible under each criterion (the ceilings)
+                "search_found_strict": bool(planner.found.get("strict_success", False)),
+                "search_found": bool(planner.found.get("success", False)),
+            }
+        if hasattr(planner, "first") and hasattr(planner, "steps"):  # physics from depth
+            from clutterbench.trials.ch6.physics_model import estimate_record
+
+            record |= estimate_record(planner, spec)
+        return EpisodeResult(_rounded(record), log)
+
+
+def _rounded(d: dict[str, Any]) -> dict[str, Any]:
+    """Floats to 1e-6 (micrometres) so records read cleanly; the bits stay deterministic."""
+    return {k: round(v, 6) if isinstance(v, float) else v for k, v in d.items()}
+
+
+def planner_support(
+    thresholds: Path, planner: str, rule: str, ch6: Any
+) -> tuple[SupportParams, float]:
+    """A CP planner's support thresholds and its abort threshold cp_max: the support stage's
+    choice on validation scenes for its method (trials.config.support_method), the pull-head
+    planners' overridden by trials.ch6.pull_prob_threshold / pull_score_threshold where set
+    (chosen on dev streams); cp_max: trials.ch6.cp_max, else the score threshold."""
+    support = chosen_support(thresholds, support_method(planner, rule, ch6.pull_map_meaning))
+    if planner in PULL_HEAD_PLANNERS:
+        over = {
+            "prob_threshold": ch6.pull_prob_threshold,
+            "score_threshold": ch6.pull_score_threshold,
+        }
+        support = dataclasses.replace(support, **{k: v for k, v in over.items() if v is not None})
+    return support, ch6.cp_max if ch6.cp_max is not None else support.score_threshold
+
+
+def condition_jobs(
+    name: str,
+    cond: Any,
+    trials: Any,
+    seed: int,
+    physics: PhysicsConfig,
+    camera: CameraConfig,
+    thresholds: Path,
+) -> tuple[list[dict[str, Any]], SupportParams, float]:
+    """Condition `cond`'s episode jobs, with its support rule's thresholds (chosen on
+    validation scenes by the support stage, `thresholds`) and its abort threshold cp_max;
+    one-line errors when a network is missing."""
+    for model in {trials.ch6.model, trials.ch6.ch4_model}:
+        if not Path(f"models/{model}/best.pt").exists():
+            raise ClutterbenchError(f"models/{model}/best.pt missing; run train@{model}")
+    if cond.executor == "arm" and reads_truth_maps(cond.planner):
+        raise ClutterbenchError(
+            f"trials.conditions.{name}: planner {cond.planner} reads physics-truth maps, which "
+            "run on the kinematic executor only (executor: kinematic)"
+        )
+    support, cp_max = planner_support(thresholds, cond.planner, cond.rule, trials.ch6)
+    jobs = ch6_jobs(
+        name,
+        cond,
+        trials,
+        trials.streams[cond.stream],
+        seed,
+        physics,
+        camera,
+        support,
+        cp_max,
+        Path(f"models/{trials.ch6.model}/best.pt"),
+    )
+    return jobs, support, cp_max
+
+
+def ch6_jobs(
+    condition: str,
+    cond: Any,
+    trials: Any,
+    stream_cfg: SceneStreamConfig,
+    seed: int,
+    physics: PhysicsConfig,
+    camera: CameraConfig,
+    support: SupportParams | None,
+    cp_max: float,
+    model_path: Path,
+) -> list[dict[str, Any]]:
+    """Condition `condition`'s episode jobs (collapse-free thresholds: trials.collapse_free)."""
+    return [
+        {
+            "condition": condition,
+            "planner": cond.planner,
+            "rule": cond.rule,
+            "stream": cond.stream,
+            "stream_cfg": stream_cfg,
+            "index": i,
+            "seed": seed,
+            "physics": physics,
+            "camera": camera,
+            "params": trials.ch6,
+            "collapse_free": trials.collapse_free,
+            "support": support,
+            "cp_max": cp_max,
+            "model_path": model_path,
+            "ch4_model_path": Path(f"models/{trials.ch6.ch4_model}/best.pt"),
+            "max_attempts": trials.max_attempts,
+            "record_images": trials.mcap_images,
+            "executor": cond.executor,
+            "arm": trials.arm,
+        }
+        for i in range(cond.episodes)
+    ]

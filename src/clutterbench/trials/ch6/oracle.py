@@ -1,0 +1,207 @@
+"""The search oracles of Table 6.3 (`oracle`, `oracle_hold`): sequences of pulls (and holds)
+simulated from the true state with the trials' own pull, under a node budget; a ceiling under
+each criterion. The physics-from-depth planner runs the same search on an estimated scene
+(`SearchOracle.plan_from`)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from clutterbench.criteria import CollapseFreeConfig
+from clutterbench.observation import Observation
+from clutterbench.planning.ch6.extraction import (
+    Decision,
+    visible_objects,
+)
+from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.pull import SceneState, execute_pull, world_at
+from clutterbench.sim.render import observe
+from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.config import Ch6TrialParams
+from clutterbench.trials.core.protocol import judge_pull
+
+Action = tuple[int, "int | None"]
+"""(box to pull, box the second arm holds or None)."""
+
+
+class SearchOracle:
+    """The ceiling: a depth-first search over sequences of pulls, each simulated from the
+    present state with the trials' own step (`protocol.execute_pull` in a world built by
+    `protocol.world_at`, released and judged as an executed step is), memoized over the set
+    of removed boxes, for a sequence of clean steps that ends with the target out.
+
+    Actions: every visible box (planners see no other) and the target; with `holding`, the
+    target may also be pulled while any one visible box is held (the bimanual and ch. 4
+    planners hold one box while pulling the target), the boxes its unheld pull disturbs
+    tried first. Holding a box that the unheld pull leaves within the threshold can still
+    save the others (it stops the few millimetres that let them slide), so no box is left
+    out. With `hold_any_pull` as well, a box other than the target whose unheld pull is not
+    clean may be pulled while any one visible box is held (the bimanual pull planners' idle
+    arm holds during such pulls). As execution reproduces the simulation bit for bit, the
+    plan found is followed; no planner succeeds on an episode where the search proved there
+    is no such sequence, unless a node budget ran out (counted) or a planner's aborted pull
+    left a state outside the search's actions.
+    Lives here, not in planning/, because it reads the world."""
+
+    def __init__(
+        self,
+        spec: SceneSpec,
+        physics: PhysicsConfig,
+        camera: CameraConfig,
+        params: Ch6TrialParams,
+        holding: bool,
+        cf: CollapseFreeConfig,
+        hold_any_pull: bool = False,
+    ):
+        self.spec, self.physics, self.camera, self.params = spec, physics, camera, params
+        self.holding, self.cf = holding, cf
+        self.hold_any_pull = holding and hold_any_pull
+        self.state: SceneState | None = None  # set by the harness before each decision
+        self._plan: list[tuple[Action, SceneState]] = []
+        self._expected: SceneState | None = None
+        self.nodes = self.searches = self.exhausted = self.replanned = 0
+        self.found: dict[str, bool] = {}  # criterion -> a clean sequence found (first search)
+
+    # -- simulation -------------------------------------------------------------------------
+    def simulate(
+        self, state: SceneState, action: Action, cut_short: bool = True
+    ) -> tuple[dict[str, Any], SceneState | None, np.ndarray | None]:
+        """One step from `state` as the harness executes it -> (its judgement, the state it
+        leaves, (N,) displacements). With `cut_short`, a pull during which another box (not
+        held) has already moved more than `search_cut_m` is stopped there and judged a
+        failure (no state, no displacements): that box does not come back within the moved
+        threshold, and most simulated pulls in a pile fail, so this is most of the search's
+        saving."""
+        world = world_at(self.spec, state, self.physics)
+        p = self.params
+        box, hold = action
+        watch = [k for k in range(self.spec.n) if k not in state.removed and k not in action]
+
+        def go_on(done: int) -> bool:
+            if done and watch and np.max(world.displacements()[watch]) > p.search_cut_m:
+                raise _CutShort
+            return True
+
+        try:
+            result = execute_pull(
+                world, box, hold, p.pull_increment_m, p.grasp_lift_m, go_on if cut_short else None
+            )
+        except _CutShort:
+            return {"success": False, "strict_success": False, "cut_short": True}, None, None
+        step = judge_pull(result, box, hold, state.removed, p.moved_threshold_m, self.cf)
+        return step, SceneState.of(world), result.displacement_m
+
+    def candidates(self, state: SceneState, target: int) -> list[int]:
+        """What a planner could pull in `state`: the visible boxes and the target."""
+        obs = observe(world_at(self.spec, state, self.physics, render=True), self.camera)
+        ids, _ = visible_objects(obs, self.params.min_pixels)
+        return sorted(set(ids) | {target})
+
+    def search(
+        self, state: SceneState, target: int, key: str = "strict_success"
+    ) -> tuple[list | None, int, bool]:
+        """(plan: [(action, state after it)] or None, nodes expanded, budget exhausted): a
+        sequence of steps each clean under the criterion `key` ("strict_success", pulls cut
+        short once another box moved `search_cut_m`; or "success", collapse-free, pulls never
+        cut short: a box that slid far may still be collapse-free)."""
+        cut = key == "strict_success"
+        visited: set[frozenset[int]] = {state.removed}
+        nodes = 0
+        budget = self.params.search_node_budget
+
+        class _Budget(Exception):
+            pass
+
+        def visit(now: SceneState) -> list | None:
+            nonlocal nodes
+            if nodes >= budget:
+                raise _Budget
+            nodes += 1
+            boxes = self.candidates(now, target)
+            first, after, disp = self.simulate(now, (target, None), cut_short=False)
+            if first[key]:
+                return [((target, None), after)]
+            # The boxes the target's pull disturbed: what stands in its way, and the holds
+            # most likely to save it, so they are tried first.
+            in_way = np.nan_to_num(disp, nan=0.0) > self.params.moved_threshold_m
+            if self.holding:
+                others = sorted((b for b in boxes if b != target), key=lambda b: (not in_way[b], b))
+                for h in others:
+                    step, after, _ = self.simulate(now, (target, h), cut_short=cut)
+                    if step[key]:
+                        return [((target, h), after)]
+            children: list[tuple[Action, SceneState]] = []
+            holds = boxes if self.hold_any_pull else []
+            for x in boxes:
+                if x == target:
+                    continue
+                for h in [None, *(b for b in holds if b != x)]:
+                    step, after, _ = self.simulate(now, (x, h), cut_short=cut)
+                    if step[key]:
+                        children.append(((x, h), after))
+                        break
+            children.sort(key=lambda c: (not in_way[c[0][0]], c[0][0]))
+            for action, after in children:
+                if after.removed in visited:
+                    continue
+                visited.add(after.removed)
+                rest = visit(after)
+                if rest is not None:
+                    return [(action, after), *rest]
+            return None
+
+        try:
+            return visit(state), nodes, False
+        except _Budget:
+            return None, nodes, True
+
+    def plan_from(
+        self, state: SceneState, target: int
+    ) -> tuple[list | None, dict[str, bool], dict[str, Any]]:
+        """(plan or None, found per criterion, search info): a ceiling under each criterion
+        from one search tree: a strict sequence is also collapse-free, so it is searched
+        first; only where none exists is the larger collapse-free tree searched."""
+        found: dict[str, bool] = {}
+        info: dict[str, Any] = {}
+        plan = None
+        for key in ("strict_success", "success"):
+            plan, nodes, exhausted = self.search(state, target, key)
+            self.searches += 1
+            self.nodes += nodes
+            self.exhausted += exhausted
+            found[key] = plan is not None
+            info |= {f"{key}_search_nodes": nodes, f"{key}_exhausted": exhausted}
+            if plan is not None:
+                found.setdefault("success", True)
+                break
+        return plan, found, info
+
+    # -- the planner interface --------------------------------------------------------------
+    def decide(self, obs: Observation, target: int, blocked: frozenset[int]) -> Decision:
+        state = self.state
+        assert state is not None, "the harness sets the oracle's state before each decision"
+        info: dict[str, Any] = {"policy": "oracle_hold" if self.holding else "oracle"}
+        if self._plan and not _same_state(self._expected, state):
+            self.replanned += 1  # the world left the simulated path: search again
+            self._plan = []
+        if not self._plan:
+            plan, found, searched = self.plan_from(state, target)
+            self.found = self.found or found
+            info |= searched | {"found": found}
+            self._plan = list(plan or [])
+        if not self._plan:
+            # No clean sequence exists (or the budget ran out): pull the target; it fails.
+            return Decision(target, None, info | {"plan": None})
+        (pull, hold), self._expected = self._plan.pop(0)
+        info["plan"] = [[pull, hold], *[list(a) for a, _ in self._plan]]
+        return Decision(pull, hold, info)
+
+
+class _CutShort(Exception):
+    """A simulated pull already disturbed another box beyond recovery."""
+
+
+def _same_state(a: SceneState, b: SceneState) -> bool:
+    return a.removed == b.removed and np.array_equal(a.poses, b.poses)

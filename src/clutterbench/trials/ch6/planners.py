@@ -1,0 +1,283 @@
+"""The ch. 6 planners by name (`trials.conditions.<c>.planner`): the registry
+(`register_planner`, docs/extending.md), the built-in factories (the thesis' previous
+method, Algorithm 1 with predicted or truth maps, the oracles, physics from depth, random,
+pull-the-target) and the user planner modules loaded by name."""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from clutterbench.errors import ClutterbenchError
+from clutterbench.observation import Observation
+from clutterbench.planning.ch6.extraction import (
+    CollapseGraphPlanner,
+    Decision,
+    RandomOrderPlanner,
+    TargetFirstPlanner,
+)
+from clutterbench.planning.ch6.support import SupportParams
+from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.ch6.oracle import SearchOracle
+from clutterbench.trials.ch6.truth_maps import TruthCollapseMaps
+from clutterbench.trials.config import PLANNERS as BUILT_IN
+from clutterbench.trials.config import PULL_MAP_HEADS, Ch6TrialParams
+from clutterbench.trials.core.harness import load_predictor
+from clutterbench.trials.core.scenes import policy_rng
+
+
+class SupportWhilePullPlanner:
+    """The thesis' previous method as the single-step rows of Table 6.3 (their counts equal
+    the various-size cells of Table 4.1): pull the target at once while the second arm holds
+    the support of least risk r_c chosen by the chapter 4 network (eqs. 4.1, 4.2)."""
+
+    def __init__(self, predictor: Any, params: Ch6TrialParams):
+        self.predictor, self.params = predictor, params
+
+    def decide(self, obs: Observation, target: int, blocked: frozenset[int]) -> Decision:
+        from clutterbench.perception.masks import segment
+        from clutterbench.planning.ch4.risk_planner import plan_risk
+
+        seg = segment(obs, "instance", min_pixels=self.params.min_pixels)
+        if target not in seg.ids or len(seg.ids) < 2:
+            return Decision(target, None, {"policy": "single_step", "support": None})
+        choice, pairs, risks, _ = plan_risk(
+            self.predictor, obs, seg, seg.ids.index(target), self.params.ch4_pixel_threshold
+        )
+        hold = seg.ids[choice.support] if choice.support is not None else None
+        finite = np.isfinite(choice.risk)
+        state = {
+            "policy": "single_step",
+            "support": hold,
+            "risk": round(float(choice.risk), 4) if finite else None,
+        }
+        return Decision(target, hold, state)
+
+
+PLANNERS: dict[str, Callable[[dict[str, Any], SceneSpec], Any]] = {}
+"""ch. 6 planner name -> factory(job, spec): the registry the conditions' `planner` names."""
+
+
+def chosen_support(thresholds: Path, rule: str) -> SupportParams:
+    """The support rule's thresholds chosen on validation scenes by the support stage."""
+    from clutterbench.io import read_json
+
+    chosen = read_json(thresholds)
+    try:
+        return SupportParams(**chosen["chosen"][rule])
+    except (KeyError, TypeError) as exc:
+        # pull_<rule>, pull_collapse_<rule>: chosen only where the support model has that head
+        hint = " with a support.model that has that pull head" if rule.startswith("pull_") else ""
+        raise ClutterbenchError(
+            f"{thresholds}: no usable thresholds for rule '{rule}' ({exc}); rerun the support "
+            f"stage{hint}"
+        ) from None
+
+
+def register_planner(name: str):
+    """Register a ch. 6 planner factory under `name` (usable as a condition's planner)."""
+
+    def wrap(factory):
+        PLANNERS[name] = factory
+        return factory
+
+    return wrap
+
+
+@register_planner("pull_target")
+def _pull_target(job: dict[str, Any], spec: SceneSpec):
+    return TargetFirstPlanner()
+
+
+@register_planner("single_step")
+def _single_step(job: dict[str, Any], spec: SceneSpec):
+    return SupportWhilePullPlanner(
+        load_predictor(job["ch4_model_path"], job["camera"].image_size), job["params"]
+    )
+
+
+@register_planner("random")
+def _random(job: dict[str, Any], spec: SceneSpec):
+    rng = policy_rng(job["seed"], job["stream"], job["index"], job["planner"])
+    return RandomOrderPlanner(rng, job["params"].min_pixels)
+
+
+@register_planner("oracle")
+def _oracle(job: dict[str, Any], spec: SceneSpec):
+    return SearchOracle(
+        spec, job["physics"], job["camera"], job["params"], False, job["collapse_free"]
+    )
+
+
+@register_planner("oracle_hold")
+def _oracle_hold(job: dict[str, Any], spec: SceneSpec):
+    """May hold one box during any pull: the ceiling of every planner that holds, the
+    bimanual pull planners' idle hold included."""
+    return SearchOracle(
+        spec,
+        job["physics"],
+        job["camera"],
+        job["params"],
+        True,
+        job["collapse_free"],
+        hold_any_pull=True,
+    )
+
+
+def _cpg_planner(
+    job: dict[str, Any], bimanual: bool, spec: SceneSpec | None = None, pull: bool = False
+):
+    """Algorithm 1 with the collapse predictor, or (`spec` given) with physics-truth maps of
+    that scene through the same interface (`pull`: maps of the trials' pull, else of
+    deleting the box; the bimanual plan clears the held box's load first and an abort teaches
+    the graph what it feared for, trials.ch6.abort_response; issue 50): the same planner and
+    rule. `pull` without `spec`: the collapse predictor's pull head, with the thresholds
+    chosen for it (the job's `support`, trials.config.support_method)."""
+    params: Ch6TrialParams = job["params"]
+    if spec is None:
+        head = PULL_MAP_HEADS[params.pull_map_meaning] if pull else "deletion"
+        predictor = load_predictor(job["model_path"], job["camera"].image_size, head)
+    else:
+        action = (params.pull_increment_m, params.grasp_lift_m) if pull else None
+        falls = job["collapse_free"] if pull and params.pull_map_meaning == "collapse" else None
+        predictor = TruthCollapseMaps(spec, job["physics"], params.moved_threshold_m, action, falls)
+    simulate_hold = spec is not None and pull and bimanual and params.truth_hold == "simulate"
+    return CollapseGraphPlanner(
+        predictor,
+        job["support"],
+        job["cp_max"],
+        params.min_pixels,
+        bimanual=bimanual,
+        clear_hold_load=pull,  # the pull planners clear the held box's load first
+        learn_from_aborts=pull and params.abort_response == "learn",
+        watch_m=params.pull_watch_m if pull and spec is None else None,
+        when_no_plan=params.when_no_plan if pull else "give_up",
+        idle_hold_share=params.idle_hold_share if pull else None,
+        idle_hold_prob=params.idle_hold_prob if pull else None,
+        score_over=params.score_over if pull else "contact",
+        hold_feared=params.hold_feared if pull else "never",
+        predict_held=predictor.held if simulate_hold else None,
+    )
+
+
+@register_planner("multi_step")
+def _multi_step(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=False)
+
+
+@register_planner("bimanual")
+def _bimanual(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=True)
+
+
+@register_planner("multi_step_truth")
+def _multi_step_truth(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=False, spec=spec)
+
+
+@register_planner("bimanual_truth")
+def _bimanual_truth(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=True, spec=spec)
+
+
+@register_planner("multi_step_pull_truth")
+def _multi_step_pull_truth(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=False, spec=spec, pull=True)
+
+
+@register_planner("bimanual_pull_truth")
+def _bimanual_pull_truth(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=True, spec=spec, pull=True)
+
+
+@register_planner("multi_step_pull")
+def _multi_step_pull(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=False, pull=True)
+
+
+@register_planner("bimanual_pull")
+def _bimanual_pull(job: dict[str, Any], spec: SceneSpec):
+    return _cpg_planner(job, bimanual=True, pull=True)
+
+
+def _physics_from_depth(job: dict[str, Any], spec: SceneSpec, holding: bool):
+    """The physics-from-depth planner (planning/ch6/physics_depth.py): boxes fitted to each
+    observation, searched in SAPIEN by the oracle's code on that estimate, with the action
+    set of the oracle it mirrors (`holding`: oracle_hold's, a box may be held during any
+    pull). Of the episode's spec it gets the shelf only (fixed, a robot knows it); of its
+    stream the catalogue."""
+    from clutterbench.planning.ch6.physics_depth import PhysicsFromDepthPlanner
+    from clutterbench.trials.ch6.physics_model import EstimatedWorldModel, make_estimator
+
+    params: Ch6TrialParams = job["params"]
+    model = EstimatedWorldModel(
+        spec.shelf,
+        job["camera"],
+        job["physics"],
+        params,
+        holding,
+        job["collapse_free"],
+        functools.partial(SearchOracle, hold_any_pull=True),
+    )
+    estimate = make_estimator(job["stream_cfg"].catalogue, params.min_pixels)
+    return PhysicsFromDepthPlanner(estimate, model, holding)
+
+
+@register_planner("physics_from_depth")
+def _pfd(job: dict[str, Any], spec: SceneSpec):
+    return _physics_from_depth(job, spec, holding=False)
+
+
+@register_planner("physics_from_depth_hold")
+def _pfd_hold(job: dict[str, Any], spec: SceneSpec):
+    return _physics_from_depth(job, spec, holding=True)
+
+
+CP_PLANNERS = tuple(p for p in BUILT_IN if p.startswith(("multi_step", "bimanual")))
+"""The planners of Algorithm 1 (a support rule, cp_max); `*_truth` read physics-truth maps
+(`*_pull_truth`: of the trials' pull, the others of deletion); `*_pull` the collapse
+predictor's pull head, the others its deletion head."""
+
+
+def reads_truth_maps(name: str) -> bool:
+    return name.endswith("_truth") and name in CP_PLANNERS
+
+
+def truth_maps_of(planner: Any) -> TruthCollapseMaps | None:
+    """The physics-truth maps a planner reads instead of the collapse predictor, if any."""
+    maps = getattr(planner, "predict", None)
+    return maps if isinstance(maps, TruthCollapseMaps) else None
+
+
+def load_planners(modules: Sequence[str], names: Sequence[str]) -> None:
+    """Import the modules that register extra planners, then check that every planner a
+    condition names is registered (one line naming the first that is not)."""
+    import importlib
+
+    for module in modules:
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise ClutterbenchError(
+                f"trials.planner_modules: cannot import {module} ({exc})"
+            ) from None
+    for name in names:
+        if name not in PLANNERS:
+            raise ClutterbenchError(
+                f"planner '{name}': not registered (known: {', '.join(PLANNERS)}; a module "
+                "registering more goes in trials.planner_modules)"
+            )
+
+
+def make_planner(job: dict[str, Any], spec: SceneSpec):
+    try:
+        factory = PLANNERS[job["planner"]]
+    except KeyError:
+        raise ClutterbenchError(
+            f"planner '{job['planner']}': not registered (known: {', '.join(PLANNERS)})"
+        ) from None
+    return factory(job, spec)
