@@ -60,7 +60,7 @@ bench: setup
 
 # Does this machine reproduce the recorded results? A tiny pipeline with 400 test scenes and
 # 300 episodes each of multi_step and oracle in a temporary copy, compared statistically
-# with reports/crosscheck/expected.json (README: Determinism); exit 1 when a rate differs.
+# with reports/crosscheck/expected.json (docs/determinism.md); exit 1 when a rate differs.
 .PHONY: crosscheck
 crosscheck: setup
 	python -m clutterbench.crosscheck
@@ -89,60 +89,60 @@ dev-ch4-piles: setup
 dev-ch5-planner: setup
 	python -m clutterbench.dev.ch5_planner
 
-# No box fit raises out of a stage (issue 53): both physics-from-depth planners and Table
+# No box fit raises out of a stage: both physics-from-depth planners and Table
 # 6.2's row on dev scenes of the 3-10 stream with noisy depth (params dev.perturbed_fit; no
 # network needed) -> reports/dev/perturbed_fit.{json,md}
 dev-perturbed-fit: setup
 	python -m clutterbench.dev.perturbed_fit
 
-# What the ch. 6 pull planners do after an abort (issue 50): trials.ch6.abort_response block vs
+# What the ch. 6 pull planners do after an abort: trials.ch6.abort_response block vs
 # learn for each planner of dev.ch6_pull.planners and both oracles on dev scenes of the 3-10
 # stream (reads the support stage's thresholds) -> reports/dev/ch6_pull.{json,md}
 dev-ch6-pull: setup
 	python -m clutterbench.dev.ch6_pull
 
-# The pull-head CP planners' thresholds (issue 50): trials.ch6.pull_prob_threshold and
+# The pull-head CP planners' thresholds: trials.ch6.pull_prob_threshold and
 # pull_score_threshold, each variant of dev.ch6_pull_thresholds on dev scenes of the 3-10 stream
 # -> reports/dev/ch6_pull_thresholds.{json,md}
 dev-ch6-pull-thresholds: setup
 	python -m clutterbench.dev.ch6_pull ch6_pull_thresholds
 
-# The pull-head CP planners watching their pull in depth (issue 50): trials.ch6.pull_watch_m,
+# The pull-head CP planners watching their pull in depth: trials.ch6.pull_watch_m,
 # each variant of dev.ch6_pull_watch on dev scenes of the 3-10 stream
 # -> reports/dev/ch6_pull_watch.{json,md}
 dev-ch6-pull-watch: setup
 	python -m clutterbench.dev.ch6_pull ch6_pull_watch
 
-# What the pull planners do when their rule rejects every candidate (issue 50):
+# What the pull planners do when their rule rejects every candidate:
 # trials.ch6.when_no_plan, each variant of dev.ch6_no_plan on dev scenes of the 3-10 stream
 # -> reports/dev/ch6_no_plan.{json,md}
 dev-ch6-no-plan: setup
 	python -m clutterbench.dev.ch6_pull ch6_no_plan
 
 # The pull-head CP planners' thresholds once a decision that rejects every candidate pulls the
-# least risky one (issue 50): each variant of dev.ch6_no_plan_thresholds on dev scenes of the
+# least risky one: each variant of dev.ch6_no_plan_thresholds on dev scenes of the
 # 3-10 stream -> reports/dev/ch6_no_plan_thresholds.{json,md}
 dev-ch6-no-plan-thresholds: setup
 	python -m clutterbench.dev.ch6_pull ch6_no_plan_thresholds
 
-# The bimanual pull planners' idle arm (issue 50): trials.ch6.idle_hold_share, each variant of
+# The bimanual pull planners' idle arm: trials.ch6.idle_hold_share, each variant of
 # dev.ch6_idle_hold on dev scenes of the 3-10 stream -> reports/dev/ch6_idle_hold.{json,md}
 dev-ch6-idle-hold: setup
 	python -m clutterbench.dev.ch6_pull ch6_idle_hold
 
 # Whose shares the pull planners' collapse score takes, and clearing around a rejected plan
-# (issue 50): trials.ch6.score_over and when_no_plan clear, each variant of dev.ch6_clear on
+#: trials.ch6.score_over and when_no_plan clear, each variant of dev.ch6_clear on
 # dev scenes of the 3-10 stream -> reports/dev/ch6_clear.{json,md}
 dev-ch6-clear: setup
 	python -m clutterbench.dev.ch6_pull ch6_clear
 
-# How the bimanual pull planners score and choose a held pull (issue 50): trials.ch6.truth_hold
+# How the bimanual pull planners score and choose a held pull: trials.ch6.truth_hold
 # and hold_feared, each variant of dev.ch6_hold on dev scenes of the 3-10 stream
 # -> reports/dev/ch6_hold.{json,md}
 dev-ch6-hold: setup
 	python -m clutterbench.dev.ch6_pull ch6_hold
 
-# The pull-head CP planners against physics from depth (issue 50's targets), the params' own
+# The pull-head CP planners against physics from depth, the params' own
 # settings, on more dev scenes than a table has -> reports/dev/ch6_vs_pfd.{json,md}
 dev-ch6-vs-pfd: setup
 	python -m clutterbench.dev.ch6_pull ch6_vs_pfd

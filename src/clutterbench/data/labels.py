@@ -15,7 +15,7 @@ OUTPUT_CHANNELS = {1: (1,), 2: (1, len(PULL_CLASSES))}
 a collapse map (1); extraction + support masks (pull labels) -> a collapse map (1) or the
 four classes of thesis Fig. 4.4."""
 LABEL_KINDS = ("deletion", "pull", "pull_collapse")
-"""What a collapse map of box x marks (issue 50): `deletion`, the boxes that move when x is
+"""What a collapse map of box x marks: `deletion`, the boxes that move when x is
 lifted out and the rest settles (the removal matrix, the thesis' labels); `pull`, the boxes
 that move or leave the shelf when the trials' executor pulls x out (the pullout_* arrays of a
 dataset generated with pull_outcomes: true); `pull_collapse`, of those only the boxes that

@@ -12,7 +12,7 @@
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
 rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull
-(`*_pull*`, issue 50) do next: `block` skips the box until a step succeeds (Algorithm 1;
+(`*_pull*`) do next: `block` skips the box until a step succeeds (Algorithm 1;
 an episode whose every candidate is skipped gives up), `learn` takes the box the score
 feared for as carried by the box being pulled (an edge of the collapse prediction graph for
 the rest of the episode), so the plan removes that box first or, bimanual, holds it

@@ -5,7 +5,7 @@ committed run and a fresh clone's `make repro` on another CPU -> one markdown re
   the episodes whose target differs (a different settled start: a CPU's physics);
 - the trials' targets against the benchmark scenes (data/benchmark/ of this checkout, run
   from it): how many of a run's episodes have the target the artifact holds;
-- the physics-from-depth conditions' box repair (issue 53): boxes dropped and boxes with no
+- the physics-from-depth conditions' box repair: boxes dropped and boxes with no
   place in the shelf, per stream, and decisions without a model.
 
     python -m clutterbench.dev.compare_runs OURS_DIR THEIRS_DIR [--out FILE]
@@ -45,7 +45,7 @@ def rate(records: Sequence[Mapping[str, Any]], key: str) -> str:
 
 
 def repair_counts(records: Sequence[Mapping[str, Any]]) -> dict[str, int]:
-    """Issue 53's repair in a physics-from-depth condition's records."""
+    """The box repair in a physics-from-depth condition's records."""
     dropped = outside = decisions = 0
     for r in records:
         for d in r.get("estimate_dropped") or []:
@@ -143,7 +143,7 @@ def compare(ours: Path, theirs: Path) -> list[str]:
         "success differs; 'boxes pulled differ': the sequence of pulled boxes differs; "
         "'records identical': the episode's record is the same in both runs, field for field.",
         "",
-        "## Physics from depth: the box repair (issue 53)",
+        "## Physics from depth: the box repair",
         "",
         "| condition | run | decisions | boxes dropped | of them: no place in the shelf | "
         "decisions without a model |",

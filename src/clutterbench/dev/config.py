@@ -107,7 +107,7 @@ CH6_VARIED = (
 
 @dataclasses.dataclass(frozen=True)
 class Ch6PullConfig:
-    """The ch. 6 pull-planner recheck (`python -m clutterbench.dev.ch6_pull`, issue 50)."""
+    """The ch. 6 pull-planner recheck (`python -m clutterbench.dev.ch6_pull`)."""
 
     streams: tuple[str, ...] = ()
     """Dev streams of the ch. 6 trial families (keys of dev.streams; params.yaml names them)."""
@@ -154,7 +154,7 @@ class Ch6PullConfig:
 
 @dataclasses.dataclass(frozen=True)
 class PerturbedFitConfig:
-    """The perturbed-fit recheck (`python -m clutterbench.dev.perturbed_fit`, issue 53)."""
+    """The perturbed-fit recheck (`python -m clutterbench.dev.perturbed_fit`)."""
 
     streams: tuple[str, ...] = ()
     """Dev streams whose scenes it draws (params.yaml: dev_ch6_3_10)."""

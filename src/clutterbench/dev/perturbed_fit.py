@@ -1,5 +1,5 @@
 """Recheck: can any box fit raise out of a stage? The physics-from-depth planners and Table
-6.2's physics-from-depth row run on perturbed depth (issue 53).
+6.2's physics-from-depth row run on perturbed depth.
 
     python -m clutterbench.dev.perturbed_fit     # make dev-perturbed-fit
 
@@ -207,7 +207,7 @@ def recheck(params: Mapping[str, Any]) -> dict[str, Any]:
 
 def markdown(result: Mapping[str, Any]) -> str:
     lines = [
-        "# Perturbed box fits: no estimate raises out of a stage (issue 53)",
+        "# Perturbed box fits: no estimate raises out of a stage",
         "",
         "`make dev-perturbed-fit` (clutterbench/dev/perturbed_fit.py): scenes of the 3-10 box "
         "streams from seeds of this recheck's own, Gaussian noise on every depth image before "

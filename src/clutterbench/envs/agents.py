@@ -18,8 +18,8 @@ from clutterbench.envs.plan import NO_BOX, as_observation
 from clutterbench.errors import ClutterbenchError
 
 CP_AGENTS = ("multi_step", "bimanual", "multi_step_pull", "bimanual_pull")
-"""The agents on the collapse predictor: its deletion head, or its pull head (`*_pull`, issue
-50) with the support thresholds chosen for that head (trials.config.support_method)."""
+"""The agents on the collapse predictor: its deletion head, or its pull head (`*_pull`)
+with the support thresholds chosen for that head (trials.config.support_method)."""
 
 OBSERVATION_PLANNERS = ("pull_target", "single_step", *CP_AGENTS, "random")
 """The built-in planners that read only what the robot sees (the oracles and the *_truth

@@ -54,7 +54,7 @@ class LabelledScene:
     sapien_s: float
     """Wall time spent inside SAPIEN step/render calls, rejected attempts included."""
     pull_outcome: PullOutcomes | None = None
-    """What the trials' own pull of each box does (issue 50), or None."""
+    """What the trials' own pull of each box does, or None."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -10,7 +10,7 @@ settled scene (PhysX contacts). Objects are the boxes a robot sees (>= min_pixel
 as the thesis, we "ignore the case where O_HYP does not correspond to O_GT", so a relation
 with a hidden box is in neither graph.
 
-Pull truth (a collapse predictor with pull heads, issue 50): the same with "removing X" read
+Pull truth (a collapse predictor with pull heads): the same with "removing X" read
 as "the trials' executor pulling X out", under the head's label kind (data.labels.label_matrix:
 `pull`, Y moves beyond the threshold or leaves the shelf; `pull_collapse`, Y collapses by
 trials.collapse_free), from the pullout_* arrays of datasets generated with pull_outcomes:

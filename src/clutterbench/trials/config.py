@@ -149,26 +149,26 @@ class Ch6TrialParams:
     ch4_pixel_threshold: float = bounded(0.4, gt=0.0, le=1.0)
     """Its pixel threshold of the risk index (thesis 4.4.1)."""
     abort_response: Literal["block", "learn"] = "learn"
-    """What the planners on maps of the pull (`*_pull*`, issue 50) do after a collapse score
+    """What the planners on maps of the pull (`*_pull*`) do after a collapse score
     over cp_max: block skips the box until a step succeeds (Algorithm 1, what the deletion
     planners do); learn also takes the box the score feared for as carried by it, so the
     plan removes that box first or, bimanual, holds it (planning/ch6/extraction.py)."""
     pull_prob_threshold: float | None = bounded(None, gt=0.0, le=1.0)
     """The pull-head CP planners' (PULL_HEAD_PLANNERS) collapse area R_C = heatmap > this;
     null: the support stage's choice on validation scenes (the support graph's F-measure
-    against pull truth). Issue 50: chosen on dev streams for the trials' own outcome
+    against pull truth). Chosen on dev streams for the trials' own outcome
     (make dev-ch6-pull, docs/design-choices.md)."""
     pull_score_threshold: float | None = bounded(None, gt=0.0, le=1.0)
     """The same planners' support-edge score threshold, and their abort threshold cp_max
     unless cp_max is set; null: the support stage's choice on validation scenes."""
     pull_watch_m: float | None = bounded(None, gt=0.0)
-    """The pull-head CP planners also watch their pull (issue 50): before each increment, a
+    """The pull-head CP planners also watch their pull: before each increment, a
     box other than the pulled and held one whose pixels seen at the decision and now moved
     in depth by more than this (median, m) stops the pull like a collapse score over cp_max
     (abort_response learn: that box is then taken as carried by the pulled one). The robot's
     own depth images, no prediction; null: no watch. Chosen on dev streams."""
     when_no_plan: Literal["give_up", "least_risk", "least_risk_unmonitored", "clear"] = "give_up"
-    """What the planners on maps of the pull (`*_pull*`, issue 50) do when their rule
+    """What the planners on maps of the pull (`*_pull*`) do when their rule
     rejects every candidate: give_up ends the episode (Algorithm 1, what the deletion
     planners do); least_risk pulls the rejected candidate of the lowest collapse score,
     aborting only when the score grows beyond that one; least_risk_unmonitored pulls it
@@ -177,19 +177,19 @@ class Ch6TrialParams:
     lowest score), least_risk when there is none (planning/ch6/extraction.py NO_PLAN_RESPONSES).
     Chosen on dev streams (make dev-ch6-no-plan, make dev-ch6-clear)."""
     score_over: Literal["contact", "visible"] = "contact"
-    """Whose shares the collapse score of the planners on maps of the pull (`*_pull*`, issue
-    50) takes: contact, the objects in pseudo-direct contact with the pulled box (eq. 6.2,
+    """Whose shares the collapse score of the planners on maps of the pull (`*_pull*`)
+    takes: contact, the objects in pseudo-direct contact with the pulled box (eq. 6.2,
     what the deletion planners do); visible, every visible object, so a pull that drags a
     box it does not touch (through one between) is rejected too. Chosen on dev streams
     (make dev-ch6-clear)."""
     idle_hold_share: float | None = bounded(None, ge=0.0, le=1.0)
-    """The bimanual planners on maps of the pull (`bimanual_pull*`, issue 50): a pull their
+    """The bimanual planners on maps of the pull (`bimanual_pull*`): a pull their
     plan makes with the second arm idle holds the pulled box's contact neighbour of the
     largest predicted share (eq. 6.2's, below the edge threshold) above this, one that carries
     nothing in the graph; null: the arm stays idle (thesis Fig. 6.7). Chosen on dev streams
     (make dev-ch6-idle-hold)."""
     hold_feared: Literal["never", "any", "free", "search"] = "never"
-    """The bimanual planners on maps of the pull (`bimanual_pull*`, issue 50): a pull their
+    """The bimanual planners on maps of the pull (`bimanual_pull*`): a pull their
     plan makes with the second arm idle whose collapse score exceeds cp_max is tried again
     holding the box that score fears for (the largest share), left out of the score as Fig.
     6.7 (d) leaves out the held child, and taken when it then passes: any, whatever that box
@@ -199,7 +199,7 @@ class Ch6TrialParams:
     simulate). never: the candidate is rejected (thesis). Chosen on dev streams
     (make dev-ch6-hold)."""
     truth_hold: Literal["leave_out", "simulate"] = "leave_out"
-    """How the truth-map bimanual pull planners (`bimanual_pull_truth`, issue 50) score a
+    """How the truth-map bimanual pull planners (`bimanual_pull_truth`) score a
     pull made holding a box: leave_out, the map of the unheld pull with the held box left
     out (Fig. 6.7 (d), what the CP planners do: the network sees no hold); simulate, the map
     of that very pull by the trials' executor, the held box held, let go and settled, and

@@ -93,7 +93,7 @@ class PomdpConfig:
     when_no_state_fits: Literal["refuse", "slide"] = "slide"
     """... and the POMDP then refuses the piece (the thesis' rule read literally: no belief on
     the flat states) or leaves the choice to the target selection (slide: the POMDP has no
-    evidence either way). Chosen on validation piles (README)."""
+    evidence either way). Chosen on validation piles (docs/design-choices.md)."""
 
 
 def _visible_pieces(obs: Observation, min_px: int) -> dict[int, np.ndarray]:

@@ -151,7 +151,7 @@ def bimanual_plan(
     order (c). When the target itself or every such leaf is blocked, the plan falls back to
     the single-arm plan (any non-blocked leaf; steps_to_target counts every other box).
 
-    `clear_hold_load` (issue 50; not the thesis): the box to be held is let go after the pull,
+    `clear_hold_load` (not the thesis): the box to be held is let go after the pull,
     and what it carries falls then, so its own subtree is removed first (its leaves, as any
     other), and the held pull comes after.
     """

@@ -55,7 +55,7 @@ class Decision:
 
 
 NO_PLAN_RESPONSES = ("give_up", "least_risk", "least_risk_unmonitored", "clear")
-"""What a CPG planner does when every candidate is rejected by its own rule (issue 50):
+"""What a CPG planner does when every candidate is rejected by its own rule:
 give_up (the episode ends, Algorithm 1); least_risk pulls the rejected candidate of the
 lowest collapse score, aborting only when the score grows beyond that one;
 least_risk_unmonitored pulls it without abort checks; clear first pulls a box the rule
@@ -64,13 +64,13 @@ or of a box its score feared for), so the next decision meets a smaller pile, an
 least_risk when no such box is left."""
 
 SCORE_OVER = ("contact", "visible")
-"""Whose shares a collapse score takes (issue 50): contact, the objects in pseudo-direct
+"""Whose shares a collapse score takes: contact, the objects in pseudo-direct
 contact with the pulled box (eq. 6.2); visible, every visible object (what the pull drags
 along to a box it does not touch, through one between)."""
 
 HOLD_FEARED = ("never", "any", "free", "search")
 """Which box a bimanual planner may hold to save a candidate pulled with its second arm idle
-whose collapse score exceeds cp_max (issue 50): never (the candidate is rejected, thesis);
+whose collapse score exceeds cp_max: never (the candidate is rejected, thesis);
 any, the box that score fears for; free, that box only where it carries nothing in the graph
 (what a held box carries falls when it is let go); search, that box and then every other
 visible one in id order, the first whose held pull passes (with maps that know a held pull,
@@ -122,13 +122,13 @@ class CollapseGraphPlanner:
         self.clear_hold_load = clear_hold_load
         """Bimanual: remove what the box to be held carries before the held pull (cpg)."""
         self.learn_from_aborts = learn_from_aborts
-        """Issue 50 (not the thesis): a collapse score over cp_max names the box it fears for
+        """Not the thesis: a collapse score over cp_max names the box it fears for
         (the contact box of the largest share); that box is then treated as carried by the
         box being pulled (an edge of the CPG for the rest of the episode), so the plan
         removes it first or, bimanual, holds it, instead of skipping the pulled box until
         the graph has nothing left (Algorithm 1 blocks the box and re-plans)."""
         self.watch_m = watch_m
-        """Issue 50 (not the thesis): also watch the pull. Before each increment, a box other
+        """Not the thesis: also watch the pull. Before each increment, a box other
         than the pulled and the held one whose pixels, seen in both the decision's
         observation and the present one, moved in depth by more than this (median, m) stops
         the pull as a collapse score over cp_max does (score: 1 + that depth change, above
@@ -136,10 +136,10 @@ class CollapseGraphPlanner:
         if when_no_plan not in NO_PLAN_RESPONSES:
             raise ValueError(f"when_no_plan: {when_no_plan!r} is none of {NO_PLAN_RESPONSES}")
         self.when_no_plan = when_no_plan
-        """Issue 50 (not the thesis): what to do when the rule rejects every candidate
+        """Not the thesis: what to do when the rule rejects every candidate
         (NO_PLAN_RESPONSES)."""
         self.idle_hold_share = idle_hold_share
-        """Issue 50 (not the thesis), bimanual: a pull the plan makes with the second arm idle
+        """Not the thesis, bimanual: a pull the plan makes with the second arm idle
         holds the pulled box's contact neighbour of the largest predicted share above this
         (one that carries nothing in the graph; the held box may settle when let go, what it
         carries may not). None: the arm stays idle (Fig. 6.7)."""
@@ -149,15 +149,15 @@ class CollapseGraphPlanner:
         if score_over not in SCORE_OVER:
             raise ValueError(f"score_over: {score_over!r} is none of {SCORE_OVER}")
         self.score_over = score_over
-        """Issue 50 (not the thesis): whose shares the collapse score takes (SCORE_OVER)."""
+        """Not the thesis: whose shares the collapse score takes (SCORE_OVER)."""
         if hold_feared not in HOLD_FEARED:
             raise ValueError(f"hold_feared: {hold_feared!r} is none of {HOLD_FEARED}")
         self.hold_feared = hold_feared
-        """Issue 50 (not the thesis), bimanual: a candidate pulled with the second arm idle
+        """Not the thesis, bimanual: a candidate pulled with the second arm idle
         whose score exceeds cp_max is tried again holding the box that score fears for
         (HOLD_FEARED says which boxes may be held)."""
         self.predict_held = predict_held
-        """Issue 50 (not the thesis): the map of a pull made holding a box, where the maps
+        """Not the thesis: the map of a pull made holding a box, where the maps
         know it (the truth maps of the executed pull); the score of a held pull then reads
         it and judges the held box too. None: the unheld pull's map without the held box
         (Fig. 6.7 (d): a network sees no hold)."""

@@ -1,5 +1,5 @@
 """The physics-from-depth planner: rebuild the shelf from one depth image, simulate before
-acting (issue 39; Pathak and Muthusamy 2025 do this on real box stacks).
+acting (Pathak and Muthusamy 2025 do this on real box stacks).
 
 Each step: fit the visible boxes from the observation (`estimate`, e.g.
 perception.box_fit.fit_boxes), hand them to a world model (`search`: build a scene from the

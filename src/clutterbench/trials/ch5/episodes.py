@@ -127,7 +127,7 @@ def draw_start(job: dict[str, Any]) -> tuple[SceneSpec, np.ndarray]:
 NO_FREE_PLACE = ("replenish_shelved",)
 """Families whose trial starts are redrawn while a placement candidate is free (thesis Fig.
 5.9: the obstacle stands where the new box must go; the family builds them so, this makes
-sure: README, chapter 5)."""
+sure: docs/ch5-replenishment.md)."""
 
 
 def free_places(

@@ -134,7 +134,7 @@ def _cpg_planner(
     """Algorithm 1 with the collapse predictor, or (`spec` given) with physics-truth maps of
     that scene through the same interface (`pull`: maps of the trials' pull, else of
     deleting the box; the bimanual plan clears the held box's load first and an abort teaches
-    the graph what it feared for, trials.ch6.abort_response; issue 50): the same planner and
+    the graph what it feared for, trials.ch6.abort_response): the same planner and
     rule. `pull` without `spec`: the collapse predictor's pull head, with the thresholds
     chosen for it (the job's `support`, trials.config.support_method)."""
     params: Ch6TrialParams = job["params"]

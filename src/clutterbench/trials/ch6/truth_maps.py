@@ -10,8 +10,8 @@ harness tells it the present state before the planner's decision and before ever
 check during a pull (`at`); the planner itself is unchanged, so a truth row differs from its
 CP row only in the maps. Lives in trials/, not planning/, because it reads the world.
 
-With `pull=(increment_m, lift_m)` the maps are of the trial's own action instead (issue 50,
-`*_pull_truth`): the map of box x is the boxes that move beyond the label threshold or leave
+With `pull=(increment_m, lift_m)` the maps are of the trial's own action instead
+(`*_pull_truth`): the map of box x is the boxes that move beyond the label threshold or leave
 the shelf when x is pulled out of the present state by the trials' executor
 (sim.pull.execute_pull, the same increments and lift, the held box held and released, the
 scene settled), so it agrees bit for bit with executing that whole pull. Friction drags

@@ -212,7 +212,7 @@ def judge_episode(steps: list[dict[str, Any]], end: str, target: int) -> dict[st
 
 
 STEP_NOTES = ("no_plan", "idle_hold", "feared_hold")
-"""The notes of a pull planner's decision a step record carries (issue 50): no_plan (no plan
+"""The notes of a pull planner's decision a step record carries: no_plan (no plan
 was left: how the pull was chosen), idle_hold (the bimanual idle arm held a box),
 feared_hold (the second arm held the box the unheld pull's score feared for)."""
 
