@@ -197,3 +197,17 @@ def test_a_loop_is_found(tmp_path, files):
         (pkg / name).write_text(text)
     found = loops(import_graph(pkg.parent))
     assert found and set(found[0]) == {f"clutterbench.pkg.{n[:-3]}" for n in files}
+
+
+def test_the_architecture_page_lists_the_layers_in_order():
+    """docs/architecture.md's layer table names LAYERS' packages, top layer first."""
+    text = (SRC.parent / "docs" / "architecture.md").read_text()
+    table = text.split("<!-- layers:begin -->")[1].split("<!-- layers:end -->")[0]
+    rows = [r.split("|")[2] for r in table.strip().splitlines()[2:]]
+    named = [
+        {n.strip("`/ ").removesuffix(".py") for n in row.split(",") if "`" in n} for row in rows
+    ]
+    listed = [names & set().union(*LAYERS) for names in named]
+    listed = [names for names in listed if names]
+    assert listed[:-1] == [set(layer) for layer in reversed(LAYERS[1:])], listed
+    assert listed[-1] <= LAYERS[0], listed[-1]
