@@ -52,6 +52,14 @@ def test_repo_params_parse_at_every_scale(root):
         ({"n_scenes": 3, "families": {"bogus": 1}}, "families.bogus: unknown family"),
         ({"n_scenes": 3, "families": {"random": 1}, "n_objects": [9, 5]}, "n_objects"),
         ({"n_scenes": 3, "families": {"random": 1}, "catalogue": "huge"}, "ds.catalogue"),
+        (
+            {
+                "n_scenes": 3,
+                "families": {"random": 1, "replenish_stacked": 1},
+                "n_objects": [20, 20],
+            },
+            "n_objects: family replenish_stacked arranges at most 7 boxes",
+        ),
         ({"families": {"random": 1}}, "ds.n_scenes: missing required key"),
     ],
 )
@@ -122,3 +130,11 @@ def test_bad_arm_conditions_name_the_key(arm_conditions, message):
     assert "\n" not in str(info.value)
     ok = {**data, "arm_conditions": {"x_arm": {"of": "k", "episodes": 5}}}
     assert parse(TrialsConfig, ok, "trials").arm_conditions["x_arm"].of == "k"
+
+
+def test_the_families_caps_are_the_params_check_s():
+    """The cap the params are checked against is the one scene drawing applies."""
+    from clutterbench.sim.config import FAMILY_MAX_OBJECTS
+    from clutterbench.sim.families import FAMILIES
+
+    assert {n: f.max_objects for n, f in FAMILIES.items() if f.max_objects} == FAMILY_MAX_OBJECTS

@@ -8,7 +8,7 @@ from typing import Literal
 
 from clutterbench.config import bounded
 from clutterbench.sim.catalog import CATALOGUES
-from clutterbench.sim.config import FAMILY_NAMES
+from clutterbench.sim.config import FAMILY_MAX_OBJECTS, FAMILY_NAMES
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,6 +43,15 @@ class DatasetConfig:
                 raise ValueError(f"families.{name}: weight must be > 0")
         if self.n_objects[0] > self.n_objects[1]:
             raise ValueError("n_objects: the range must be [low, high] with low <= high")
+        for name in self.families:
+            most = FAMILY_MAX_OBJECTS.get(name)
+            if most is not None and self.n_objects[0] > most:
+                # a larger draw is cut to `most` so that families can share one range, but a
+                # range all above it would give the family none of the boxes asked for
+                raise ValueError(
+                    f"n_objects: family {name} arranges at most {most} boxes, "
+                    f"the range asks for at least {self.n_objects[0]}"
+                )
         assert self.catalogue in CATALOGUES
 
 

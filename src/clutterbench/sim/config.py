@@ -22,6 +22,9 @@ FAMILY_NAMES = (
     "replenish_random",
 )
 """Names of the scene families in sim/families (checked equal to its registry by a test)."""
+FAMILY_MAX_OBJECTS = {"replenish_stacked": 7, "replenish_random": 8}
+"""The most boxes a family can arrange (the families not named: any number); the families'
+own `max_objects` (sim/families) read it from here, so params are checked without SAPIEN."""
 REJECT_REASONS = ("moving", "fell", "no_room", "overlap", "creeping")
 """Why a placement attempt is redrawn: still moving after sim.physics.settle_max_s, a box
 off the shelf, no room for every box, boxes jammed into each other (> 1 mm, e.g. a stack

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from clutterbench.sim.config import FAMILY_MAX_OBJECTS
 from clutterbench.sim.families.arrangement import _CORNER_SIGNS
 from clutterbench.sim.families.base import (
     GAP_M,
@@ -79,7 +80,7 @@ def row_from_wall(
 
 class ReplenishStacked(SceneFamily):
     name = "replenish_stacked"
-    max_objects = 7
+    max_objects = FAMILY_MAX_OBJECTS[name]
     """Left-over books stand in one row from the wall beside the stack: with 8 boxes the row
     meets the stack in most draws (measured: 6 of 6 scenes needed redraws, 2 at most)."""
     dependent_prob = 0.5
@@ -179,7 +180,7 @@ class ReplenishRandom(SceneFamily):
     """Either layout with one more box dropped in a random pose (it joins what it touches)."""
 
     name = "replenish_random"
-    max_objects = ReplenishStacked.max_objects + 1
+    max_objects = FAMILY_MAX_OBJECTS[name]  # the stacked layout's row and one dropped box
 
     def place(self, world: BoxWorld, sizes_m: np.ndarray, rng: np.random.Generator) -> Placement:
         layout = ReplenishStacked() if rng.random() < 0.5 else ReplenishShelved()
