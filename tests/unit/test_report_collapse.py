@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.report.collapse import settings_differences, thesis_settings
 from clutterbench.report.tables import load_thesis_figures
+from clutterbench.report.tables_5_1_6_1 import settings_differences, thesis_settings
 
 OURS = {
     "image_size": 128,

@@ -10,9 +10,9 @@ from clutterbench.io import write_json
 from clutterbench.models.checkpoint import save_checkpoint
 from clutterbench.models.collapse_map import CollapseMapConfig, CollapseMapNet
 from clutterbench.models.vgg import VGGConfig
-from clutterbench.report.collapse import RunSources
 from clutterbench.report.table_4_2 import table_4_2
 from clutterbench.report.tables import load_thesis_figures
+from clutterbench.report.tables_5_1_6_1 import RunSources
 
 ROWS = {
     "same_model/same_size_gt": "s_on_s",

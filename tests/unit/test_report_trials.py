@@ -10,15 +10,15 @@ import pandas as pd
 import pytest
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.report.extraction import (
+from clutterbench.report.support_figure import SupportPanel, support_figure
+from clutterbench.report.table_6_2 import mutual_support_note, support_table, thresholds_text
+from clutterbench.report.table_6_3 import (
     _gap_text,
     extraction_families_table,
     extraction_table,
     oracle_gaps,
     trial_params_note,
 )
-from clutterbench.report.support import mutual_support_note, support_table, thresholds_text
-from clutterbench.report.support_figure import SupportPanel, support_figure
 from clutterbench.report.tables import load_thesis_figures, thesis_row
 from clutterbench.trials.config import Ch6TrialParams
 from clutterbench.trials.core.stats import cluster_bootstrap_interval
@@ -309,7 +309,7 @@ def test_support_figure_is_byte_identical_across_calls(tmp_path):
 
 
 def test_rule_note_names_the_trials_rule_and_its_val_thresholds():
-    from clutterbench.report.extraction import rule_note
+    from clutterbench.report.table_6_3 import rule_note
 
     used = {"ms": [{"rule": "coverage_gap"}], "or": [{"rule": None}]}
     chosen = {

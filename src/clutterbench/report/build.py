@@ -20,24 +20,24 @@ from clutterbench.io import read_json, write_json
 from clutterbench.platform_info import environment
 from clutterbench.report.arm_table import arm_table
 from clutterbench.report.box_estimation import estimation_table
-from clutterbench.report.collapse import RunSources, collapse_table
 from clutterbench.report.config import ReportConfig
 from clutterbench.report.datasets import dataset_stats, datasets_table
 from clutterbench.report.decomposition import decomposition_table
-from clutterbench.report.extraction import (
+from clutterbench.report.fig_3_15 import fig_3_15_table
+from clutterbench.report.paired import paired_table
+from clutterbench.report.summary import summary_table
+from clutterbench.report.table_4_1 import table_4_1, table_4_1_target
+from clutterbench.report.table_4_2 import table_4_2
+from clutterbench.report.table_5_2 import table_5_2
+from clutterbench.report.table_6_2 import support_table
+from clutterbench.report.table_6_3 import (
     extraction_families_table,
     extraction_table,
     rule_note,
     trial_params_note,
 )
-from clutterbench.report.fig_3_15 import fig_3_15_table
-from clutterbench.report.paired import paired_table
-from clutterbench.report.summary import summary_table
-from clutterbench.report.support import support_table
-from clutterbench.report.table_4_1 import table_4_1, table_4_1_target
-from clutterbench.report.table_4_2 import table_4_2
-from clutterbench.report.table_5_2 import table_5_2
 from clutterbench.report.tables import load_thesis_figures
+from clutterbench.report.tables_5_1_6_1 import RunSources, collapse_table
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.core.records import read_records
 from clutterbench.trials.core.stats import aggregate_games

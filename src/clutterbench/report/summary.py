@@ -19,7 +19,7 @@ import pandas as pd
 
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_text
-from clutterbench.report import datasets, extraction, fig_3_15, support, table_4_1, table_5_2
+from clutterbench.report import datasets, fig_3_15, table_4_1, table_5_2, table_6_2, table_6_3
 from clutterbench.report.tables import rate_text, thesis_rate_text, thesis_row
 
 NAME = "summary"
@@ -228,10 +228,10 @@ def _table_5_2(frames: Mapping[str, pd.DataFrame], figures: Mapping[str, Any]) -
 def _table_6_2(
     frames: Mapping[str, pd.DataFrame], figures: Mapping[str, Any], methods: Mapping[str, str]
 ) -> list[Row]:
-    thesis = thesis_row(figures, support.TABLE, "mean")
+    thesis = thesis_row(figures, table_6_2.TABLE, "mean")
     if not thesis:
         return []
-    label = methods[support.THESIS_METHOD]
+    label = methods[table_6_2.THESIS_METHOD]
     ours = _by(frames["table_6_2"], "table_6_2", method=label)
     return [
         Row(
@@ -246,14 +246,14 @@ def _table_6_2(
 
 def _table_6_3(frames: Mapping[str, pd.DataFrame], figures: Mapping[str, Any]) -> list[Row]:
     rows = []
-    for thesis in _thesis_rows(figures, extraction.TABLE):
+    for thesis in _thesis_rows(figures, table_6_3.TABLE):
         method, objects = thesis["method"], str(thesis["n_objects"])
         ours = _by(frames["table_6_3"], "table_6_3", row=f"{method}/{objects}")
-        who = f"{extraction.METHODS[method].split(':')[0].split(' (')[0]}, {objects} boxes"
+        who = f"{table_6_3.METHODS[method].split(':')[0].split(' (')[0]}, {objects} boxes"
         if thesis["rate_unit"] == "per_step":
             cells = (
-                extraction.step_rate_text(ours, "success"),
-                extraction.step_rate_text(ours, "strict_success"),
+                table_6_3.step_rate_text(ours, "success"),
+                table_6_3.step_rate_text(ours, "strict_success"),
             )
             quantity = f"success per step, {who}"
         else:

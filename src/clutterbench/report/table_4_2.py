@@ -15,14 +15,14 @@ from pathlib import Path
 from typing import Any
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.report.collapse import (
+from clutterbench.report.tables import Column, comparison_frame, thesis_row, write_table
+from clutterbench.report.tables_5_1_6_1 import (
     RunSources,
     load_run_metrics,
     model_settings,
     settings_differences,
     thesis_settings,
 )
-from clutterbench.report.tables import Column, comparison_frame, thesis_row, write_table
 
 TABLE = "table_4_2"
 COLUMNS = [

@@ -439,7 +439,7 @@ def rule_note(
 ) -> list[str]:
     """The support rule the CP planners ran with (their records' `rule`), its Table 6.2 row
     and the thresholds the support stage chose for it on validation scenes."""
-    from clutterbench.report.support import thresholds_text
+    from clutterbench.report.table_6_2 import thresholds_text
     from clutterbench.trials.config import support_method
 
     methods = sorted(
