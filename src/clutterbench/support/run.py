@@ -1,0 +1,257 @@
+"""The support stage's work: thresholds chosen on val scenes, then Table 6.2's evidence (rows,
+truth, thresholds, figure) on test scenes generated from their own stream."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from clutterbench.collapse.predict import CollapsePredictor
+from clutterbench.config import as_dict, load_section
+from clutterbench.criteria import label_thresholds
+from clutterbench.data.config import DatasetConfig, GenerateConfig
+from clutterbench.data.generate import generate_dataset
+from clutterbench.errors import ClutterbenchError
+from clutterbench.io import write_json, write_text
+from clutterbench.models.checkpoint import checkpoint_heads, load_checkpoint
+from clutterbench.parallel import ParallelConfig
+from clutterbench.planning.ch6.support import oracle_heatmaps
+from clutterbench.precision import Precision, inference_from_params
+from clutterbench.progress import progress_bar
+from clutterbench.report.support_figure import SupportPanel, support_figure
+from clutterbench.sim.config import SimConfig
+from clutterbench.support.config import SupportEvalConfig
+from clutterbench.support.evaluate import (
+    PULL_HEADS,
+    Scene,
+    all_scenes,
+    choose_all,
+    contact_edge_rate,
+    evaluate_scene,
+    evidence,
+    head_prefix,
+    method_head,
+    predicted_heatmaps,
+    split_scenes,
+    sweep_all,
+    val_metrics_at,
+)
+from clutterbench.trials.ch6.physics_model import SUPPORT_METHOD, SUPPORT_RULE, PhysicsDepthSupport
+from clutterbench.trials.config import Ch6TrialParams, TrialsConfig
+from clutterbench.trials.core.scenes import stream_key
+
+
+@dataclass(frozen=True)
+class SupportPaths:
+    """Where the stage reads (model, val scenes) and writes (reports, test scenes)."""
+
+    model: Path  # the CP checkpoint
+    gen_dir: Path  # generated datasets
+    split_file: Path  # the val dataset's split
+    out: Path  # val_sweep.csv, scenes.csv, thresholds.json, figure.png
+    scenes: Path  # the test scenes and their truth.json
+
+
+@dataclass(frozen=True)
+class Predictors:
+    """The CP's deletion predictor, its pull heads and one predictor per pull head."""
+
+    deletion: CollapsePredictor
+    heads: list[str]
+    of_head: dict[str, CollapsePredictor]
+
+
+def load_predictors(model: Path, image_size: int) -> Predictors:
+    predictor = CollapsePredictor.from_checkpoint(model, image_size=image_size)
+    # Each pull head of the CP gets its own rows, thresholds chosen and scored on its truth.
+    heads = [h for h in PULL_HEADS if h in checkpoint_heads(load_checkpoint(model))]
+    head_predictors = {
+        h: CollapsePredictor.from_checkpoint(model, image_size=image_size, head=h) for h in heads
+    }
+    return Predictors(predictor, heads, head_predictors)
+
+
+def run_support(
+    params: dict,
+    seed: int,
+    cfg: SupportEvalConfig,
+    sim: SimConfig,
+    parallel: ParallelConfig,
+    paths: SupportPaths,
+) -> pd.DataFrame:
+    """Choose thresholds on val scenes, score every method on fresh test scenes and write the
+    outputs; returns each method's mean precision and recall over the test scenes."""
+    precision = inference_from_params(params)
+    models = load_predictors(paths.model, sim.camera.image_size)
+    ch6 = load_section(TrialsConfig, "trials", params).ch6
+    read = {"heads": models.heads, "collapse_free": label_thresholds(params)}
+
+    # 1. thresholds on validation scenes
+    val, sweep = val_sweep(cfg, sim, paths, models, read)
+    write_text(paths.out / "val_sweep.csv", sweep.to_csv(index=False))
+    chosen = choose_all(sweep)
+    p_edge = contact_edge_rate(val, chosen["coverage"])
+
+    # 2. test scenes from their own stream, with every removal simulated
+    generate_test_scenes(cfg, sim, parallel, seed, ch6, models.heads, paths.scenes)
+    rng = np.random.default_rng([seed, 62])
+    physics_depth = PhysicsDepthSupport(cfg, sim, chosen[SUPPORT_RULE], ch6.physics_depth_settle_s)
+    scenes_in = all_scenes(
+        paths.scenes, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera, **read
+    )
+    rows, panels, truth = score_test_scenes(
+        scenes_in, cfg, models, chosen, p_edge, rng, physics_depth, seed
+    )
+    # edges: removing X moves Y, X and Y touch; <head>_edges: the trials' pull of X marks Y
+    # under that head's label kind, X and Y touch
+    truths = {f"{head_prefix(h)}edges": edges for h, edges in truth.items()}
+    write_json(paths.scenes / "truth.json", truths | {"moved_threshold_m": cfg.moved_threshold_m})
+    scenes = pd.DataFrame(rows)
+    write_text(paths.out / "scenes.csv", scenes.to_csv(index=False))
+    write_thresholds(paths.out, chosen, p_edge, sweep, len(val), precision)
+    support_figure(
+        panels, paths.out / "figure.png", "Inferred (white, dashed) and true (pink) support"
+    )
+    return scenes.groupby("method", sort=False)[["precision", "recall"]].mean()
+
+
+def val_sweep(
+    cfg: SupportEvalConfig,
+    sim: SimConfig,
+    paths: SupportPaths,
+    models: Predictors,
+    read: dict[str, Any],
+) -> tuple[list[Scene], pd.DataFrame]:
+    """The val scenes and every method's threshold sweep over their evidence."""
+    val = split_scenes(
+        paths.gen_dir,
+        paths.split_file,
+        "val",
+        cfg.val_scenes,
+        cfg.moved_threshold_m,
+        cfg.min_pixels,
+        sim.camera,
+        **read,
+    )
+    evidence_of: dict[str, tuple[list, list]] = {h: ([], []) for h in ("deletion", *models.heads)}
+    with progress_bar("support: val heatmaps", total=len(val)) as advance:
+        for sc in val:
+            for head, (cp_ev, oracle_ev) in evidence_of.items():
+                view = sc.view(head)
+                cp_ev.append(
+                    evidence(
+                        view, predicted_heatmaps(view, models.of_head.get(head, models.deletion))
+                    )
+                )
+                oracle_ev.append(evidence(view, oracle_heatmaps(view.moved, view.masks)))
+            advance(1)
+    sweep = pd.concat(
+        [sweep_all(cp, oracle, cfg, head_prefix(h)) for h, (cp, oracle) in evidence_of.items()],
+        ignore_index=True,
+    )
+    return val, sweep
+
+
+def generate_test_scenes(
+    cfg: SupportEvalConfig,
+    sim: SimConfig,
+    parallel: ParallelConfig,
+    seed: int,
+    ch6: Ch6TrialParams,
+    heads: list[str],
+    scenes_dir: Path,
+) -> None:
+    """The test scenes from the support stream, with every removal (and, for a CP with pull
+    heads, the trials' pull of every box) simulated."""
+    test_ds = DatasetConfig(
+        n_scenes=cfg.test_scenes,
+        families=dict(cfg.test.families),
+        catalogue=cfg.test.catalogue,
+        n_objects=cfg.test.n_objects,
+        moved_threshold_m=cfg.moved_threshold_m,
+        pull_outcomes=bool(heads),  # the pull truth: the trials' own pull of every box
+    )
+    shards = GenerateConfig(shard_size=10, workers=cfg.workers, max_attempts=cfg.max_attempts)
+    key = stream_key("support")
+    trial_pull = (ch6.pull_increment_m, ch6.grasp_lift_m) if heads else None
+    generate_dataset(
+        key, test_ds, shards, sim, seed, scenes_dir / "scenes", trial_pull, parallel=parallel
+    )
+
+
+def score_test_scenes(
+    scenes_in: Any,
+    cfg: SupportEvalConfig,
+    models: Predictors,
+    chosen: dict,
+    p_edge: float,
+    rng: np.random.Generator,
+    physics_depth: PhysicsDepthSupport,
+    seed: int,
+) -> tuple[list[dict], list[SupportPanel], dict[str, dict[str, list]]]:
+    """Every method's rows on every test scene, the figure's panels and each head's true edges."""
+    heads = models.heads
+    chosen_of = {h: {m: p for m, p in chosen.items() if method_head(m)[0] == h} for h in heads}
+    deletion = {m: p for m, p in chosen.items() if method_head(m)[0] == "deletion"}
+    rows, panels = [], []
+    truth: dict[str, dict[str, list]] = {h: {} for h in ("deletion", *heads)}
+    with progress_bar("support: test scenes", total=cfg.test_scenes) as advance:
+        for sc in scenes_in:
+            heat = predicted_heatmaps(sc, models.deletion)
+            scene_rows, edges = evaluate_scene(sc, heat, deletion, p_edge, rng)
+            rows += scene_rows + [physics_depth_row(physics_depth, sc, seed)]
+            truth["deletion"][str(sc.index)] = sorted(map(list, sc.true_edges))
+            for head in heads:  # no random row: rng draws stay the deletion rows'
+                view = sc.view(head)
+                head_heat = predicted_heatmaps(view, models.of_head[head])
+                rows += evaluate_scene(view, head_heat, chosen_of[head], None, rng)[0]
+                truth[head][str(sc.index)] = sorted(map(list, view.true_edges))
+            if len(panels) < cfg.figure_scenes:
+                panels.append(
+                    SupportPanel(
+                        sc.depth_m,
+                        sc.masks,
+                        sc.ids,
+                        edges["coverage"],
+                        sc.true_edges,
+                        f"test scene {sc.index} ({sc.family})",
+                    )
+                )
+            advance(1)
+    return rows, panels, truth
+
+
+def write_thresholds(
+    out: Path, chosen: dict, p_edge: float, sweep: pd.DataFrame, n_val: int, precision: Precision
+) -> None:
+    """thresholds.json: each method's chosen thresholds, its val metrics at them, the val
+    scene count and the network precision the heatmaps were inferred at."""
+    thresholds = {m: as_dict(p) for m, p in chosen.items()} | {"random": {"p_edge": p_edge}}
+    thresholds[SUPPORT_METHOD] = as_dict(chosen[SUPPORT_RULE])
+    val_at = {m: val_metrics_at(sweep, m, p) for m, p in chosen.items()}
+    write_json(
+        out / "thresholds.json",
+        {
+            "chosen": thresholds,
+            "val": val_at,
+            "val_scenes": n_val,
+            "network_precision": precision,
+        },
+    )
+
+
+def physics_depth_row(physics_depth: PhysicsDepthSupport, scene: Scene, seed: int) -> dict:
+    """The scene's physics-from-depth row: a perception failure is recorded in it
+    (PhysicsDepthSupport.row); anything else is a bug, one line naming the scene and seed."""
+    try:
+        return physics_depth.row(scene)
+    except ClutterbenchError as exc:
+        raise ClutterbenchError(f"support: test scene {scene.index}, seed {seed}: {exc}") from None
+    except Exception as exc:
+        raise ClutterbenchError(
+            f"support: test scene {scene.index}, seed {seed}: {type(exc).__name__}: {exc}"
+        ) from None
