@@ -70,77 +70,14 @@ def table_5_2(
     scale: str,
 ) -> pd.DataFrame:
     """reports/tables/table_5_2.{md,csv} and table_5_2_branches.{md,csv}."""
-    cells: dict[str, dict[str, list[Mapping[str, Any]]]] = {}
-    for row, cond in rows.items():
-        method, scene = _parse(row)
-        if cond not in by_condition:
-            raise ClutterbenchError(
-                f"report.table_5_2.{row}: no trial records of condition '{cond}' "
-                "(run stage trials_ch5)"
-            )
-        cells.setdefault(method, {})[scene] = list(by_condition[cond])
+    cells = _cells(by_condition, rows)
     oracle = cells.get("oracle", {})
     oracle_ok = {
         scene: {r["episode"]: bool(r["success"]) for r in recs} for scene, recs in oracle.items()
     }
     table_rows, raw = [], []
     for method, scenes in cells.items():
-        line: dict[str, Any] = {"method": METHODS[method]}
-        all_recs: list[Mapping[str, Any]] = []
-        beats = 0
-        for scene in SCENES:
-            recs = scenes.get(scene, [])
-            all_recs += recs
-            r = rate(recs, "success") if recs else Rate(0, 0)
-            strict = rate(recs, "strict_success") if recs else Rate(0, 0)
-            # the thesis column beside the collapse-free one (the thesis' trial notion)
-            line[scene] = r.text()
-            line[f"{scene} (thesis)"] = _thesis_text(figures, f"{method}/{scene}")
-            line[f"{scene} strict"] = strict.text()
-            raw.append(
-                {
-                    "method": method,
-                    "scene": scene,
-                    "success_k": r.k,
-                    "success_n": r.n,
-                    "strict_success_k": strict.k,
-                    "strict_success_n": strict.n,
-                }
-            )
-            known = oracle_ok.get(scene, {})
-            beats += sum(bool(x["success"]) and known.get(x["episode"]) is False for x in recs)
-        total = rate(all_recs, "success") if all_recs else Rate(0, 0)
-        total_strict = rate(all_recs, "strict_success") if all_recs else Rate(0, 0)
-        line["total"] = total.text()
-        line["total (thesis)"] = _thesis_text(figures, f"{method}/total")
-        line["total strict"] = total_strict.text()
-        raw.append(
-            {
-                "method": method,
-                "scene": "total",
-                "success_k": total.k,
-                "success_n": total.n,
-                "strict_success_k": total_strict.k,
-                "strict_success_n": total_strict.n,
-            }
-        )
-        if oracle and method != "oracle":
-            o = [x for s in oracle.values() for x in s]
-            for key, ours, col in (
-                ("success", total, "points below the oracle"),
-                ("strict_success", total_strict, "points below the oracle (strict)"),
-            ):
-                gap = 100 * (rate(o, key).rate - ours.rate) if o and all_recs else None
-                line[col] = f"{gap:.1f}" if gap is not None else "—"
-            line["episodes the oracle failed"] = beats
-        else:
-            line["points below the oracle"] = "—"
-            line["points below the oracle (strict)"] = "—"
-            line["episodes the oracle failed"] = "—"
-        line["mean disturbed boxes"] = (
-            f"{sum(x['n_disturbed'] for x in all_recs) / len(all_recs):.2f}" if all_recs else "—"
-        )
-        table_rows.append(line)
+        table_rows.append(_method_line(method, scenes, oracle, oracle_ok, figures, raw))
     frame = pd.DataFrame.from_records(table_rows)
     thesis_cols = [c for c in frame.columns if c.endswith("(thesis)") and frame[c].notna().any()]
     frame = frame.drop(
@@ -152,50 +89,134 @@ def table_5_2(
         out_dir,
         TABLE,
         f"Table 5.2: shelf replenishment success ({scale} scale, simulated)",
-        [
-            NOTE,
-            "(thesis) columns: the thesis' real-robot counts (Table 5.2); ours are simulated. "
-            "Each scene's first column is collapse-free success (no box off the shelf, none "
-            "but the moved ones dropped beyond trials.collapse_free.drop_m or tipped beyond "
-            "tilt_deg, the new box at its place: the thesis' trial notion, so the thesis "
-            "column stands beside it); 'strict': also no other box moved beyond the label "
-            "threshold, the prefix of the same episode up to its first strict failure.",
-            "without collapse prediction: the same planner with the collapse prediction "
-            "removed and nothing else: no R_s overlap test (eq. 5.5) before a blocker is "
-            "moved and no collapse check of a rearrangement, so every blocker whose way is "
-            "clear is movable; the geometric way check (the thesis' assumption that a moved "
-            "object touches no other) stays in both variants. Random: an action drawn "
-            "uniformly from the oracle's action set (a placement at any candidate, a blocker "
-            "held aside, or an obstacle rearranged first) at every step.",
-            "pushing where it has no plan (beyond the thesis): the planner with collapse "
-            "prediction, but where it would give up it carries the first blocker that is "
-            "movable (eq. 5.5) and whose goal is in the shelf although boxes stand in its way: "
-            "they are pushed (the oracle's action set holds these carries, so it stays the "
-            "ceiling). It differs from the row with collapse prediction only in episodes that "
-            "row gave up. The oracle over the actions that move no box into another simulates "
-            "only those the thesis' planners may take (no placement at an occupied candidate, "
-            "no carry whose way is blocked): a planner that keeps the thesis' no-contact rule "
-            "beats it only through the re-plan after a rearrangement, as it may the oracle "
-            "(below); the contact and random rows can.",
-            free_start_note(cells),
-            "arrangement clusters from: "
-            + ", ".join(
-                sorted(
-                    {
-                        str(r.get("perception"))
-                        for s in cells.values()
-                        for v in s.values()
-                        for r in v
-                    }
-                )
-            )
-            + " (clusters: the generator's ground truth; detector: the trained detector).",
-            "episodes the oracle failed: scenes where the method succeeded but the oracle's "
-            "first successful action sequence was not found (its budget or the rearrangement "
-            "re-plan, which the oracle simulates as one fixed sequence).",
-        ],
+        _notes(cells),
     )
     write_raw_csv(raw, out_dir / f"{TABLE}.csv", counts=())
+    _write_branches(cells, out_dir, scale)
+    return frame
+
+
+def _cells(
+    by_condition: Mapping[str, Sequence[Mapping[str, Any]]], rows: Mapping[str, str]
+) -> dict[str, dict[str, list[Mapping[str, Any]]]]:
+    """method -> scene type -> the records of the row's trials_ch5 condition."""
+    cells: dict[str, dict[str, list[Mapping[str, Any]]]] = {}
+    for row, cond in rows.items():
+        method, scene = _parse(row)
+        if cond not in by_condition:
+            raise ClutterbenchError(
+                f"report.table_5_2.{row}: no trial records of condition '{cond}' "
+                "(run stage trials_ch5)"
+            )
+        cells.setdefault(method, {})[scene] = list(by_condition[cond])
+    return cells
+
+
+def _raw_row(method: str, scene: str, r: Rate, strict: Rate) -> dict[str, Any]:
+    return {
+        "method": method,
+        "scene": scene,
+        "success_k": r.k,
+        "success_n": r.n,
+        "strict_success_k": strict.k,
+        "strict_success_n": strict.n,
+    }
+
+
+def _method_line(
+    method: str,
+    scenes: Mapping[str, Sequence[Mapping[str, Any]]],
+    oracle: Mapping[str, Sequence[Mapping[str, Any]]],
+    oracle_ok: Mapping[str, Mapping[Any, bool]],
+    figures: Mapping[str, Any],
+    raw: list[dict[str, Any]],
+) -> dict[str, Any]:
+    """One method's row of the table; its per-scene and total counts are appended to `raw`."""
+    line: dict[str, Any] = {"method": METHODS[method]}
+    all_recs: list[Mapping[str, Any]] = []
+    beats = 0
+    for scene in SCENES:
+        recs = scenes.get(scene, [])
+        all_recs += recs
+        r = rate(recs, "success") if recs else Rate(0, 0)
+        strict = rate(recs, "strict_success") if recs else Rate(0, 0)
+        # the thesis column beside the collapse-free one (the thesis' trial notion)
+        line[scene] = r.text()
+        line[f"{scene} (thesis)"] = _thesis_text(figures, f"{method}/{scene}")
+        line[f"{scene} strict"] = strict.text()
+        raw.append(_raw_row(method, scene, r, strict))
+        known = oracle_ok.get(scene, {})
+        beats += sum(bool(x["success"]) and known.get(x["episode"]) is False for x in recs)
+    total = rate(all_recs, "success") if all_recs else Rate(0, 0)
+    total_strict = rate(all_recs, "strict_success") if all_recs else Rate(0, 0)
+    line["total"] = total.text()
+    line["total (thesis)"] = _thesis_text(figures, f"{method}/total")
+    line["total strict"] = total_strict.text()
+    raw.append(_raw_row(method, "total", total, total_strict))
+    if oracle and method != "oracle":
+        o = [x for s in oracle.values() for x in s]
+        for key, ours, col in (
+            ("success", total, "points below the oracle"),
+            ("strict_success", total_strict, "points below the oracle (strict)"),
+        ):
+            gap = 100 * (rate(o, key).rate - ours.rate) if o and all_recs else None
+            line[col] = f"{gap:.1f}" if gap is not None else "—"
+        line["episodes the oracle failed"] = beats
+    else:
+        line["points below the oracle"] = "—"
+        line["points below the oracle (strict)"] = "—"
+        line["episodes the oracle failed"] = "—"
+    line["mean disturbed boxes"] = (
+        f"{sum(x['n_disturbed'] for x in all_recs) / len(all_recs):.2f}" if all_recs else "—"
+    )
+    return line
+
+
+def _notes(cells: Mapping[str, Mapping[str, Sequence[Mapping[str, Any]]]]) -> list[str]:
+    """The notes under Table 5.2."""
+    return [
+        NOTE,
+        "(thesis) columns: the thesis' real-robot counts (Table 5.2); ours are simulated. "
+        "Each scene's first column is collapse-free success (no box off the shelf, none "
+        "but the moved ones dropped beyond trials.collapse_free.drop_m or tipped beyond "
+        "tilt_deg, the new box at its place: the thesis' trial notion, so the thesis "
+        "column stands beside it); 'strict': also no other box moved beyond the label "
+        "threshold, the prefix of the same episode up to its first strict failure.",
+        "without collapse prediction: the same planner with the collapse prediction "
+        "removed and nothing else: no R_s overlap test (eq. 5.5) before a blocker is "
+        "moved and no collapse check of a rearrangement, so every blocker whose way is "
+        "clear is movable; the geometric way check (the thesis' assumption that a moved "
+        "object touches no other) stays in both variants. Random: an action drawn "
+        "uniformly from the oracle's action set (a placement at any candidate, a blocker "
+        "held aside, or an obstacle rearranged first) at every step.",
+        "pushing where it has no plan (beyond the thesis): the planner with collapse "
+        "prediction, but where it would give up it carries the first blocker that is "
+        "movable (eq. 5.5) and whose goal is in the shelf although boxes stand in its way: "
+        "they are pushed (the oracle's action set holds these carries, so it stays the "
+        "ceiling). It differs from the row with collapse prediction only in episodes that "
+        "row gave up. The oracle over the actions that move no box into another simulates "
+        "only those the thesis' planners may take (no placement at an occupied candidate, "
+        "no carry whose way is blocked): a planner that keeps the thesis' no-contact rule "
+        "beats it only through the re-plan after a rearrangement, as it may the oracle "
+        "(below); the contact and random rows can.",
+        free_start_note(cells),
+        "arrangement clusters from: "
+        + ", ".join(
+            sorted(
+                {str(r.get("perception")) for s in cells.values() for v in s.values() for r in v}
+            )
+        )
+        + " (clusters: the generator's ground truth; detector: the trained detector).",
+        "episodes the oracle failed: scenes where the method succeeded but the oracle's "
+        "first successful action sequence was not found (its budget or the rearrangement "
+        "re-plan, which the oracle simulates as one fixed sequence).",
+    ]
+
+
+def _write_branches(
+    cells: Mapping[str, Mapping[str, Sequence[Mapping[str, Any]]]], out_dir: Path, scale: str
+) -> None:
+    """table_5_2_branches.{md,csv}: where each method's episodes ended, by planner branch."""
     branches = branch_breakdown(cells)
     write_table(
         branches,
@@ -214,7 +235,6 @@ def table_5_2(
             "collapse region overlapping another cluster (and no safe rearrangement).",
         ],
     )
-    return frame
 
 
 def free_start_note(cells: Mapping[str, Mapping[str, Sequence[Mapping[str, Any]]]]) -> str:
