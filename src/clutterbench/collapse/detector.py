@@ -306,17 +306,7 @@ def train_detector(
 ) -> tuple[ArrangementDetector, dict[str, Any]]:
     """Train on the train split, keep the best val-mAP epoch; returns (its detector, the
     training summary)."""
-    train = load_arrangement_split(paths.gen_dir, paths.split_file, "train")
-    val = load_arrangement_split(paths.gen_dir, paths.split_file, "val")
-    for name, part in (("train", train), ("val", val)):
-        if len(part) == 0:
-            raise ClutterbenchError(f"detector: dataset '{p.dataset}' has no {name} scenes")
-    size = train.depth_m.shape[-1]
-    if train.depth_m.shape[-2:] != (p.net.input_size, p.net.input_size):
-        raise ClutterbenchError(
-            f"detector.net.input_size is {p.net.input_size} but dataset '{p.dataset}' has "
-            f"{train.depth_m.shape[-2]}x{size} images (sim.camera.image_size)"
-        )
+    train, val, size = _train_val_splits(p, paths)
     seed = detector_seed(base_seed, p.dataset)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
@@ -325,16 +315,7 @@ def train_detector(
     model = ArrangementNet(p.net)
     if p.channels_last:
         model = model.to(memory_format=torch.channels_last)
-    opt = torch.optim.AdamW(model.parameters(), lr=p.lr, weight_decay=p.weight_decay)
-    steps_per_epoch = -(-len(train) // p.batch_size)
-    schedule = torch.optim.lr_scheduler.OneCycleLR(
-        opt,
-        max_lr=p.lr,
-        total_steps=p.epochs * steps_per_epoch,
-        pct_start=0.1,
-        div_factor=10.0,
-        final_div_factor=10.0,
-    )
+    opt, schedule = _optimizer(model, p, len(train))
     log = CsvLog(paths.report_dir / "log.csv", LOG_COLUMNS)
     meta = {
         "dataset": p.dataset,
@@ -352,34 +333,8 @@ def train_detector(
     stale, started, epoch_s = 0, time.perf_counter(), []
     for epoch in range(1, p.epochs + 1):
         t0 = time.perf_counter()
-        model.train()
-        order = rng.permutation(len(train))
-        total = 0.0
-        with progress_bar(f"detector epoch {epoch}", total=len(train)) as advance:
-            for lo in range(0, len(order), p.batch_size):
-                idx = np.sort(order[lo : lo + p.batch_size])
-                x, targets = training_batch(train, idx, p, rng)
-                if p.channels_last:
-                    x = x.contiguous(memory_format=torch.channels_last)
-                with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
-                    out = model(x)
-                out = {k: v.float() for k, v in out.items()}
-                loss = detector_loss(out, targets, p)
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-                schedule.step()
-                total += float(loss.detach()) * len(idx)
-                advance(len(idx))
-        detector = ArrangementDetector(model.eval(), p.score_threshold, p.nms_iou, p.max_detections)
-        val_map, prs = mean_ap(
-            detect_all(detector, val, p.eval_score_threshold),
-            truth_of(val),
-            p.net.n_classes,
-            p.match_iou,
-        )
-        row = {"epoch": epoch, "train_loss": total / len(train), "val_map50": val_map}
-        row |= {f"val_ap_{c}": pr.ap() for c, pr in zip(ARRANGEMENT_CLASSES, prs)}
+        total = _train_epoch(model, opt, schedule, train, p, rng, bf16, epoch)
+        row, val_map = _val_row(model, val, p, epoch, total / len(train))
         log.append(row)
         epoch_s.append(round(time.perf_counter() - t0, 1))
         print(f"detector epoch {epoch}: loss {row['train_loss']:.4f} val mAP@0.5 {val_map:.3f}")
@@ -405,6 +360,91 @@ def train_detector(
     }
     write_json(paths.timing_file, {"stage": "detector", "train_s": train_s, "epoch_s": epoch_s})
     return ArrangementDetector.from_checkpoint(paths.model_dir / "best.pt"), summary
+
+
+def _train_val_splits(
+    p: DetectorParams, paths: DetectorPaths
+) -> tuple[ArrangementSet, ArrangementSet, int]:
+    """The train and val splits (neither empty, at the network's input size) and that size."""
+    train = load_arrangement_split(paths.gen_dir, paths.split_file, "train")
+    val = load_arrangement_split(paths.gen_dir, paths.split_file, "val")
+    for name, part in (("train", train), ("val", val)):
+        if len(part) == 0:
+            raise ClutterbenchError(f"detector: dataset '{p.dataset}' has no {name} scenes")
+    size = train.depth_m.shape[-1]
+    if train.depth_m.shape[-2:] != (p.net.input_size, p.net.input_size):
+        raise ClutterbenchError(
+            f"detector.net.input_size is {p.net.input_size} but dataset '{p.dataset}' has "
+            f"{train.depth_m.shape[-2]}x{size} images (sim.camera.image_size)"
+        )
+    return train, val, size
+
+
+def _optimizer(
+    model: ArrangementNet, p: DetectorParams, n_train: int
+) -> tuple[torch.optim.AdamW, torch.optim.lr_scheduler.OneCycleLR]:
+    """AdamW and its one-cycle schedule over every step of p.epochs."""
+    opt = torch.optim.AdamW(model.parameters(), lr=p.lr, weight_decay=p.weight_decay)
+    steps_per_epoch = -(-n_train // p.batch_size)
+    schedule = torch.optim.lr_scheduler.OneCycleLR(
+        opt,
+        max_lr=p.lr,
+        total_steps=p.epochs * steps_per_epoch,
+        pct_start=0.1,
+        div_factor=10.0,
+        final_div_factor=10.0,
+    )
+    return opt, schedule
+
+
+def _train_epoch(
+    model: ArrangementNet,
+    opt: torch.optim.AdamW,
+    schedule: torch.optim.lr_scheduler.OneCycleLR,
+    train: ArrangementSet,
+    p: DetectorParams,
+    rng: np.random.Generator,
+    bf16: bool,
+    epoch: int,
+) -> float:
+    """One pass over the train split in shuffled batches; returns the summed loss (each
+    batch's mean loss times its size)."""
+    model.train()
+    order = rng.permutation(len(train))
+    total = 0.0
+    with progress_bar(f"detector epoch {epoch}", total=len(train)) as advance:
+        for lo in range(0, len(order), p.batch_size):
+            idx = np.sort(order[lo : lo + p.batch_size])
+            x, targets = training_batch(train, idx, p, rng)
+            if p.channels_last:
+                x = x.contiguous(memory_format=torch.channels_last)
+            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+                out = model(x)
+            out = {k: v.float() for k, v in out.items()}
+            loss = detector_loss(out, targets, p)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            schedule.step()
+            total += float(loss.detach()) * len(idx)
+            advance(len(idx))
+    return total
+
+
+def _val_row(
+    model: ArrangementNet, val: ArrangementSet, p: DetectorParams, epoch: int, train_loss: float
+) -> tuple[dict[str, Any], float]:
+    """The epoch's log row (its val mAP@0.5 and per-class AP) and that mAP."""
+    detector = ArrangementDetector(model.eval(), p.score_threshold, p.nms_iou, p.max_detections)
+    val_map, prs = mean_ap(
+        detect_all(detector, val, p.eval_score_threshold),
+        truth_of(val),
+        p.net.n_classes,
+        p.match_iou,
+    )
+    row = {"epoch": epoch, "train_loss": train_loss, "val_map50": val_map}
+    row |= {f"val_ap_{c}": pr.ap() for c, pr in zip(ARRANGEMENT_CLASSES, prs)}
+    return row, val_map
 
 
 def evaluate_detector(

@@ -99,6 +99,45 @@ def classification_metrics(probs: np.ndarray, labels: np.ndarray) -> dict[str, A
     }
 
 
+def _crops(samples: dict[str, np.ndarray], cfg: SlideTrainConfig) -> np.ndarray:
+    """The samples' crops as float32, refused unless they are the network's input size."""
+    crops = np.asarray(samples["crops"], dtype=np.float32)
+    if crops.shape[1:] != (cfg.net.input_size, cfg.net.input_size):
+        raise ClutterbenchError(
+            f"slide samples are {crops.shape[1]}x{crops.shape[2]} crops but "
+            f"yamakuzushi.convnet.net.input_size is {cfg.net.input_size}; make them equal "
+            "(yamakuzushi.scan.crop_px)"
+        )
+    return crops
+
+
+def _train_epoch(
+    model: SlideConvNet,
+    opt: torch.optim.Adam,
+    xt: torch.Tensor,
+    yt: torch.Tensor,
+    cfg: SlideTrainConfig,
+    gen: torch.Generator,
+) -> float:
+    """One pass over the training crops in shuffled batches (each crop mirrored with
+    probability 1/2 under cfg.mirror); returns the summed loss (batch mean times size)."""
+    model.train()
+    order = torch.randperm(len(xt), generator=gen)
+    total = 0.0
+    for i in range(0, len(order), cfg.batch_size):
+        idx = order[i : i + cfg.batch_size]
+        xb = xt[idx]
+        if cfg.mirror:
+            flip = torch.rand(len(idx), generator=gen) < 0.5
+            xb = torch.where(flip[:, None, None, None], xb.flip(-1), xb)
+        loss = F.cross_entropy(model(xb), yt[idx])
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        total += float(loss.detach()) * len(idx)
+    return total
+
+
 @flush_denormals()
 def train_slide_convnet(
     samples: dict[str, np.ndarray],
@@ -115,13 +154,7 @@ def train_slide_convnet(
     arithmetic is many times slower on some CPUs. Torch's worker threads take the setting only
     when they are started inside the block, so a stage calls this before any other parallel
     torch work."""
-    crops = np.asarray(samples["crops"], dtype=np.float32)
-    if crops.shape[1:] != (cfg.net.input_size, cfg.net.input_size):
-        raise ClutterbenchError(
-            f"slide samples are {crops.shape[1]}x{crops.shape[2]} crops but "
-            f"yamakuzushi.convnet.net.input_size is {cfg.net.input_size}; make them equal "
-            "(yamakuzushi.scan.crop_px)"
-        )
+    crops = _crops(samples, cfg)
     val = samples["val"].astype(bool)
     if val.all() or not val.any():
         raise ClutterbenchError("slide samples: need both training and validation piles")
@@ -137,20 +170,7 @@ def train_slide_convnet(
     stale, started = 0, time.perf_counter()
     with progress_bar("train slide ConvNet", total=cfg.epochs) as advance:
         for epoch in range(1, cfg.epochs + 1):
-            model.train()
-            order = torch.randperm(len(xt), generator=gen)
-            total = 0.0
-            for i in range(0, len(order), cfg.batch_size):
-                idx = order[i : i + cfg.batch_size]
-                xb = xt[idx]
-                if cfg.mirror:
-                    flip = torch.rand(len(idx), generator=gen) < 0.5
-                    xb = torch.where(flip[:, None, None, None], xb.flip(-1), xb)
-                loss = F.cross_entropy(model(xb), yt[idx])
-                opt.zero_grad()
-                loss.backward()
-                opt.step()
-                total += float(loss.detach()) * len(idx)
+            total = _train_epoch(model, opt, xt, yt, cfg, gen)
             val_loss = _val_loss(model, xv, yv, 256)
             val_acc = classification_metrics(
                 success_probability(model, xv[:, 0]).numpy(), samples["label"][val]
