@@ -415,28 +415,7 @@ class ArmExecutor:
             if status != "ok":
                 step.outcome, step.failed_arm = status, "pull"
         if step.outcome == "ok":
-            start = np.asarray(self.u.tcp_pose(pull_arm).p, dtype=np.float64)
-            q_tool = np.asarray(self.u.tcp_pose(pull_arm).q, dtype=np.float64)
-            if lift_m > 0.0:
-                start = start + [0.0, 0.0, lift_m]
-                self._line(pull_arm, np.hstack([start, q_tool]), step, check_shelf=False)
-            travel, pulled = self._travel_m(box), 0.0
-            while pulled < travel - 1e-9:
-                if go_on is not None and not go_on(increments, self.u.box_poses()):
-                    aborted = True
-                    break
-                pulled += min(increment_m, travel - pulled)
-                goal = np.hstack([start - [pulled, 0.0, 0.0], q_tool])
-                if self._line(pull_arm, goal, step, check_shelf=False) != "ok":
-                    step.outcome, step.failed_arm = "planning_failed", "pull"
-                    aborted = True
-                    break
-                increments += 1
-            step.pose_log.append((step.control_steps * self.dt_s, self.u.box_poses()))
-            if aborted:
-                self.u.detach(pull_arm)
-            else:
-                self.u.park(box)
+            increments, aborted = self._pull_out(pull_arm, box, increment_m, lift_m, go_on, step)
         self.u.detach(pull_arm)
         self._home(pull_arm, step)
         self._settle(step)
@@ -459,3 +438,40 @@ class ArmExecutor:
             self.u.scene_spec.shelf.contains(poses_start[:, :3]),
         )
         return result, step, SceneState(self.u.box_poses(), frozenset(self.u.removed))
+
+    def _pull_out(
+        self,
+        pull_arm: int,
+        box: int,
+        increment_m: float,
+        lift_m: float,
+        go_on: Callable[[int, np.ndarray], bool] | None,
+        step: ArmStep,
+    ) -> tuple[int, bool]:
+        """With `box` grasped by `pull_arm`: lift it by lift_m, then pull it out by
+        increments (each after `go_on` lets it go on); a pull that ends parks the box, one
+        stopped or failed lets it go. -> (increments made, aborted)."""
+        increments, aborted = 0, False
+        start = np.asarray(self.u.tcp_pose(pull_arm).p, dtype=np.float64)
+        q_tool = np.asarray(self.u.tcp_pose(pull_arm).q, dtype=np.float64)
+        if lift_m > 0.0:
+            start = start + [0.0, 0.0, lift_m]
+            self._line(pull_arm, np.hstack([start, q_tool]), step, check_shelf=False)
+        travel, pulled = self._travel_m(box), 0.0
+        while pulled < travel - 1e-9:
+            if go_on is not None and not go_on(increments, self.u.box_poses()):
+                aborted = True
+                break
+            pulled += min(increment_m, travel - pulled)
+            goal = np.hstack([start - [pulled, 0.0, 0.0], q_tool])
+            if self._line(pull_arm, goal, step, check_shelf=False) != "ok":
+                step.outcome, step.failed_arm = "planning_failed", "pull"
+                aborted = True
+                break
+            increments += 1
+        step.pose_log.append((step.control_steps * self.dt_s, self.u.box_poses()))
+        if aborted:
+            self.u.detach(pull_arm)
+        else:
+            self.u.park(box)
+        return increments, aborted

@@ -569,20 +569,7 @@ class ReplenishPlanner:
         cands = candidates(
             obs, clusters, np.asarray(size_m, float), self.params, self.space, points, owner
         )
-        info: dict[str, Any] = {
-            "clusters": [
-                {"cls": c.cls, "box_px": _r(c.box_px), "rect_m": _r(c.rect_m)} for c in clusters
-            ],
-            "candidates": [
-                {
-                    "cluster": c.cluster,
-                    "side": c.side,
-                    "rect_m": _r(c.rect_m),
-                    "occupants": list(c.occupants),
-                }
-                for c in cands
-            ],
-        }
+        info = _plan_info(clusters, cands)
         for cand in cands:  # simple replenishment
             if cand.free:
                 return Plan("simple", cand, None, info | {"candidate": cands.index(cand)})
@@ -647,3 +634,21 @@ class ReplenishPlanner:
 
 def _r(a: np.ndarray) -> list[float]:
     return [round(float(v), 4) for v in a]
+
+
+def _plan_info(clusters: Sequence[Cluster], cands: Sequence[Candidate]) -> dict[str, Any]:
+    """A plan's record of what it saw: the clusters and the placement candidates."""
+    return {
+        "clusters": [
+            {"cls": c.cls, "box_px": _r(c.box_px), "rect_m": _r(c.rect_m)} for c in clusters
+        ],
+        "candidates": [
+            {
+                "cluster": c.cluster,
+                "side": c.side,
+                "rect_m": _r(c.rect_m),
+                "occupants": list(c.occupants),
+            }
+            for c in cands
+        ],
+    }

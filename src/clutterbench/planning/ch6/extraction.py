@@ -219,17 +219,7 @@ class CollapseGraphPlanner:
             except ValueError:
                 if self.when_no_plan == "give_up" or not rejected:
                     raise
-                clear = None
-                if self.when_no_plan == "clear":
-                    around = {p.pull for _, p in rejected} | feared
-                    clear = self._clear_around(obs, around, {target, *now})
-                if clear is not None:
-                    cp, plan = clear
-                    no_plan = "clear"
-                    break
-                cp, plan = min(rejected, key=lambda c: c[0])  # ties: the first rejected
-                limit = math.inf if self.when_no_plan == "least_risk_unmonitored" else cp
-                no_plan = "least_risk" if self.when_no_plan == "clear" else self.when_no_plan
+                cp, plan, limit, no_plan = self._no_plan(obs, target, now, rejected, feared)
                 break
             cp = self.collapse_score(obs, plan.pull, plan.hold)
             if cp > self.cp_max and self.bimanual and plan.hold is None:
@@ -262,6 +252,44 @@ class CollapseGraphPlanner:
         if no_plan is not None:
             state["no_plan"] = no_plan
         state |= state_notes
+        hold = self._with_idle_hold(obs, plan, graph, limit, state)
+        self._decided_on = obs
+        return Decision(plan.pull, hold, state, limit)
+
+    def _no_plan(
+        self,
+        obs: Observation,
+        target: int,
+        now: set[int],
+        rejected: list[tuple[float, BimanualPlan]],
+        feared: set[int],
+    ) -> tuple[float, BimanualPlan, float | None, str]:
+        """(score, plan, abort threshold, no_plan note) of the pull made when every
+        candidate is blocked (when_no_plan other than give_up, at least one rejected): a
+        cleared neighbour (clear) where there is one, else the rejected candidate of the
+        lowest score."""
+        clear = None
+        if self.when_no_plan == "clear":
+            around = {p.pull for _, p in rejected} | feared
+            clear = self._clear_around(obs, around, {target, *now})
+        if clear is not None:
+            cp, plan = clear
+            return cp, plan, None, "clear"
+        cp, plan = min(rejected, key=lambda c: c[0])  # ties: the first rejected
+        limit = math.inf if self.when_no_plan == "least_risk_unmonitored" else cp
+        no_plan = "least_risk" if self.when_no_plan == "clear" else self.when_no_plan
+        return cp, plan, limit, no_plan
+
+    def _with_idle_hold(
+        self,
+        obs: Observation,
+        plan: BimanualPlan,
+        graph: Any,
+        limit: float | None,
+        state: dict[str, Any],
+    ) -> int | None:
+        """The box held while `plan` pulls: its own hold, or (bimanual, idle_hold_share) the
+        idle arm's where the held pull's score passes; a hold so made is noted in `state`."""
         hold = plan.hold
         if self.bimanual and hold is None and self.idle_hold_share is not None:
             idle = self._idle_hold(obs, plan.pull, graph)
@@ -274,8 +302,7 @@ class CollapseGraphPlanner:
                     hold = idle
                     state["idle_hold"] = hold
                     state["cp"] = round(held_cp, 4)
-        self._decided_on = obs
-        return Decision(plan.pull, hold, state, limit)
+        return hold
 
     def _clear_around(
         self, obs: Observation, around: set[int], skip: set[int]
