@@ -43,7 +43,13 @@ def trials(params: dict, base: BaseConfig) -> None:
     jobs, about = [], {}
     for name, cond in conditions.items():
         mine, support, cp_max = condition_jobs(
-            name, cond, cfg, base.seed, sim.physics, sim.camera, THRESHOLDS
+            name=name,
+            cond=cond,
+            trials=cfg,
+            seed=base.seed,
+            physics=sim.physics,
+            camera=sim.camera,
+            thresholds=THRESHOLDS,
         )
         jobs += mine
         about[name] = {

@@ -43,7 +43,13 @@ def trials_arm(params: dict, base: BaseConfig) -> None:
             )
             load_planners(cfg.planner_modules, [cond.planner])
             mine, _, _ = condition_jobs(
-                name, cond, cfg, base.seed, sim.physics, sim.camera, THRESHOLDS
+                name=name,
+                cond=cond,
+                trials=cfg,
+                seed=base.seed,
+                physics=sim.physics,
+                camera=sim.camera,
+                thresholds=THRESHOLDS,
             )
             chapter = 6
         else:
@@ -55,20 +61,20 @@ def trials_arm(params: dict, base: BaseConfig) -> None:
                     f"models/{cond.model}/best.pt missing; run train@{cond.model}"
                 )
             mine = ch4_jobs(
-                name,
-                cond,
-                cfg.ch4,
-                cfg.streams[cond.stream],
-                base.seed,
-                sim.physics,
-                sim.camera,
-                cfg.max_attempts,
-                cfg.mcap_images,
-                cfg.arm,
+                condition=name,
+                cond=cond,
+                params=cfg.ch4,
+                stream_cfg=cfg.streams[cond.stream],
+                seed=base.seed,
+                physics=sim.physics,
+                camera=sim.camera,
+                max_attempts=cfg.max_attempts,
+                record_images=cfg.mcap_images,
+                arm=cfg.arm,
                 collapse_free=cfg.collapse_free,
             )
             chapter = 4
-        jobs += [j | {"chapter": chapter} for j in mine]
+        jobs += mine
         about[name] = {
             "condition": name,
             "of": arm.of,

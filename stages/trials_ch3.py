@@ -39,7 +39,12 @@ def trials_ch3(params: dict, base: BaseConfig) -> None:
             )
         model = str(MODEL)
     collapse_free = load_section(CollapseFreeConfig, "trials.collapse_free", params)
-    jobs = ch3_jobs(cfg, lambda g: pile_seed(base.seed, "ch3_games", g), model, collapse_free)
+    jobs = ch3_jobs(
+        cfg=cfg,
+        seed_of=lambda g: pile_seed(base.seed, "ch3_games", g),
+        model=model,
+        collapse_free=collapse_free,
+    )
     parallel = load_section(ParallelConfig, "parallel", params)
     results = run_episodes("trials_ch3", run_ch3_game, jobs, cfg.games.workers, parallel)
     records = [r.record for r in results]

@@ -37,15 +37,15 @@ def trials_ch4(params: dict, base: BaseConfig) -> None:
         if cond.model is not None and not Path(f"models/{cond.model}/best.pt").exists():
             raise ClutterbenchError(f"models/{cond.model}/best.pt missing; run train@{cond.model}")
         jobs += ch4_jobs(
-            name,
-            cond,
-            cfg.ch4,
-            cfg.streams[cond.stream],
-            base.seed,
-            sim.physics,
-            sim.camera,
-            cfg.max_attempts,
-            cfg.mcap_images,
+            condition=name,
+            cond=cond,
+            params=cfg.ch4,
+            stream_cfg=cfg.streams[cond.stream],
+            seed=base.seed,
+            physics=sim.physics,
+            camera=sim.camera,
+            max_attempts=cfg.max_attempts,
+            record_images=cfg.mcap_images,
             collapse_free=cfg.collapse_free,
         )
     parallel = load_section(ParallelConfig, "parallel", params)
@@ -69,7 +69,7 @@ def trials_ch4(params: dict, base: BaseConfig) -> None:
         n for n, c in cfg.ch4_conditions.items() if c.planner == "risk" and c.mode == "target"
     ]
     if figure:
-        first = next(j for j in jobs if j["condition"] == figure[0])
+        first = next(j for j in jobs if j.condition == figure[0])
         n = cfg.ch4_conditions[figure[0]].episodes
         draw_figure(
             jobs[jobs.index(first) + min(cfg.ch4.figure_episode, n - 1)], OUT / "fig_4_8.png"

@@ -8,6 +8,7 @@ trials' records."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -476,9 +477,18 @@ def _trials_records(env, planner: str, episodes: int, support, cp_max: float, cp
     src = env.unwrapped.source
     cond = ConditionConfig(planner=planner, stream=src.name, episodes=episodes, rule="coverage")
     jobs = ch6_jobs(
-        planner, cond, src.trials, src.cfg, src.seed, src.physics, src.camera, support, cp_max, cp
+        condition=planner,
+        cond=cond,
+        trials=src.trials,
+        stream_cfg=src.cfg,
+        seed=src.seed,
+        physics=src.physics,
+        camera=src.camera,
+        support=support,
+        cp_max=cp_max,
+        model_path=cp,
     )
-    return [run_ch6_episode(j | {"record_images": False}).record for j in jobs]
+    return [run_ch6_episode(dataclasses.replace(j, record_images=False)).record for j in jobs]
 
 
 def _same_records(got, want):

@@ -97,7 +97,18 @@ def _job(planner: str) -> dict:
     cfg = dataclasses.replace(cfg, ch6=ch6)
     cond = ConditionConfig(planner=planner, stream="s", episodes=1)
     support = SupportParams("coverage", 0.5, 0.3, 2, 0.0)
-    job = ch6_jobs("c", cond, cfg, stream, 0, PhysicsConfig(), CAM, support, 0.3, Path("x"))[0]
+    job = ch6_jobs(
+        condition="c",
+        cond=cond,
+        trials=cfg,
+        stream_cfg=stream,
+        seed=0,
+        physics=PhysicsConfig(),
+        camera=CAM,
+        support=support,
+        cp_max=0.3,
+        model_path=Path("x"),
+    )[0]
     return job
 
 

@@ -24,7 +24,7 @@ def cfg():
 
 @pytest.fixture(scope="module")
 def games(cfg):
-    jobs = ch3_jobs(cfg, lambda g: pile_seed(0, "ch3_test", g), None)
+    jobs = ch3_jobs(cfg=cfg, seed_of=lambda g: pile_seed(0, "ch3_test", g), model=None)
     return [run_ch3_game(job).record for job in jobs]
 
 

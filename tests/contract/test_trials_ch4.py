@@ -3,6 +3,7 @@ one episode per planner and mode, and the Fig. 4.8 figure."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -164,10 +165,20 @@ def _jobs(tiny_ch4: Path, **cond) -> list[dict]:
     c = Ch4ConditionConfig(stream="s", episodes=2, **cond)
     cfg = TrialsConfig(streams={"s": stream}, ch4_conditions={"c": c})
     params = Ch4TrialParams(min_pixels=5, min_target_pixels=10)
-    jobs = ch4_jobs("c", cfg.ch4_conditions["c"], params, stream, 0, PhysicsConfig(), CAM, 30, True)
-    for j in jobs:
-        j["model_path"] = tiny_ch4 if c.model is not None else None
-    return jobs
+    jobs = ch4_jobs(
+        condition="c",
+        cond=cfg.ch4_conditions["c"],
+        params=params,
+        stream_cfg=stream,
+        seed=0,
+        physics=PhysicsConfig(),
+        camera=CAM,
+        max_attempts=30,
+        record_images=True,
+    )
+    return [
+        dataclasses.replace(j, model_path=tiny_ch4 if c.model is not None else None) for j in jobs
+    ]
 
 
 @pytest.mark.parametrize(
@@ -235,13 +246,13 @@ def test_the_mcap_shows_the_scene_and_the_camera(tmp_path):
     path = tmp_path / "episodes.mcap"
     write_mcap(path, [result], {"condition": "c"})
     spec = draw_trial_spec(
-        job["cond"].stream,
-        job["stream_cfg"],
-        job["seed"],
-        job["index"],
-        job["physics"],
-        job["camera"],
-        job["max_attempts"],
+        job.cond.stream,
+        job.stream_cfg,
+        job.seed,
+        job.index,
+        job.physics,
+        job.camera,
+        job.max_attempts,
     )
     topics = ["/scene", "/camera/calibration", "/camera/depth"]
     with open(path, "rb") as f:

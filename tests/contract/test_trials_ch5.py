@@ -4,6 +4,7 @@ release-then-judge order, one record per trial and its MCAP."""
 from __future__ import annotations
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -96,17 +97,17 @@ def test_episode_record_and_mcap(tmp_path):
     spec = crowded_row()
     cond = Ch5ConditionConfig(planner="no_collapse", stream="ch5_shelved", perception="clusters")
     job = ch5.ch5_jobs(
-        "hand",
-        cond,
-        TrialsConfig().ch5,
-        SceneStreamConfig(families={"shelved": 1.0}, n_objects=(4, 6)),
-        0,
-        PhysicsConfig(),
-        CAM,
-        5,
-        True,
-        0.5,
-        "shelved",
+        condition="hand",
+        cond=cond,
+        params=TrialsConfig().ch5,
+        stream_cfg=SceneStreamConfig(families={"shelved": 1.0}, n_objects=(4, 6)),
+        seed=0,
+        physics=PhysicsConfig(),
+        camera=CAM,
+        max_attempts=5,
+        record_images=True,
+        prob_threshold=0.5,
+        scene_type="shelved",
     )[0]
     result = ch5.replenish(spec, job, NEW_BOX)
     rec = result.record
@@ -137,9 +138,11 @@ def test_the_planner_and_the_oracle_carry_a_blocker_by_the_params_rule(scene, mo
 
     monkeypatch.setattr(replenish, "move_goal", spy)
     monkeypatch.setattr(ch5_oracle, "move_goal", spy)
-    job = {"params": TrialsConfig().ch5, "prob_threshold": 0.5}
-    job["params"] = dataclasses.replace(job["params"], blocker_goal=rule, min_points=3)
-    job["cond"] = Ch5ConditionConfig(planner="replenish", stream="s")
+    job = SimpleNamespace(  # the fields planner_params reads
+        params=dataclasses.replace(TrialsConfig().ch5, blocker_goal=rule, min_points=3),
+        prob_threshold=0.5,
+        cond=Ch5ConditionConfig(planner="replenish", stream="s"),
+    )
     rp, space = ch5.planner_params(job), ch5.space_of(spec)
     plan = ReplenishPlanner(rp, space).plan(obs, dets, NEW_BOX)
     assert plan.branch == "bimanual" and given
@@ -414,16 +417,26 @@ def test_shelved_starts_offer_no_free_place():
     cond = Ch5ConditionConfig(planner="oracle", stream="ch5_shelved", perception="clusters")
     cfg = TrialsConfig().ch5
     jobs = ch5.ch5_jobs(
-        "shelved", cond, cfg, stream, 0, PhysicsConfig(), CAM, 40, False, 0.5, "shelved"
+        condition="shelved",
+        cond=cond,
+        params=cfg,
+        stream_cfg=stream,
+        seed=0,
+        physics=PhysicsConfig(),
+        camera=CAM,
+        max_attempts=40,
+        record_images=False,
+        prob_threshold=0.5,
+        scene_type="shelved",
     )
     leaning = 0
     for job in jobs[:12]:
         spec, size_m = ch5.draw_start(job)
         assert spec.family == "replenish_shelved"
-        assert ch5.free_places(spec, job, size_m) == [], (job["index"], spec.meta)
+        assert ch5.free_places(spec, job, size_m) == [], (job.index, spec.meta)
         state = SceneState.start(spec)
-        obs = observe(world_at(spec, state, job["physics"], render=True), CAM)
-        classes = [d.cls for d in ch5_perception.true_clusters(spec, state, job["physics"], obs)]
+        obs = observe(world_at(spec, state, job.physics, render=True), CAM)
+        classes = [d.cls for d in ch5_perception.true_clusters(spec, state, job.physics, obs)]
         leaning += any(c in ("C^r", "C^l") for c in classes)
     assert leaning >= 4, leaning
 
@@ -457,8 +470,11 @@ def test_a_planner_may_push_only_as_the_contact_rows_and_only_a_movable_blocker(
     state = SceneState.start(spec)
     obs = observe(world_at(spec, state, physics, render=True), CAM)
     dets = ch5_perception.true_clusters(spec, state, physics, obs)
-    job = {"params": TrialsConfig().ch5, "prob_threshold": 0.5}
-    job["cond"] = Ch5ConditionConfig(planner=planner, stream="s")
+    job = SimpleNamespace(  # the fields planner_params reads
+        params=TrialsConfig().ch5,
+        prob_threshold=0.5,
+        cond=Ch5ConditionConfig(planner=planner, stream="s"),
+    )
     rp, space = ch5.planner_params(job), ch5.space_of(spec)
     assert rp.contact == (planner == "contact")
     assert rp.use_collapse == (planner != "no_collapse")
@@ -528,8 +544,11 @@ def test_each_oracle_searches_its_own_action_set(scene, monkeypatch, planner):
     spec, state, obs, dets, physics = scene
     asked = []
     monkeypatch.setattr(ch5_oracle, "action_set", lambda *args: asked.append(args[-1]) or [])
-    job = {"params": TrialsConfig().ch5, "physics": physics}
-    job["cond"] = Ch5ConditionConfig(planner=planner, stream="s")
+    job = SimpleNamespace(  # the fields oracle_choice reads before its action set
+        params=TrialsConfig().ch5,
+        physics=physics,
+        cond=Ch5ConditionConfig(planner=planner, stream="s"),
+    )
     rp = ReplenishParams(finger_m=0.012)
     seq, tried = ch5_oracle.oracle_choice(
         spec, state, obs, [dets], NEW_BOX, rp, ch5.space_of(spec), job

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ from clutterbench.sim.pull import SceneState, execute_pull, world_at
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch6.episodes import (
     PLANNERS,
+    Ch6Job,
     SearchOracle,
     ch6_jobs,
     register_planner,
@@ -125,8 +127,19 @@ def _job(planner: str, episodes: int = 1, cp: Path | None = None) -> dict:
     cfg = TrialsConfig(streams={"s": stream})
     cond = ConditionConfig(planner="random", stream="s", episodes=episodes)
     support = SupportParams("coverage", 0.5, 0.3, 2, 0.0)
-    jobs = ch6_jobs("c", cond, cfg, stream, 0, PhysicsConfig(), CAM, support, 0.3, cp)
-    return [j | {"planner": planner, "ch4_model_path": cp} for j in jobs]
+    jobs = ch6_jobs(
+        condition="c",
+        cond=cond,
+        trials=cfg,
+        stream_cfg=stream,
+        seed=0,
+        physics=PhysicsConfig(),
+        camera=CAM,
+        support=support,
+        cp_max=0.3,
+        model_path=cp,
+    )
+    return [dataclasses.replace(j, planner=planner, ch4_model_path=cp) for j in jobs]
 
 
 def test_an_episode_ends_at_its_first_collapse(stack3):
@@ -412,7 +425,9 @@ def test_collapse_meaning_pull_planners_read_the_pull_collapse_head(
     monkeypatch.setattr(planners, "load_predictor", spy)
     for meaning, head in (("collapse", "pull_collapse"), ("moved", "pull")):
         job = _job("multi_step_pull", 1, tiny_cp_three_heads)[0]
-        job["params"] = dataclasses.replace(job["params"], pull_map_meaning=meaning)
+        job = dataclasses.replace(
+            job, params=dataclasses.replace(job.params, pull_map_meaning=meaning)
+        )
         rec = run_ch6_episode(job).record
         assert heads[-1] == head
         assert rec["collapse_maps"] == f"predicted by the {head} head"
@@ -439,14 +454,14 @@ def test_the_registry_covers_every_planner_name():
     assert set(PLANNER_NAMES) <= set(PLANNERS)
 
 
-def _jobs(planner: str, cp: Path, episodes: int = 2) -> list[dict]:
+def _jobs(planner: str, cp: Path, episodes: int = 2) -> list[Ch6Job]:
     return _job(planner, episodes, cp)
 
 
 @pytest.mark.parametrize("planner", PLANNER_NAMES)
 def test_every_planner_gives_a_judged_record(planner, tiny_cp, tiny_cp_heads, tiny_ch4):
     cp = tiny_cp_heads if planner in PULL_HEAD_PLANNERS else tiny_cp
-    job = _jobs(planner, cp, 1)[0] | {"ch4_model_path": tiny_ch4}
+    job = dataclasses.replace(_jobs(planner, cp, 1)[0], ch4_model_path=tiny_ch4)
     rec = run_ch6_episode(job).record
     assert rec["planner"] == planner and rec["steps"]
     if planner in PULL_HEAD_PLANNERS:  # the record says which head its maps came from

@@ -19,6 +19,7 @@ from clutterbench.bench.scaling import (
 from clutterbench.bench.workloads import SEED, WORKLOADS, scale_params, workload_jobs
 from clutterbench.config import load_section
 from clutterbench.errors import ClutterbenchError
+from clutterbench.trials.ch4.episodes import Ch4Job
 from clutterbench.trials.config import TrialsConfig
 
 
@@ -95,7 +96,7 @@ def test_the_trials_workload_is_the_stages_mix_of_network_free_planners():
     assert not planners & set(NETWORK_PLANNERS)
     _, jobs, units = workload_jobs("trials", "default", 0, 0, len(names) + 2)
     assert units == len(jobs) == len(names) + 2
-    got = [j["planner"] for j in jobs]
+    got = [j.planner for j in jobs]
     want = [trials.conditions[n].planner for n in names]
     assert got == want + want[:2]  # round-robin over the conditions, in params order
 
@@ -110,10 +111,10 @@ def test_the_ch4_and_slides_workloads_are_the_stages_jobs():
     assert {trials.ch4_conditions[n].planner for n in names} == {"random", "oracle"}
     _, jobs, units = workload_jobs("trials_ch4", "default", 0, 0, len(names) + 1)
     assert units == len(jobs) == len(names) + 1
-    assert [j["cond"].planner for j in jobs] == [
-        trials.ch4_conditions[n].planner for n in names
-    ] + [trials.ch4_conditions[names[0]].planner]
-    assert all(j["model_path"] is None for j in jobs)
+    assert [j.cond.planner for j in jobs] == [trials.ch4_conditions[n].planner for n in names] + [
+        trials.ch4_conditions[names[0]].planner
+    ]
+    assert all(j.model_path is None for j in jobs)
     _, piles, units = workload_jobs("slides", "default", 3, 0, 0)
     assert units == len(piles) == 3 and len({p["seed"] for p in piles}) == 3
 
@@ -137,26 +138,26 @@ def test_the_ch5_workload_is_the_stages_jobs_of_its_network_free_conditions():
     assert {c.perception for c in conds} == {"clusters"}
     fn, jobs, units = workload_jobs("trials_ch5", "tiny", 0, 0, len(names) + 1)
     assert fn is run_ch5_episode and units == len(jobs) == len(names) + 1
-    assert [j["condition"] for j in jobs] == [f"bench_{n}" for n in names + names[:1]]
-    assert [j["index"] for j in jobs] == [0] * len(names) + [1]
+    assert [j.condition for j in jobs] == [f"bench_{n}" for n in names + names[:1]]
+    assert [j.index for j in jobs] == [0] * len(names) + [1]
     first = trials.ch5_conditions[names[0]]
     own = ch5_jobs(
-        f"bench_{names[0]}",
-        dataclasses.replace(first, episodes=2),
-        trials.ch5,
-        trials.streams[first.stream],
-        SEED,
-        sim.physics,
-        sim.camera,
-        trials.max_attempts,
-        False,
-        0.5,
-        first.stream.removeprefix("ch5_"),
-        False,
+        condition=f"bench_{names[0]}",
+        cond=dataclasses.replace(first, episodes=2),
+        params=trials.ch5,
+        stream_cfg=trials.streams[first.stream],
+        seed=SEED,
+        physics=sim.physics,
+        camera=sim.camera,
+        max_attempts=trials.max_attempts,
+        record_images=False,
+        prob_threshold=0.5,
+        scene_type=first.stream.removeprefix("ch5_"),
+        oracle_detector=False,
         collapse_free=trials.collapse_free,
     )
     assert jobs[0] == own[0] and jobs[-1] == own[1]
-    assert all(j["seed"] == SEED and not j["oracle_detector"] for j in jobs)
+    assert all(j.seed == SEED and not j.oracle_detector for j in jobs)
 
 
 def test_the_ch3_workload_is_the_stages_games_without_the_convnet():
@@ -168,12 +169,12 @@ def test_the_ch3_workload_is_the_stages_games_without_the_convnet():
 
     fn, jobs, units = workload_jobs("trials_ch3", "tiny", 0, 0, 4)
     assert fn is run_ch3_game and units == len(jobs) == 4
-    assert [j["variant"] for j in jobs] == ["no_convnet", "random", "oracle", "no_convnet"]
+    assert [j.condition for j in jobs] == ["no_convnet", "random", "oracle", "no_convnet"]
     assert set(CH3_NETWORK_FREE) == {"no_convnet", "random", "oracle"}
-    assert [j["game"] for j in jobs] == [0, 0, 0, 1]
-    assert [j["seed"] for j in jobs] == [pile_seed(SEED, "ch3_games", g) for g in (0, 0, 0, 1)]
-    assert all(j["model"] is None and not j["mcap_images"] for j in jobs)
-    assert jobs[0]["cfg"].games.variants == ("no_convnet",)
+    assert [j.index for j in jobs] == [0, 0, 0, 1]
+    assert [j.seed for j in jobs] == [pile_seed(SEED, "ch3_games", g) for g in (0, 0, 0, 1)]
+    assert all(j.model is None and not j.record_images for j in jobs)
+    assert jobs[0].cfg.games.variants == ("no_convnet",)
 
 
 @pytest.fixture
@@ -204,15 +205,15 @@ def test_the_arm_workload_runs_the_arm_conditions_whose_network_exists(bare):
     assert unavailable("trials_arm", "tiny") is None
     fn, jobs, units = workload_jobs("trials_arm", "tiny", 0, 0, 2)
     assert fn is run_arm_episode and units == len(jobs) == 2
-    assert [j["condition"] for j in jobs] == ["bench_various_5_arm"] * 2
-    assert [j["index"] for j in jobs] == [0, 1]
-    assert all(j["chapter"] == 4 and j["cond"].executor == "arm" for j in jobs)
-    assert all(j["seed"] == SEED and j["cond"].planner == "risk" for j in jobs)
+    assert [j.condition for j in jobs] == ["bench_various_5_arm"] * 2
+    assert [j.index for j in jobs] == [0, 1]
+    assert all(isinstance(j, Ch4Job) and j.cond.executor == "arm" for j in jobs)
+    assert all(j.seed == SEED and j.cond.planner == "risk" for j in jobs)
     # the ch. 6 conditions' network without the support stage's thresholds: still not run
     (bare / "models/cp_focal").mkdir()
     (bare / "models/cp_focal/best.pt").touch()
     _, jobs, _ = workload_jobs("trials_arm", "tiny", 0, 0, 2)
-    assert {j["condition"] for j in jobs} == {"bench_various_5_arm"}
+    assert {j.condition for j in jobs} == {"bench_various_5_arm"}
 
 
 def test_the_bench_skips_a_workload_it_cannot_run_with_a_line(bare, monkeypatch, capsys):

@@ -65,15 +65,15 @@ def test_jobs_run_each_variant_on_dev_streams_only(root, monkeypatch):
     assert len(jobs) == len(cfg.streams) * len(cfg.variants) * arms * cfg.episodes
     seen = set()
     for job in jobs:
-        label, stream = job["condition"].split("/")
+        label, stream = job.condition.split("/")
         variant, planner, perception = label.split(":")
         seen.add((stream, variant, planner))
-        assert stream in cfg.streams and stream.startswith("dev_") and job["cond"].stream == stream
-        assert job["stream_cfg"] == dev.streams[stream] and not job["record_images"]
+        assert stream in cfg.streams and stream.startswith("dev_") and job.cond.stream == stream
+        assert job.stream_cfg == dev.streams[stream] and not job.record_images
         rp = ch5.planner_params(job)
         for key, value in cfg.variants[variant].items():
-            assert getattr(job["params"], key) == value and getattr(rp, key) == value
-        assert (job["cond"].planner, job["cond"].perception) == (planner, perception)
+            assert getattr(job.params, key) == value and getattr(rp, key) == value
+        assert (job.cond.planner, job.cond.perception) == (planner, perception)
     assert {v for _, v, _ in seen} == set(cfg.variants)
     assert {p for _, _, p in seen} == set(cfg.planners) | {"oracle"}
     assert current_variant(cfg.variants, load_section(TrialsConfig, "trials", params).ch5)

@@ -76,21 +76,21 @@ def test_jobs_run_each_variant_on_dev_streams_and_reach_the_planner(root, tmp_pa
     assert len(jobs) == len(cfg.streams) * arms * cfg.episodes
     seen = set()
     for job in jobs:
-        label, stream = job["condition"].split("/")
+        label, stream = job.condition.split("/")
         variant, planner = label.split(":")
         seen.add((variant, planner))
-        assert stream in cfg.streams and stream.startswith("dev_") and job["stream"] == stream
-        assert job["stream_cfg"] == dev.streams[stream] and job["planner"] == planner
+        assert stream in cfg.streams and stream.startswith("dev_") and job.stream == stream
+        assert job.stream_cfg == dev.streams[stream] and job.planner == planner
         for key, value in cfg.variants.get(variant, {}).items():
-            assert getattr(job["params"], key) == value
+            assert getattr(job.params, key) == value
         pull_head = planner in ("multi_step_pull", "bimanual_pull")
         # a pull planner runs with the thresholds of its meaning's head
-        collapse = job["params"].pull_map_meaning == "collapse"
+        collapse = job.params.pull_map_meaning == "collapse"
         expect = (0.5 if collapse else 0.4) if pull_head else 0.3
-        assert job["support"].score_threshold == expect
-        if variant != "-" and job["index"] == 0 and not pull_head:  # the variant reaches it
+        assert job.support.score_threshold == expect
+        if variant != "-" and job.index == 0 and not pull_head:  # the variant reaches it
             made = make_planner(job, object())  # truth maps keep the spec only
-            assert made.learn_from_aborts == (job["params"].abort_response == "learn")
+            assert made.learn_from_aborts == (job.params.abort_response == "learn")
     assert {v for v, _ in seen} == set(cfg.variants) | {"-"}
     assert {p for _, p in seen} == set(cfg.planners) | {"oracle", "oracle_hold"}
 
@@ -220,8 +220,10 @@ def test_pull_thresholds_reach_only_the_pull_head_planners(root, tmp_path, monke
         assert support.max_gap_m == 0.05  # the rest stays the support stage's choice
     cond = ConditionConfig("bimanual_pull", "ch6_3_10", 1, "coverage_gap")
     staged = dataclasses.replace(trials, ch6=ch6)
-    jobs, support, cp_max = condition_jobs("c", cond, staged, 0, None, None, path)
-    assert (jobs[0]["support"].prob_threshold, jobs[0]["cp_max"], cp_max) == (0.2, 0.8, 0.8)
+    jobs, support, cp_max = condition_jobs(
+        name="c", cond=cond, trials=staged, seed=0, physics=None, camera=None, thresholds=path
+    )
+    assert (jobs[0].support.prob_threshold, jobs[0].cp_max, cp_max) == (0.2, 0.8, 0.8)
     monkeypatch.setattr(ch6_pull, "THRESHOLDS", path)
     params["dev"]["ch6_pull_thresholds"] = {
         "streams": list(params["dev"]["ch6_pull"]["streams"]),
@@ -232,7 +234,7 @@ def test_pull_thresholds_reach_only_the_pull_head_planners(root, tmp_path, monke
     }
     dev = load_section(DevConfig, "dev", params)
     got = {
-        j["condition"].split("/")[0]: (j["support"].prob_threshold, j["cp_max"])
+        j.condition.split("/")[0]: (j.support.prob_threshold, j.cp_max)
         for j in trial_jobs(dev, params, "ch6_pull_thresholds")
     }
     assert got == {

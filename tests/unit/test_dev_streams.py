@@ -198,14 +198,14 @@ def test_trials_run_each_network_and_the_oracle_on_dev_streams_only(root):
     cfg = dev.ch4_piles
     assert len(jobs) == len(cfg.streams) * (len(candidates) + cfg.oracle) * cfg.episodes
     for job in jobs:
-        label, stream = job["condition"].split("/")
-        assert stream in cfg.streams and job["cond"].stream == stream
-        assert job["stream_cfg"] == dev.streams[stream] and not job["record_images"]
+        label, stream = job.condition.split("/")
+        assert stream in cfg.streams and job.cond.stream == stream
+        assert job.stream_cfg == dev.streams[stream] and not job.record_images
         if label == "oracle":
-            assert job["cond"].planner == "oracle" and job["model_path"] is None
+            assert job.cond.planner == "oracle" and job.model_path is None
         else:
-            assert job["cond"].planner == "risk" and job["cond"].model == cfg.model
-            assert str(job["model_path"]) == f"{'a' if label == '6-6' else 'b'}/best.pt"
+            assert job.cond.planner == "risk" and job.cond.model == cfg.model
+            assert str(job.model_path) == f"{'a' if label == '6-6' else 'b'}/best.pt"
 
 
 def test_rows_and_report_from_records():

@@ -8,6 +8,8 @@ process already holds as it is); the first two tests run before it starts."""
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import os
 import signal
 import time
@@ -145,12 +147,23 @@ def episodes(tmp_path_factory):
     cond = ConditionConfig(planner="pull_target", stream="s", episodes=2)
     support = SupportParams("coverage", 0.5, 0.3, 2, 0.0)
     cam = CameraConfig(image_size=64)
-    jobs = ch6_jobs("c", cond, cfg, stream, 0, PhysicsConfig(), cam, support, 0.3, cp)
-    jobs = [j | {"ch4_model_path": cp} for j in jobs]
+    jobs = ch6_jobs(
+        condition="c",
+        cond=cond,
+        trials=cfg,
+        stream_cfg=stream,
+        seed=0,
+        physics=PhysicsConfig(),
+        camera=cam,
+        support=support,
+        cp_max=0.3,
+        model_path=cp,
+    )
+    jobs = [dataclasses.replace(j, ch4_model_path=cp) for j in jobs]
     return jobs, _written(tmp_path_factory.mktemp("processes"), jobs, None)
 
 
-def _written(out: Path, jobs: list[dict], parallel: ParallelConfig | None, fn=None) -> dict:
+def _written(out: Path, jobs: list, parallel: ParallelConfig | None, fn=None) -> dict:
     from clutterbench.trials.ch6.episodes import run_ch6_episode
     from clutterbench.trials.core.harness import run_episodes, write_mcap
     from clutterbench.trials.core.records import write_records
@@ -166,12 +179,13 @@ def test_episodes_are_byte_identical_on_either_backend(local_ray, episodes, tmp_
     assert _written(tmp_path, jobs, RAY) == processes
 
 
-def _killed_once(job: dict):
-    """Episode 1's worker process dies (SIGKILL) the first time it runs it."""
+def _killed_once(job, markers: str):
+    """Episode 1's worker process dies (SIGKILL) the first time it runs it (a file in
+    `markers` says it has)."""
     from clutterbench.trials.ch6.episodes import run_ch6_episode
 
-    marker = Path(job["markers"]) / str(job["index"])
-    if job["index"] == 1 and not marker.exists():
+    marker = Path(markers) / str(job.index)
+    if job.index == 1 and not marker.exists():
         marker.touch()
         os.kill(os.getpid(), signal.SIGKILL)
     return run_ch6_episode(job)
@@ -179,9 +193,9 @@ def _killed_once(job: dict):
 
 def test_a_killed_worker_is_rerun_and_the_bytes_are_the_same(local_ray, episodes, tmp_path):
     jobs, processes = episodes
-    jobs = [j | {"markers": str(tmp_path)} for j in jobs]
+    killed_once = functools.partial(_killed_once, markers=str(tmp_path))
     out = tmp_path / "out"
-    assert _written(out, jobs, ParallelConfig("ray", max_retries=1), _killed_once) == processes
+    assert _written(out, jobs, ParallelConfig("ray", max_retries=1), killed_once) == processes
     assert (tmp_path / "1").exists()  # it was killed once
 
 

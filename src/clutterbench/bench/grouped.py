@@ -215,16 +215,16 @@ def bench_trial_cp(params: dict[str, Any], episodes: int) -> dict[str, float]:
     for path, once in (("per_pair", False), ("grouped", True)):
         predictor = _use_predictor(model, sim.camera.image_size, once)
         jobs = ch6_jobs(
-            "bench",
-            cond,
-            trials,
-            trials.streams["ch6_3_10"],
-            99,
-            sim.physics,
-            sim.camera,
-            support,
-            support.score_threshold,
-            model,
+            condition="bench",
+            cond=cond,
+            trials=trials,
+            stream_cfg=trials.streams["ch6_3_10"],
+            seed=99,
+            physics=sim.physics,
+            camera=sim.camera,
+            support=support,
+            cp_max=support.score_threshold,
+            model_path=model,
         )
         run_ch6_episode(jobs[0])  # warm-up
         predictor.seconds, wall = 0.0, time.perf_counter()

@@ -8,6 +8,7 @@ stream (seed 99, never a table's), every decision timed: box fitting, the estima
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -59,21 +60,21 @@ def bench_physics_depth(out_dir: Path = Path("reports/bench"), episodes: int = E
                 times[k].clear()
             cond = ConditionConfig(planner=planner, stream="ch6_3_10", episodes=episodes)
             jobs = ch6_jobs(
-                "bench",
-                cond,
-                trials,
-                trials.streams["ch6_3_10"],
-                99,
-                sim.physics,
-                sim.camera,
-                None,
-                1.0,
-                Path("unused"),
+                condition="bench",
+                cond=cond,
+                trials=trials,
+                stream_cfg=trials.streams["ch6_3_10"],
+                seed=99,
+                physics=sim.physics,
+                camera=sim.camera,
+                support=None,
+                cp_max=1.0,
+                model_path=Path("unused"),
             )
             walls = []
             for job in jobs:
                 t0 = time.perf_counter()
-                run_ch6_episode(job | {"stream": "bench", "record_images": False})
+                run_ch6_episode(dataclasses.replace(job, stream="bench", record_images=False))
                 walls.append(time.perf_counter() - t0)
             result[f"{planner}_decision_s_median"] = float(np.median(times["decision"]))
             result[f"{planner}_decision_s_p90"] = float(np.percentile(times["decision"], 90))

@@ -69,18 +69,18 @@ def bench_ch5(out_dir: Path = Path("reports/bench")) -> dict:
             name = f"{planner}_{scene_type}"
             cond = trials.ch5_conditions[name]
             jobs = ch5.ch5_jobs(
-                name,
-                cond,
-                trials.ch5,
-                trials.streams[cond.stream],
-                SEED,
-                sim.physics,
-                sim.camera,
-                trials.max_attempts,
-                False,
-                prob,
-                scene_type,
-                True,
+                condition=name,
+                cond=cond,
+                params=trials.ch5,
+                stream_cfg=trials.streams[cond.stream],
+                seed=SEED,
+                physics=sim.physics,
+                camera=sim.camera,
+                max_attempts=trials.max_attempts,
+                record_images=False,
+                prob_threshold=prob,
+                scene_type=scene_type,
+                oracle_detector=True,
             )[:N_SCENES]
             ch5.run_ch5_episode(jobs[0])  # warm-up: models loaded, shaders compiled
             episodes[name] = [_timed(ch5.run_ch5_episode, job)[1] for job in jobs]
@@ -90,12 +90,12 @@ def bench_ch5(out_dir: Path = Path("reports/bench")) -> dict:
                 spec, t = _timed(
                     draw_trial_spec,
                     cond.stream,
-                    job["stream_cfg"],
-                    job["seed"],
-                    job["index"],
+                    job.stream_cfg,
+                    job.seed,
+                    job.index,
                     sim.physics,
                     sim.camera,
-                    job["max_attempts"],
+                    job.max_attempts,
                     keep_groups=True,
                 )
                 parts["draw"].append(t)
@@ -111,9 +111,7 @@ def bench_ch5(out_dir: Path = Path("reports/bench")) -> dict:
                 clusters = place_clusters(obs, dets, space)
                 if clusters:
                     parts["collapse_map"].append(_timed(cmap, obs, clusters[0].mask)[1])
-                size = ch5.new_box_size(
-                    job["seed"], cond.stream, job["index"], trials.ch5.new_boxes
-                )
+                size = ch5.new_box_size(job.seed, cond.stream, job.index, trials.ch5.new_boxes)
                 plan = ReplenishPlanner(ch5.planner_params(job), space, cmap).plan
                 parts["plan"].append(_timed(plan, obs, dets, size)[1])
     result: dict = {**cpu_description(), "scenes_per_type": N_SCENES}

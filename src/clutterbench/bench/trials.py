@@ -67,15 +67,15 @@ def bench_ch4(trials: TrialsConfig, sim: SimConfig, scenes: int) -> dict:
             model=model if planner == "risk" else None,
         )
         jobs = ch4_jobs(
-            "bench",
-            cond,
-            trials.ch4,
-            trials.streams[cond.stream],
-            99,
-            sim.physics,
-            sim.camera,
-            trials.max_attempts,
-            trials.mcap_images,
+            condition="bench",
+            cond=cond,
+            params=trials.ch4,
+            stream_cfg=trials.streams[cond.stream],
+            seed=99,
+            physics=sim.physics,
+            camera=sim.camera,
+            max_attempts=trials.max_attempts,
+            record_images=trials.mcap_images,
         )
         wall = []
         for job in jobs:
@@ -118,16 +118,16 @@ def bench_trials(
     for planner_name in ("single_step", "multi_step", "bimanual", "oracle", "random"):
         cond = ConditionConfig(planner=planner_name, stream="ch6_3_10", episodes=episodes)
         jobs = ch6_jobs(
-            "bench",
-            cond,
-            trials,
-            trials.streams["ch6_3_10"],
-            99,
-            sim.physics,
-            sim.camera,
-            support,
-            support.score_threshold,
-            model,
+            condition="bench",
+            cond=cond,
+            trials=trials,
+            stream_cfg=trials.streams["ch6_3_10"],
+            seed=99,
+            physics=sim.physics,
+            camera=sim.camera,
+            support=support,
+            cp_max=support.score_threshold,
+            model_path=model,
         )
         wall = []
         for job in jobs:

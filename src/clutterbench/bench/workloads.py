@@ -24,10 +24,16 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from clutterbench.config import load_params, load_section
 from clutterbench.errors import ClutterbenchError
+
+if TYPE_CHECKING:
+    from clutterbench.trials.ch3.games import Ch3Job
+    from clutterbench.trials.ch4.episodes import Ch4Job
+    from clutterbench.trials.ch5.episodes import Ch5Job
+    from clutterbench.trials.ch6.episodes import Ch6Job
 
 WORKLOADS = (
     "generate",
@@ -52,26 +58,29 @@ NETWORK_PLANNERS = ("single_step", "multi_step", "bimanual", "multi_step_pull", 
 """The ch. 6 planners that read a trained network: left out of the bench's trials mix (the
 bench runs before, or without, any training)."""
 
+J = TypeVar("J")
+
 
 def mix_conditions(trials: Any) -> list[str]:
     """The trials stage's conditions whose planner needs no trained network, in params order."""
     return [k for k, c in trials.conditions.items() if c.planner not in NETWORK_PLANNERS]
 
 
-def job_conditions(jobs: list[dict[str, Any]]) -> list[str]:
-    """The conditions (a game's variant) that `jobs` run, in order of first appearance."""
-    names = [j.get("condition", j.get("variant")) for j in jobs]
+def job_conditions(jobs: list[Any]) -> list[str]:
+    """The conditions (a game's variant) that `jobs` run, in order of first appearance (the
+    data workloads' jobs, dicts, run none)."""
+    names = [getattr(j, "condition", None) for j in jobs]
     return [n for n in dict.fromkeys(names) if n is not None]
 
 
-def round_robin(by_condition: list[list[dict[str, Any]]], n: int) -> list[dict[str, Any]]:
+def round_robin(by_condition: list[list[J]], n: int) -> list[J]:
     """The first `n` jobs taken one per condition in turn (each list as long as the first)."""
     return [js[i] for i in range(len(by_condition[0])) for js in by_condition][:n]
 
 
 def workload_jobs(
     workload: str, scale: str, shards: int, shard_size: int, episodes: int
-) -> tuple[Any, list[dict[str, Any]], int]:
+) -> tuple[Any, list[Any], int]:
     """(job function, jobs, units): units are scenes (generate), piles (slides), games
     (trials_ch3) or episodes (the other trials); `episodes` is the job count of every trials
     workload."""
@@ -139,7 +148,7 @@ def _generate_jobs(
     return shard_arrays, jobs, shards * shard_size
 
 
-def _trials_jobs(trials: Any, sim: Any, episodes: int) -> tuple[Any, list[dict[str, Any]], int]:
+def _trials_jobs(trials: Any, sim: Any, episodes: int) -> tuple[Any, list[Ch6Job], int]:
     """The trials stage's mix: ch. 6 episodes of its network-free conditions, round-robin."""
     from clutterbench.planning.ch6.support import SupportParams
     from clutterbench.trials.ch6.episodes import ch6_jobs, run_ch6_episode
@@ -156,16 +165,16 @@ def _trials_jobs(trials: Any, sim: Any, episodes: int) -> tuple[Any, list[dict[s
         cond = ConditionConfig(planner=cond.planner, stream=cond.stream, episodes=per)
         by_condition.append(
             ch6_jobs(
-                f"bench_{name}",
-                cond,
-                trials,
-                trials.streams[cond.stream],
-                SEED,
-                sim.physics,
-                sim.camera,
-                support,
-                0.5,
-                Path("models/none/best.pt"),  # no planner of the mix loads a network
+                condition=f"bench_{name}",
+                cond=cond,
+                trials=trials,
+                stream_cfg=trials.streams[cond.stream],
+                seed=SEED,
+                physics=sim.physics,
+                camera=sim.camera,
+                support=support,
+                cp_max=0.5,
+                model_path=Path("models/none/best.pt"),  # no planner of the mix loads a network
             )
         )
     jobs = round_robin(by_condition, episodes)
@@ -199,7 +208,7 @@ CH4_NETWORK_FREE = ("random", "oracle")
 
 def _ch4_jobs(
     params: dict[str, Any], trials: Any, sim: Any, episodes: int
-) -> tuple[Any, list[dict[str, Any]], int]:
+) -> tuple[Any, list[Ch4Job], int]:
     """The trials_ch4 stage's network-free conditions, `episodes` trials round-robin."""
     from clutterbench.trials.ch4.episodes import run_ch4_episode
 
@@ -216,22 +225,22 @@ def _ch4_jobs(
     return run_ch4_episode, jobs, episodes
 
 
-def _bench_ch4_jobs(name: str, cond: Any, trials: Any, sim: Any) -> list[dict[str, Any]]:
+def _bench_ch4_jobs(name: str, cond: Any, trials: Any, sim: Any) -> list[Ch4Job]:
     """Ch. 4 condition `cond`'s jobs on the bench's seed, without MCAP images, as the
     trials_ch4 (kinematic) and trials_arm (cond.executor "arm") stages build them."""
     from clutterbench.trials.ch4.episodes import ch4_jobs
 
     return ch4_jobs(
-        f"bench_{name}",
-        cond,
-        trials.ch4,
-        trials.streams[cond.stream],
-        SEED,
-        sim.physics,
-        sim.camera,
-        trials.max_attempts,
-        False,
-        trials.arm if cond.executor == "arm" else None,
+        condition=f"bench_{name}",
+        cond=cond,
+        params=trials.ch4,
+        stream_cfg=trials.streams[cond.stream],
+        seed=SEED,
+        physics=sim.physics,
+        camera=sim.camera,
+        max_attempts=trials.max_attempts,
+        record_images=False,
+        arm=trials.arm if cond.executor == "arm" else None,
         collapse_free=trials.collapse_free,
     )
 
@@ -244,7 +253,7 @@ def ch5_network_free(cond: Any) -> bool:
     return cond.planner not in COLLAPSE_PLANNERS and cond.perception != "detector"
 
 
-def _ch5_jobs(trials: Any, sim: Any, episodes: int) -> tuple[Any, list[dict[str, Any]], int]:
+def _ch5_jobs(trials: Any, sim: Any, episodes: int) -> tuple[Any, list[Ch5Job], int]:
     """The trials_ch5 stage's network-free conditions, `episodes` episodes round-robin. Its
     oracles do not also simulate the actions seen through the detector (the stage's do,
     `oracle_detector`, since its other conditions perceive with the detector): that needs the
@@ -262,18 +271,18 @@ def _ch5_jobs(trials: Any, sim: Any, episodes: int) -> tuple[Any, list[dict[str,
         cond = dataclasses.replace(trials.ch5_conditions[name], episodes=per)
         by_condition.append(
             ch5_jobs(
-                f"bench_{name}",
-                cond,
-                trials.ch5,
-                trials.streams[cond.stream],
-                SEED,
-                sim.physics,
-                sim.camera,
-                trials.max_attempts,
-                False,
-                prob,
-                cond.stream.removeprefix("ch5_"),
-                False,  # oracle_detector: no detector network
+                condition=f"bench_{name}",
+                cond=cond,
+                params=trials.ch5,
+                stream_cfg=trials.streams[cond.stream],
+                seed=SEED,
+                physics=sim.physics,
+                camera=sim.camera,
+                max_attempts=trials.max_attempts,
+                record_images=False,
+                prob_threshold=prob,
+                scene_type=cond.stream.removeprefix("ch5_"),
+                oracle_detector=False,  # oracle_detector: no detector network
                 collapse_free=trials.collapse_free,
             )
         )
@@ -286,7 +295,7 @@ CH3_NETWORK_FREE = ("no_convnet", "random", "oracle")
 convnet_no_pomdp read the slide ConvNet)."""
 
 
-def _ch3_jobs(params: dict[str, Any], games: int) -> tuple[Any, list[dict[str, Any]], int]:
+def _ch3_jobs(params: dict[str, Any], games: int) -> tuple[Any, list[Ch3Job], int]:
     """The trials_ch3 stage's network-free variants, `games` games round-robin (game g of
     every variant on the pile of the bench's seed stream ch3_games, g)."""
     from clutterbench.criteria import CollapseFreeConfig
@@ -306,7 +315,12 @@ def _ch3_jobs(params: dict[str, Any], games: int) -> tuple[Any, list[dict[str, A
             cfg, games=dataclasses.replace(cfg.games, variants=(v,), n_games=per, mcap_images=False)
         )
         by_variant.append(
-            ch3_jobs(one, lambda g: pile_seed(SEED, "ch3_games", g), None, collapse_free)
+            ch3_jobs(
+                cfg=one,
+                seed_of=lambda g: pile_seed(SEED, "ch3_games", g),
+                model=None,
+                collapse_free=collapse_free,
+            )
         )
     jobs = round_robin(by_variant, games)
     return run_ch3_game, jobs, games
@@ -314,7 +328,7 @@ def _ch3_jobs(params: dict[str, Any], games: int) -> tuple[Any, list[dict[str, A
 
 def _arm_condition_jobs(
     name: str, arm: Any, trials: Any, sim: Any, episodes: int
-) -> list[dict[str, Any]]:
+) -> list[Ch4Job] | list[Ch6Job]:
     """Arm condition `name`'s first `episodes` episodes on the bench's seed, built as the
     trials_arm stage builds them; a ClutterbenchError when its network (or a ch. 6
     condition's support thresholds) is missing."""
@@ -325,13 +339,19 @@ def _arm_condition_jobs(
         load_planners(trials.planner_modules, [cond.planner])
         no_images = dataclasses.replace(trials, mcap_images=False)
         jobs, _, _ = condition_jobs(
-            f"bench_{name}", cond, no_images, SEED, sim.physics, sim.camera, ARM_THRESHOLDS
+            name=f"bench_{name}",
+            cond=cond,
+            trials=no_images,
+            seed=SEED,
+            physics=sim.physics,
+            camera=sim.camera,
+            thresholds=ARM_THRESHOLDS,
         )
-        return [j | {"chapter": 6} for j in jobs]
+        return jobs
     cond = dataclasses.replace(trials.ch4_conditions[arm.of], executor="arm", episodes=episodes)
     if cond.model is not None and not Path(f"models/{cond.model}/best.pt").exists():
         raise ClutterbenchError(f"models/{cond.model}/best.pt missing; run train@{cond.model}")
-    return [j | {"chapter": 4} for j in _bench_ch4_jobs(name, cond, trials, sim)]
+    return _bench_ch4_jobs(name, cond, trials, sim)
 
 
 def arm_conditions(trials: Any, sim: Any) -> tuple[list[str], dict[str, str]]:
@@ -348,7 +368,7 @@ def arm_conditions(trials: Any, sim: Any) -> tuple[list[str], dict[str, str]]:
     return ok, why
 
 
-def _arm_jobs(trials: Any, sim: Any, episodes: int) -> tuple[Any, list[dict[str, Any]], int]:
+def _arm_jobs(trials: Any, sim: Any, episodes: int) -> tuple[Any, list[Ch4Job | Ch6Job], int]:
     """The trials_arm stage's conditions whose networks exist, `episodes` episodes
     round-robin; none: a ClutterbenchError naming what is missing."""
     from clutterbench.trials.arm.episodes import run_arm_episode

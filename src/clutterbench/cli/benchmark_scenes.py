@@ -92,28 +92,38 @@ def scale_jobs(params: dict[str, Any], scale: str) -> list[dict[str, Any]]:
 
 
 def ch5_start_jobs(cfg: TrialsConfig, seed: int, sim: SimConfig) -> list[dict[str, Any]]:
-    """The ch. 5 trials' own jobs, one per distinct start (the start depends on the stream
-    and the candidates' geometry, not on the planner)."""
+    """The ch. 5 trials' own jobs (each a start job naming the trials' Ch5Job, "job"), one per
+    distinct start (the start depends on the stream and the candidates' geometry, not on the
+    planner)."""
     from clutterbench.trials.ch5.episodes import ch5_jobs
 
     jobs, seen = [], set()
     for name, cond in cfg.ch5_conditions.items():
         for job in ch5_jobs(
-            name,
-            cond,
-            cfg.ch5,
-            cfg.streams[cond.stream],
-            seed,
-            sim.physics,
-            sim.camera,
-            cfg.max_attempts,
-            False,
-            0.5,  # the collapse threshold: no start depends on it
-            cond.stream.removeprefix("ch5_"),
+            condition=name,
+            cond=cond,
+            params=cfg.ch5,
+            stream_cfg=cfg.streams[cond.stream],
+            seed=seed,
+            physics=sim.physics,
+            camera=sim.camera,
+            max_attempts=cfg.max_attempts,
+            record_images=False,
+            prob_threshold=0.5,  # the collapse threshold: no start depends on it
+            scene_type=cond.stream.removeprefix("ch5_"),
         ):
-            if (cond.stream, job["index"]) not in seen:
-                seen.add((cond.stream, job["index"]))
-                jobs.append(job | {"kind": "ch5", "stream": cond.stream})
+            if (cond.stream, job.index) not in seen:
+                seen.add((cond.stream, job.index))
+                jobs.append(
+                    {
+                        "kind": "ch5",
+                        "condition": job.condition,
+                        "stream": cond.stream,
+                        "index": job.index,
+                        "seed": job.seed,
+                        "job": job,
+                    }
+                )
     return jobs
 
 
@@ -148,10 +158,17 @@ def start_of(job: dict[str, Any], target: bool) -> Any:
     as the episode draws it)."""
     kind = job["kind"]
     if kind in ("ch6", "ch4"):
-        from clutterbench.trials.ch6.episodes import job_spec
-        from clutterbench.trials.core.scenes import draw_target
+        from clutterbench.trials.core.scenes import draw_target, draw_trial_spec
 
-        spec = job_spec(job)  # the stream's settled scene job["index"], as every trial draws it
+        spec = draw_trial_spec(  # the stream's settled scene job["index"], as every trial draws it
+            job["stream"],
+            job["stream_cfg"],
+            job["seed"],
+            job["index"],
+            job["physics"],
+            job["camera"],
+            job["max_attempts"],
+        )
         if target:
             obs = first_observation(spec, job)
             draw_target(job["seed"], job["stream"], job["index"], obs, job["min_pixels"], spec)
@@ -159,7 +176,7 @@ def start_of(job: dict[str, Any], target: bool) -> Any:
     if kind == "ch5":
         from clutterbench.trials.ch5.episodes import draw_start as ch5_start
 
-        return ch5_start(job)[0]
+        return ch5_start(job["job"])[0]
     if kind == "support":
         from clutterbench.sim.labelling import dataset_start
         from clutterbench.sim.shelf import Shelf

@@ -3,6 +3,7 @@ executed and logged."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
@@ -153,26 +154,26 @@ def plan(
             cond = ConditionConfig(planner=planner, stream=next(iter(trials.streams), "cli"))
             streams = trials.streams or {}
             job = ch6_jobs(
-                "cli",
-                cond,
-                trials,
-                streams.get(cond.stream),
-                0,
-                physics,
-                spec.camera,
-                support,
-                cp_max,
-                model_path,
+                condition="cli",
+                cond=cond,
+                trials=trials,
+                stream_cfg=streams.get(cond.stream),
+                seed=0,
+                physics=physics,
+                camera=spec.camera,
+                support=support,
+                cp_max=cp_max,
+                model_path=model_path,
             )[0]
-            job["ch4_model_path"] = (
-                require_file(
-                    default_path(None, str(job["ch4_model_path"])),
-                    "ch4 model",
-                    f"`dvc repro train@{trials.ch6.ch4_model}` makes it",
+            if planner == "single_step":
+                job = dataclasses.replace(
+                    job,
+                    ch4_model_path=require_file(
+                        default_path(None, str(job.ch4_model_path)),
+                        "ch4 model",
+                        f"`dvc repro train@{trials.ch6.ch4_model}` makes it",
+                    ),
                 )
-                if planner == "single_step"
-                else job["ch4_model_path"]
-            )
             result = run_extraction(spec, job, target)
             if mcap is not None:
                 write_mcap(mcap, [result], {"spec": spec_path.name, "planner": planner})

@@ -3,6 +3,7 @@ executed and logged."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
@@ -114,20 +115,20 @@ def replenish(
             )
         cond = Ch5ConditionConfig(planner=planner, stream="cli", perception=perception)
         job = ch5.ch5_jobs(
-            "cli",
-            cond,
-            trials.ch5,
-            SceneStreamConfig(families={"shelved": 1.0}),
-            0,
-            physics,
-            spec.camera,
-            trials.max_attempts,
-            mcap is not None,
-            prob,
-            "cli",
+            condition="cli",
+            cond=cond,
+            params=trials.ch5,
+            stream_cfg=SceneStreamConfig(families={"shelved": 1.0}),
+            seed=0,
+            physics=physics,
+            camera=spec.camera,
+            max_attempts=trials.max_attempts,
+            record_images=mcap is not None,
+            prob_threshold=prob,
+            scene_type="cli",
             collapse_free=trials.collapse_free,
         )[0]
-        job["model_path"], job["detector_path"] = model_path, detector
+        job = dataclasses.replace(job, model_path=model_path, detector_path=detector)
         state = SceneState.start(spec)
         obs = observe(BoxWorld.from_spec(spec, physics, render=True), spec.camera)
         dets = ch5_perception.perceive(job, spec, state, obs)

@@ -45,7 +45,7 @@ def yamakuzushi(
         from clutterbench.criteria import CollapseFreeConfig
         from clutterbench.parallel import worker_init
         from clutterbench.trials.ch3.config import VARIANTS, Ch3Config
-        from clutterbench.trials.ch3.games import run_ch3_game
+        from clutterbench.trials.ch3.games import Ch3Job, run_ch3_game
         from clutterbench.trials.core.harness import write_mcap
 
         if variant not in VARIANTS:
@@ -67,15 +67,15 @@ def yamakuzushi(
         if mcap is not None:
             check_out_file(mcap, "--mcap", "game.mcap")
         worker_init(1)
-        job = {
-            "variant": variant,
-            "game": 0,
-            "seed": seed,
-            "cfg": cfg,
-            "model": None if path is None else str(path),
-            "mcap_images": mcap is not None,
-            "collapse_free": collapse_free,
-        }
+        job = Ch3Job(
+            condition=variant,
+            index=0,
+            seed=seed,
+            cfg=cfg,
+            model=None if path is None else str(path),
+            record_images=mcap is not None,
+            collapse_free=collapse_free,
+        )
         result = run_ch3_game(job)
         for step in result.record["steps"]:
             typer.echo(json.dumps(step))
@@ -132,11 +132,12 @@ def yamakuzushi_validate(
         for p in min_probability:
             select = dataclasses.replace(cfg.select, min_probability=p)
             run = dataclasses.replace(cfg, games=games_cfg, select=select)
-            for job in ch3_jobs(run, lambda g: pile_seed(seed, "ch3_val", g), str(path)):
-                jobs.append(job | {"min_probability": p})
+            jobs += ch3_jobs(
+                cfg=run, seed_of=lambda g: pile_seed(seed, "ch3_val", g), model=str(path)
+            )
         results = run_episodes("validation games", run_ch3_game, jobs, cfg.games.workers)
         records = [
-            r.record | {"condition": f"{job['min_probability']:g}"}
+            r.record | {"condition": f"{job.cfg.select.min_probability:g}"}
             for r, job in zip(results, jobs, strict=True)
         ]
         summary = aggregate_games(records)

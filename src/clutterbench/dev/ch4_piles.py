@@ -25,7 +25,7 @@ import dataclasses
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.dev.command import OUT, run_command, save
@@ -41,6 +41,9 @@ from clutterbench.dev.stats import (
 )
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import load_npz, read_json, write_json
+
+if TYPE_CHECKING:
+    pass
 
 SCRATCH = Path("data/dev/ch4_piles")
 
@@ -163,18 +166,18 @@ def trial_jobs(
         for label, planner, model, checkpoint in runs:
             cond = Ch4ConditionConfig(planner, stream, episodes=cfg.episodes, model=model)
             for job in ch4_jobs(
-                f"{label}/{stream}",
-                cond,
-                trials.ch4,
-                dev.streams[stream],
-                seed,
-                sim.physics,
-                sim.camera,
-                trials.max_attempts,
+                condition=f"{label}/{stream}",
+                cond=cond,
+                params=trials.ch4,
+                stream_cfg=dev.streams[stream],
+                seed=seed,
+                physics=sim.physics,
+                camera=sim.camera,
+                max_attempts=trials.max_attempts,
                 record_images=False,
                 collapse_free=trials.collapse_free,
             ):
-                jobs.append(job | {"model_path": checkpoint, "piles": label})
+                jobs.append(dataclasses.replace(job, model_path=checkpoint))
     return jobs
 
 
@@ -386,7 +389,10 @@ def ch4_piles(
     t0 = time.perf_counter()
     jobs = trial_jobs(candidates, dev, params)
     results = run_episodes("dev ch4 piles", run_ch4_episode, jobs, trials.workers)
-    records = [r.record | {"piles": j["piles"]} for r, j in zip(results, jobs, strict=True)]
+    # condition "<piles>/<stream>": the piles label
+    records = [
+        r.record | {"piles": j.condition.split("/")[0]} for r, j in zip(results, jobs, strict=True)
+    ]
     trials_s = time.perf_counter() - t0
     write_records(scratch / "records.jsonl", records)
     rows = summary_rows(records, dev)

@@ -30,7 +30,7 @@ import dataclasses
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.dev.command import OUT, run_command, save
@@ -47,12 +47,15 @@ from clutterbench.dev.stats import (
 )
 from clutterbench.errors import ClutterbenchError
 
+if TYPE_CHECKING:
+    from clutterbench.trials.ch5.episodes import Ch5Job
+
 
 def condition_label(variant: str, planner: str, perception: str) -> str:
     return f"{variant}:{planner}:{perception}"
 
 
-def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]]:
+def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[Ch5Job]:
     """Every (stream, variant, arm) episode's job, condition "<variant>:<planner>:
     <perception>/<stream>": each planner through each perception, the oracle through the
     ground-truth clusters (and the detector's actions, as in trials_ch5), each with trials.ch5
@@ -81,18 +84,18 @@ def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[dict[str, Any]
     jobs = []
     for name, (variant, cond) in conds.items():
         jobs += ch5_jobs(
-            name,
-            cond,
-            dataclasses.replace(trials.ch5, **cfg.variants[variant]),
-            dev.streams[cond.stream],
-            base.seed,
-            sim.physics,
-            sim.camera,
-            trials.max_attempts,
-            False,
-            prob,
-            cond.stream.removeprefix("dev_ch5_"),
-            "detector" in cfg.perceptions,
+            condition=name,
+            cond=cond,
+            params=dataclasses.replace(trials.ch5, **cfg.variants[variant]),
+            stream_cfg=dev.streams[cond.stream],
+            seed=base.seed,
+            physics=sim.physics,
+            camera=sim.camera,
+            max_attempts=trials.max_attempts,
+            record_images=False,
+            prob_threshold=prob,
+            scene_type=cond.stream.removeprefix("dev_ch5_"),
+            oracle_detector="detector" in cfg.perceptions,
             collapse_free=trials.collapse_free,
         )
     return jobs

@@ -46,7 +46,7 @@ import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.dev.command import OUT, run_command, save
@@ -62,6 +62,9 @@ from clutterbench.dev.stats import (
     rate_text,
 )
 from clutterbench.errors import ClutterbenchError
+
+if TYPE_CHECKING:
+    from clutterbench.trials.ch6.episodes import Ch6Job
 
 THRESHOLDS = Path("reports/support/thresholds.json")
 ORACLE_VARIANT = "-"
@@ -79,7 +82,7 @@ def oracle_of(planner: str) -> str:
 
 def trial_jobs(
     dev: DevConfig, params: Mapping[str, Any], section: str = "ch6_pull"
-) -> list[dict[str, Any]]:
+) -> list[Ch6Job]:
     """Every (stream, variant, planner) episode's job, condition "<variant>:<planner>/<stream>",
     with trials.ch6 as params set it but for the variant's overrides, and both oracles'."""
     from clutterbench.sim.config import SimConfig
@@ -113,16 +116,16 @@ def trial_jobs(
             ch6 = dataclasses.replace(trials.ch6, **over)
             support, cp_max = planner_support(THRESHOLDS, planner, rule, ch6)
             jobs += ch6_jobs(
-                f"{condition_label(variant, planner)}/{stream}",
-                ConditionConfig(planner, stream, cfg.episodes, rule),
-                dataclasses.replace(trials, ch6=ch6),
-                dev.streams[stream],
-                base.seed,
-                sim.physics,
-                sim.camera,
-                support,
-                cp_max,
-                Path(f"models/{trials.ch6.model}/best.pt"),
+                condition=f"{condition_label(variant, planner)}/{stream}",
+                cond=ConditionConfig(planner, stream, cfg.episodes, rule),
+                trials=dataclasses.replace(trials, ch6=ch6),
+                stream_cfg=dev.streams[stream],
+                seed=base.seed,
+                physics=sim.physics,
+                camera=sim.camera,
+                support=support,
+                cp_max=cp_max,
+                model_path=Path(f"models/{trials.ch6.model}/best.pt"),
             )
     return jobs
 

@@ -32,10 +32,21 @@ from clutterbench.dev.command import OUT, run_command, save
 from clutterbench.dev.config import DevConfig, check_dev_streams
 from clutterbench.errors import ClutterbenchError, PerceptionError
 from clutterbench.observation import Observation
+from clutterbench.trials.ch6.episodes import Ch6Job
 from clutterbench.trials.ch6.planners import register_planner
 
 NAME = "perturbed_fit"
 PLANNERS = ("physics_from_depth", "physics_from_depth_hold")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True, repr=False)
+class PerturbedJob(Ch6Job):
+    """One scene of the recheck: a ch. 6 job (its planner replaced per episode) and its noise."""
+
+    depth_noise_m: float
+    """The Gaussian depth noise's standard deviation (m)."""
+    moved_threshold_m: float
+    """Table 6.2's moved threshold (support.moved_threshold_m)."""
 
 
 def perturbed(obs: Observation, sigma_m: float, rng: np.random.Generator) -> Observation:
@@ -45,18 +56,18 @@ def perturbed(obs: Observation, sigma_m: float, rng: np.random.Generator) -> Obs
     return dataclasses.replace(obs, depth_m=np.where(depth > 0, np.maximum(noisy, 1e-4), depth))
 
 
-def _noisy_estimator(job: dict[str, Any]):
+def _noisy_estimator(job: PerturbedJob):
     """make_estimator's fit, of the observation with this job's depth noise (seeded per
     scene and decision)."""
     from clutterbench.trials.ch6.physics_model import make_estimator
 
-    fit = make_estimator(job["stream_cfg"].catalogue, job["params"].min_pixels)
-    rng = np.random.default_rng([job["seed"], job["index"], 53])
-    return lambda obs: fit(perturbed(obs, job["depth_noise_m"], rng))
+    fit = make_estimator(job.stream_cfg.catalogue, job.params.min_pixels)
+    rng = np.random.default_rng([job.seed, job.index, 53])
+    return lambda obs: fit(perturbed(obs, job.depth_noise_m, rng))
 
 
 def _perturbed_planner(holding: bool):
-    def factory(job: dict[str, Any], spec: Any):
+    def factory(job: PerturbedJob, spec: Any):
         from clutterbench.trials.ch6.planners import _physics_from_depth
 
         planner = _physics_from_depth(job, spec, holding)
@@ -70,7 +81,7 @@ for _name in PLANNERS:
     register_planner(f"perturbed_{_name}")(_perturbed_planner(_name.endswith("_hold")))
 
 
-def run_job(job: dict[str, Any]) -> dict[str, Any]:
+def run_job(job: PerturbedJob) -> dict[str, Any]:
     """One scene: Table 6.2's row on its perturbed first image, then each planner's episode."""
     from clutterbench.sim.pull import SceneState, world_at
     from clutterbench.sim.render import observe
@@ -78,30 +89,28 @@ def run_job(job: dict[str, Any]) -> dict[str, Any]:
     from clutterbench.trials.ch6.physics_model import estimated_moved
 
     spec = job_spec(job)
-    obs = observe(
-        world_at(spec, SceneState.start(spec), job["physics"], render=True), job["camera"]
-    )
-    rng = np.random.default_rng([job["seed"], job["index"], 62])
+    obs = observe(world_at(spec, SceneState.start(spec), job.physics, render=True), job.camera)
+    rng = np.random.default_rng([job.seed, job.index, 62])
     ids = sorted(int(v) - 1 for v in np.unique(obs.instance) if v > 0)
     row: dict[str, Any] = {"dropped": 0, "outside": 0, "failed": 0}
     try:
         _, info = estimated_moved(
-            perturbed(obs, job["depth_noise_m"], rng),
+            perturbed(obs, job.depth_noise_m, rng),
             ids,
-            job["stream_cfg"].catalogue,
-            job["params"].min_pixels,
+            job.stream_cfg.catalogue,
+            job.params.min_pixels,
             spec.shelf,
-            job["camera"],
-            job["physics"],
-            job["params"].physics_depth_settle_s,
-            job["moved_threshold_m"],
+            job.camera,
+            job.physics,
+            job.params.physics_depth_settle_s,
+            job.moved_threshold_m,
         )
         row |= {"dropped": int(info["dropped"]), "outside": int(info["outside"])}
     except PerceptionError:  # Table 6.2 records it
         row["failed"] = 1
     out = {"table_6_2": row, "episodes": {}}
     for planner in PLANNERS:
-        rec = run_extraction(spec, job | {"planner": f"perturbed_{planner}"}).record
+        rec = run_extraction(spec, dataclasses.replace(job, planner=f"perturbed_{planner}")).record
         out["episodes"][planner] = {
             "decisions": len(rec["estimate_settle_mm"]),
             "dropped": sum(int(d or 0) for d in rec["estimate_dropped"]),
@@ -112,7 +121,7 @@ def run_job(job: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def jobs_of(dev: Any, params: Mapping[str, Any]) -> list[dict[str, Any]]:
+def jobs_of(dev: Any, params: Mapping[str, Any]) -> list[PerturbedJob]:
     from clutterbench.sim.config import SimConfig
     from clutterbench.support.config import SupportEvalConfig
     from clutterbench.trials.ch6.episodes import ch6_jobs
@@ -130,24 +139,27 @@ def jobs_of(dev: Any, params: Mapping[str, Any]) -> list[dict[str, Any]]:
         for seed, sigma in zip(cfg.seeds, cfg.depth_noise_m):
             cond = ConditionConfig(planner=PLANNERS[0], stream=stream, episodes=cfg.scenes)
             for job in ch6_jobs(
-                f"{stream}/seed{seed}",
-                cond,
-                trials,
-                dev.streams[stream],
-                seed,
-                sim.physics,
-                sim.camera,
-                None,
-                0.0,
-                OUT / "unused",
+                condition=f"{stream}/seed{seed}",
+                cond=cond,
+                trials=trials,
+                stream_cfg=dev.streams[stream],
+                seed=seed,
+                physics=sim.physics,
+                camera=sim.camera,
+                support=None,
+                cp_max=0.0,
+                model_path=OUT / "unused",
             ):
+                fields = {f.name: getattr(job, f.name) for f in dataclasses.fields(job)}
                 jobs.append(
-                    job
-                    | {
-                        "depth_noise_m": sigma,
-                        "moved_threshold_m": support.moved_threshold_m,  # Table 6.2's
-                        "record_images": False,
-                    }
+                    PerturbedJob(
+                        **fields
+                        | {
+                            "depth_noise_m": sigma,
+                            "moved_threshold_m": support.moved_threshold_m,  # Table 6.2's
+                            "record_images": False,
+                        }
+                    )
                 )
     return jobs
 
@@ -167,9 +179,9 @@ def recheck(params: Mapping[str, Any]) -> dict[str, Any]:
         for part, r in parts.items():
             rows.append(
                 {
-                    "stream": job["stream"],
-                    "seed": job["seed"],
-                    "noise_mm": 1000 * job["depth_noise_m"],
+                    "stream": job.stream,
+                    "seed": job.seed,
+                    "noise_mm": 1000 * job.depth_noise_m,
                     "part": part,
                 }
                 | {k: r[k] for k in ("decisions", "dropped", "outside", "failed")}

@@ -9,6 +9,7 @@ env stops a pull whose score exceeds it: Algorithm 1's abort, env.set_monitor).
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -56,7 +57,7 @@ class PlannerAgent:
         src = self.env.source
         root = _project_root()
         ch6 = src.trials.ch6
-        job = self.env.job(0) | {"planner": planner, "rule": rule}
+        job = dataclasses.replace(self.env.job(0), planner=planner, rule=rule)
         self.cp_max = np.inf
         if planner in CP_AGENTS:
             if support is None:
@@ -66,15 +67,17 @@ class PlannerAgent:
             if cp_max is None:
                 cp_max = ch6.cp_max if ch6.cp_max is not None else support.score_threshold
             self.cp_max = cp_max
-            job |= {
-                "support": support,
-                "cp_max": cp_max,
-                "model_path": model_path
-                or _require(root / f"models/{ch6.model}/best.pt", ch6.model),
-            }
+            job = dataclasses.replace(
+                job,
+                support=support,
+                cp_max=cp_max,
+                model_path=model_path or _require(root / f"models/{ch6.model}/best.pt", ch6.model),
+            )
         if planner == "single_step":
-            job["ch4_model_path"] = ch4_model_path or _require(
-                root / f"models/{ch6.ch4_model}/best.pt", ch6.ch4_model
+            job = dataclasses.replace(
+                job,
+                ch4_model_path=ch4_model_path
+                or _require(root / f"models/{ch6.ch4_model}/best.pt", ch6.ch4_model),
             )
         self.name, self.job = planner, job
         self.planner: Any = None
@@ -86,7 +89,7 @@ class PlannerAgent:
     def _make(self, index: int) -> Any:
         from clutterbench.trials.ch6.planners import make_planner
 
-        self.job = self.job | {"index": index, "stream": self.env.source.name}
+        self.job = dataclasses.replace(self.job, index=index, stream=self.env.source.name)
         return make_planner(self.job, None)
 
     def reset(self, seed: int) -> None:

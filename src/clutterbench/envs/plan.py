@@ -43,8 +43,9 @@ taken, its own abort threshold (`cp_max`, a least-risk pull's) and its notes
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -57,6 +58,9 @@ from clutterbench.sim import benchmark
 from clutterbench.trials.core.harness import EpisodeResult
 from clutterbench.trials.core.protocol import STEP_FIELDS, STEP_NOTES, judge_episode
 from clutterbench.trials.core.streams import StreamSource, stream_source
+
+if TYPE_CHECKING:
+    from clutterbench.trials.ch6.episodes import Ch6Job
 
 MAX_BOXES = 30
 """Box indices an action can name (SceneStreamConfig allows at most 30 boxes)."""
@@ -160,7 +164,7 @@ class ClutterShelfPlanEnv(gym.Env):
         decision's own threshold, `decision`: module doc) it stops."""
         self.monitor, self.cp_max, self.decision_of = score, float(cp_max), decision
         if self.episode is not None:
-            self.episode.job["cp_max"] = self.cp_max
+            self.episode.job = dataclasses.replace(self.episode.job, cp_max=self.cp_max)
 
     def _decider(self) -> Any:
         return _Decider() if self.monitor is None else _Monitored(self, self.monitor)
@@ -172,31 +176,33 @@ class ClutterShelfPlanEnv(gym.Env):
         return observation_dict(obs, ep.target, ep.blocked)
 
     # -- gymnasium -------------------------------------------------------------------------------
-    def job(self, index: int) -> dict[str, Any]:
+    def job(self, index: int) -> Ch6Job:
         """The episode's job, as trials.ch6.ch6_jobs makes one (no planner of the registry:
         the decisions come from `step`)."""
+        from clutterbench.trials.ch6.episodes import Ch6Job
+
         src = self.source
-        return {
-            "condition": self.name,
-            "planner": self.name,
-            "rule": None,
-            "stream": src.name,
-            "stream_cfg": src.cfg,
-            "index": index,
-            "seed": src.seed,
-            "physics": src.physics,
-            "camera": src.camera,
-            "params": src.trials.ch6,
-            "collapse_free": src.trials.collapse_free,
-            "support": None,
-            "cp_max": self.cp_max,
-            "model_path": None,
-            "ch4_model_path": None,
-            "max_attempts": src.trials.max_attempts,
-            "record_images": self.record_images,
-            "executor": "kinematic",
-            "arm": src.trials.arm,
-        }
+        return Ch6Job(
+            condition=self.name,
+            planner=self.name,
+            rule=None,
+            stream=src.name,
+            stream_cfg=src.cfg,
+            index=index,
+            seed=src.seed,
+            physics=src.physics,
+            camera=src.camera,
+            params=src.trials.ch6,
+            collapse_free=src.trials.collapse_free,
+            support=None,
+            cp_max=self.cp_max,
+            model_path=None,
+            ch4_model_path=None,
+            max_attempts=src.trials.max_attempts,
+            record_images=self.record_images,
+            executor="kinematic",
+            arm=src.trials.arm,
+        )
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Episode `seed` (an int >= 0; None: the next one) of the stream; options may name

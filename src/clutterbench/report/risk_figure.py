@@ -142,7 +142,7 @@ def risk_figure(
     plt.close(fig)
 
 
-def draw_figure(job: dict[str, Any], out_path: Path) -> None:
+def draw_figure(job: Any, out_path: Path) -> None:
     """Thesis Fig. 4.8 from one episode of a risk condition in target mode: its scene, its
     target, the network's E / S / C for the supports of least risk (run in this process).
     The simulator and the trials' helpers load only when it is called, so the report stage
@@ -155,24 +155,24 @@ def draw_figure(job: dict[str, Any], out_path: Path) -> None:
     from clutterbench.trials.core.harness import load_predictor
     from clutterbench.trials.core.scenes import draw_target, draw_trial_spec
 
-    cond, params = job["cond"], job["params"]
+    cond, params = job.cond, job.params
     ensure_renderer()
     spec = draw_trial_spec(
         cond.stream,
-        job["stream_cfg"],
-        job["seed"],
-        job["index"],
-        job["physics"],
-        job["camera"],
-        job["max_attempts"],
+        job.stream_cfg,
+        job.seed,
+        job.index,
+        job.physics,
+        job.camera,
+        job.max_attempts,
     )
-    world = BoxWorld.from_spec(spec, job["physics"], render=True)
+    world = BoxWorld.from_spec(spec, job.physics, render=True)
     obs, seg = observe_and_segment(world, spec, job)
-    box = draw_target(job["seed"], cond.stream, job["index"], obs, params.min_target_pixels, spec)
+    box = draw_target(job.seed, cond.stream, job.index, obs, params.min_target_pixels, spec)
     k = target_segment(seg, obs.instance, box)
     if k is None or len(seg.ids) < 2:
-        raise ClutterbenchError(f"figure: episode {job['index']} has no target segment to draw")
-    predictor = load_predictor(job["model_path"], job["camera"].image_size)
+        raise ClutterbenchError(f"figure: episode {job.index} has no target segment to draw")
+    predictor = load_predictor(job.model_path, job.camera.image_size)
     _, pairs, risks, probs = plan_risk(predictor, obs, seg, k, params.pixel_threshold)
     labels = [
         f"segment {s}" if cond.perception == "depth" else f"box {seg.ids[s]}" for _, s in pairs
@@ -184,7 +184,7 @@ def draw_figure(job: dict[str, Any], out_path: Path) -> None:
         labels,
         probs,
         risks,
-        f"{job['condition']}, episode {job['index']}: extract box {box} (model {cond.model})",
+        f"{job.condition}, episode {job.index}: extract box {box} (model {cond.model})",
         params.pixel_threshold,
         box_masks=seg.masks,
         box_labels=[str(s) for s in range(len(seg.ids))]

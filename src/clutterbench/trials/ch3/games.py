@@ -20,6 +20,7 @@ One record per game (its slides in `steps`); the stage writes one row per slide 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -39,8 +40,9 @@ from clutterbench.planning.ch3.yamakuzushi import (
     random_targets,
 )
 from clutterbench.shogi_piece import PIECE_SIZE_M
-from clutterbench.trials.ch3.config import CONVNET_VARIANTS
+from clutterbench.trials.ch3.config import CONVNET_VARIANTS, Ch3Config
 from clutterbench.trials.core.harness import EpisodeLog, EpisodeResult
+from clutterbench.trials.core.jobs import EpisodeJob
 
 STEP_S = 1.0
 """Simulated seconds between two logged steps of a game on the MCAP timeline."""
@@ -167,19 +169,19 @@ def _oracle_choice(poses: np.ndarray, top: Observation, cfg) -> tuple[Target | N
     return None, None, tried
 
 
-def _targets(variant: str, job: dict[str, Any], top: Observation, rng) -> list[Target]:
-    cfg = job["cfg"]
+def _targets(variant: str, job: Ch3Job, top: Observation, rng) -> list[Target]:
+    cfg = job.cfg
     scan: ScanConfig = cfg.scan
     if variant in CONVNET_VARIANTS:
         with flush_denormals():  # as in training (clutterbench.denormals)
-            return convnet_targets(_convnet(job["model"]), top, scan, cfg.select)
+            return convnet_targets(_convnet(job.model), top, scan, cfg.select)
     if variant == "no_convnet":
         return least_occluded_targets(top, scan, cfg.select)
     return random_targets(top, scan, cfg.select, rng)
 
 
-def run_ch3_game(job: dict[str, Any]) -> EpisodeResult:
-    """One game of one variant on the pile of `job["seed"]`."""
+def run_ch3_game(job: Ch3Job) -> EpisodeResult:
+    """One game of one variant on the pile of `job.seed`."""
     from clutterbench.sim import benchmark
     from clutterbench.sim.pile import (
         PileWorld,
@@ -190,11 +192,11 @@ def run_ch3_game(job: dict[str, Any]) -> EpisodeResult:
         top_observation,
     )
 
-    cfg, variant = job["cfg"], job["variant"]
-    spec = generate_pile(cfg.pile, job["seed"])
+    cfg, variant = job.cfg, job.condition
+    spec = generate_pile(cfg.pile, job.seed)
     poses = np.array(spec.poses, dtype=np.float64)
-    rng = np.random.default_rng(job["seed"] + 7)
-    log = EpisodeLog(record_images=job["mcap_images"])
+    rng = np.random.default_rng(job.seed + 7)
+    log = EpisodeLog(record_images=job.record_images)
     steps: list[dict[str, Any]] = []
     stop: dict[str, Any] = {}
     end = "max_slides"
@@ -268,7 +270,7 @@ def run_ch3_game(job: dict[str, Any]) -> EpisodeResult:
                 "direction": chosen.direction,
                 "probability": chosen.probability,
                 **slide_outcome(bool(result.target_out), bool(result.others_still)),
-                "collapse_free": criteria.collapse_free(motion, job["collapse_free"]),
+                "collapse_free": criteria.collapse_free(motion, job.collapse_free),
                 "box_motion": motion,
                 "moved": list(result.moved),
                 "max_displacement_m": float(np.nanmax(result.displacement_m, initial=0.0)),
@@ -286,10 +288,10 @@ def run_ch3_game(job: dict[str, Any]) -> EpisodeResult:
     removed = sum(s["success"] for s in steps)
     record = {
         "condition": variant,
-        "game": job["game"],
-        "seed": job["seed"],
+        "game": job.index,
+        "seed": job.seed,
         "moved_threshold_m": cfg.slide.moved_threshold_m,
-        "collapse_free_params": dataclasses.asdict(job["collapse_free"]),
+        "collapse_free_params": dataclasses.asdict(job.collapse_free),
         "scene": pile_hash(spec),
         "scene_source": benchmark.source_of(pile_hash(spec)),
         "n_pieces": int(len(spec.poses)),
@@ -330,20 +332,34 @@ def slide_outcome(target_out: bool, others_still: bool) -> dict[str, Any]:
 DEFAULT_COLLAPSE_FREE = CollapseFreeConfig()
 
 
+@dataclasses.dataclass(frozen=True, kw_only=True, repr=False)
+class Ch3Job(EpisodeJob):
+    """One ch. 3 game: variant `condition` plays game `index` on the pile of `seed`."""
+
+    cfg: Ch3Config
+    """The yamakuzushi configuration (the pile, camera, scan, selection, slide, games)."""
+    model: str | None
+    """The slide ConvNet's checkpoint (None: no ConvNet variant runs)."""
+
+
 def ch3_jobs(
-    cfg, seed_of, model: str | None, collapse_free: CollapseFreeConfig = DEFAULT_COLLAPSE_FREE
-) -> list[dict[str, Any]]:
+    *,
+    cfg: Ch3Config,
+    seed_of: Callable[[int], int],
+    model: str | None,
+    collapse_free: CollapseFreeConfig = DEFAULT_COLLAPSE_FREE,
+) -> list[Ch3Job]:
     """Every (variant, game) job; game g of every variant plays the pile of seed_of(g)."""
     return [
-        {
-            "collapse_free": collapse_free,
-            "variant": v,
-            "game": g,
-            "seed": seed_of(g),
-            "cfg": cfg,
-            "model": model,
-            "mcap_images": cfg.games.mcap_images,
-        }
+        Ch3Job(
+            collapse_free=collapse_free,
+            condition=v,
+            index=g,
+            seed=seed_of(g),
+            cfg=cfg,
+            model=model,
+            record_images=cfg.games.mcap_images,
+        )
         for v in cfg.games.variants
         for g in range(cfg.games.n_games)
     ]

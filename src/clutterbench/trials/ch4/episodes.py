@@ -43,6 +43,7 @@ from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch4.execution import arm_pull_outcome, plan_oracle, pull_outcome
+from clutterbench.trials.ch4.jobs import Ch4Job
 from clutterbench.trials.config import Ch4ConditionConfig, Ch4TrialParams, SceneStreamConfig
 from clutterbench.trials.core.harness import (
     DECISION_TOPIC,
@@ -58,11 +59,11 @@ RISKS_LOGGED = 8
 
 # -- one episode ---------------------------------------------------------------------------
 def observe_and_segment(
-    world: BoxWorld, spec: SceneSpec, job: dict[str, Any]
+    world: BoxWorld, spec: SceneSpec, job: Ch4Job
 ) -> tuple[Observation, Segmentation]:
-    cond: Ch4ConditionConfig = job["cond"]
-    params: Ch4TrialParams = job["params"]
-    obs = observe(world, job["camera"])
+    cond: Ch4ConditionConfig = job.cond
+    params: Ch4TrialParams = job.params
+    obs = observe(world, job.camera)
     seg = segment(obs, cond.perception, min_pixels=params.min_pixels, roi=shelf_roi(spec.shelf))
     return obs, seg
 
@@ -75,23 +76,23 @@ def target_segment(seg: Segmentation, instance: np.ndarray, box: int) -> int | N
     return int(np.argmax(overlap))
 
 
-def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
-    """One ch. 4 trial on scene `job["index"]` of its stream."""
-    cond: Ch4ConditionConfig = job["cond"]
-    params: Ch4TrialParams = job["params"]
-    physics: PhysicsConfig = job["physics"]
+def run_ch4_episode(job: Ch4Job) -> EpisodeResult:
+    """One ch. 4 trial on scene `job.index` of its stream."""
+    cond: Ch4ConditionConfig = job.cond
+    params: Ch4TrialParams = job.params
+    physics: PhysicsConfig = job.physics
     spec = draw_trial_spec(
         cond.stream,
-        job["stream_cfg"],
-        job["seed"],
-        job["index"],
+        job.stream_cfg,
+        job.seed,
+        job.index,
         physics,
-        job["camera"],
-        job["max_attempts"],
+        job.camera,
+        job.max_attempts,
     )
     world = BoxWorld.from_spec(spec, physics, render=True)
     obs, seg = observe_and_segment(world, spec, job)
-    log = EpisodeLog(record_images=job["record_images"])
+    log = EpisodeLog(record_images=job.record_images)
     log.scene(0.0, spec.sizes_m, spec.shelf.boards(), obs.camera, obs.depth_m.shape)
     log.observation(0.0, obs.depth_m, obs.instance)
     log.poses(0.0, world.poses())
@@ -99,7 +100,7 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
     target_box = target_k = None
     if cond.mode == "target":
         target_box = draw_target(
-            job["seed"], cond.stream, job["index"], obs, params.min_target_pixels, spec
+            job.seed, cond.stream, job.index, obs, params.min_target_pixels, spec
         )
         target_k = target_segment(seg, obs.instance, target_box)
     decision: dict[str, Any] = {"candidates": 0}
@@ -113,7 +114,7 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
         )
         decision["candidates"] = len(pairs)
         if cond.planner == "risk":
-            predictor = load_predictor(job["model_path"], job["camera"].image_size)
+            predictor = load_predictor(job.model_path, job.camera.image_size)
             choice, pairs, risks, _ = plan_risk(
                 predictor, obs, seg, target_k, params.pixel_threshold
             )
@@ -126,7 +127,7 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
                 for k in top
             ]
         elif cond.planner == "random":
-            rng = policy_rng(job["seed"], cond.stream, job["index"], f"ch4_{cond.mode}_random")
+            rng = policy_rng(job.seed, cond.stream, job.index, f"ch4_{cond.mode}_random")
             chosen = random_pair(pairs, rng)
         else:
             box_pairs = [(boxes[x], boxes[s]) for x, s in pairs]
@@ -136,14 +137,14 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
                 for k, (x, s) in enumerate(box_pairs)
                 if x is not None and s is not None and x != s
             ]
-            rng = policy_rng(job["seed"], cond.stream, job["index"], f"ch4_{cond.mode}_oracle")
+            rng = policy_rng(job.seed, cond.stream, job.index, f"ch4_{cond.mode}_oracle")
             if usable:
                 k, tried, _ = plan_oracle(
                     spec,
                     physics,
                     [box_pairs[k] for k in usable],
                     params.moved_threshold_m,
-                    job["collapse_free"],
+                    job.collapse_free,
                     rng,
                 )
                 chosen = pairs[usable[k]]
@@ -161,7 +162,7 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
             x_box,
             s_box if s_box != x_box else None,
             params.moved_threshold_m,
-            job["collapse_free"],
+            job.collapse_free,
             job,
             log,
         )
@@ -172,7 +173,7 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
             x_box,
             s_box if s_box != x_box else None,
             params.moved_threshold_m,
-            job["collapse_free"],
+            job.collapse_free,
             world=world,
         )
     else:  # nothing graspable chosen (no pair, or a segment of no box): nothing was pulled
@@ -204,13 +205,13 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
     valid = bool(valid and (target_box is None or x_box == target_box))
     out = count_if_valid(out, valid)
     record = {
-        "condition": job["condition"],
-        "episode": job["index"],
-        "seed": job["seed"],
+        "condition": job.condition,
+        "episode": job.index,
+        "seed": job.seed,
         "stream": cond.stream,
         "family": spec.family,
         **benchmark.scene_fields(spec),
-        "catalogue": job["stream_cfg"].catalogue,
+        "catalogue": job.stream_cfg.catalogue,
         "n_objects": spec.n,
         "planner": cond.planner,
         "mode": cond.mode,
@@ -226,8 +227,8 @@ def run_ch4_episode(job: dict[str, Any]) -> EpisodeResult:
         "risk_ties": ties,
         "valid": valid,
         "collapse_free_params": {
-            "drop_m": job["collapse_free"].drop_m,
-            "tilt_deg": job["collapse_free"].tilt_deg,
+            "drop_m": job.collapse_free.drop_m,
+            "tilt_deg": job.collapse_free.tilt_deg,
         },
         "moved_threshold_m": params.moved_threshold_m,
     } | {k: _plain(v) for k, v in out.items()}
@@ -257,6 +258,7 @@ def _plain(v: Any) -> Any:
 
 
 def ch4_jobs(
+    *,
     condition: str,
     cond: Ch4ConditionConfig,
     params: Ch4TrialParams,
@@ -268,24 +270,24 @@ def ch4_jobs(
     record_images: bool,
     arm: ArmConfig | None = None,
     collapse_free: CollapseFreeConfig | None = None,
-) -> list[dict[str, Any]]:
+) -> list[Ch4Job]:
     """One job per episode (`collapse_free`: trials.collapse_free; None: its defaults)."""
     model_path = Path(f"models/{cond.model}/best.pt") if cond.model is not None else None
     return [
-        {
-            "condition": condition,
-            "cond": cond,
-            "params": params,
-            "stream_cfg": stream_cfg,
-            "index": i,
-            "seed": seed,
-            "physics": physics,
-            "camera": camera,
-            "model_path": model_path,
-            "max_attempts": max_attempts,
-            "record_images": record_images,
-            "arm": arm or ArmConfig(),
-            "collapse_free": collapse_free or CollapseFreeConfig(),
-        }
+        Ch4Job(
+            condition=condition,
+            cond=cond,
+            params=params,
+            stream_cfg=stream_cfg,
+            index=i,
+            seed=seed,
+            physics=physics,
+            camera=camera,
+            model_path=model_path,
+            max_attempts=max_attempts,
+            record_images=record_images,
+            arm=arm or ArmConfig(),
+            collapse_free=collapse_free or CollapseFreeConfig(),
+        )
         for i in range(cond.episodes)
     ]

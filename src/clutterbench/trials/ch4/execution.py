@@ -5,7 +5,7 @@ the oracle, which executes every candidate pair this way and keeps the best."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -17,6 +17,9 @@ from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.pull import SceneState
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.core.harness import EpisodeLog
+
+if TYPE_CHECKING:
+    from clutterbench.trials.ch4.jobs import Ch4Job
 
 
 # -- execution and the judge -----------------------------------------------------------------
@@ -66,7 +69,7 @@ def arm_pull_outcome(
     support: int | None,
     threshold_m: float,
     cf: CollapseFreeConfig,
-    job: dict[str, Any],
+    job: Ch4Job,
     log: EpisodeLog,
 ) -> dict[str, Any]:
     """pull_outcome with the Pandas (executor: arm): one straight pull, no lift (as the
@@ -81,7 +84,7 @@ def arm_pull_outcome(
         float("inf"),
         0.0,
         physics,
-        job["arm"],
+        job.arm,
         log,
         0.0,
     )

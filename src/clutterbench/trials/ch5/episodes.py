@@ -54,6 +54,7 @@ from clutterbench.sim.pull import SceneState, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch5.execution import execute
+from clutterbench.trials.ch5.jobs import Ch5Job
 from clutterbench.trials.ch5.oracle import action_set, oracle_choice
 from clutterbench.trials.ch5.perception import collapse_map_fn, perceive, true_clusters
 from clutterbench.trials.config import Ch5ConditionConfig, Ch5TrialParams, SceneStreamConfig
@@ -79,20 +80,20 @@ def new_box_size(seed: int, stream: str, index: int, catalogue: str) -> np.ndarr
 
 
 # -- the episode ---------------------------------------------------------------------------
-def run_ch5_episode(job: dict[str, Any]) -> EpisodeResult:
-    """One replenishment trial on scene `job["index"]` of its stream."""
+def run_ch5_episode(job: Ch5Job) -> EpisodeResult:
+    """One replenishment trial on scene `job.index` of its stream."""
     spec, size_m = draw_start(job)
     return replenish(spec, job, size_m)
 
 
-def draw_start(job: dict[str, Any]) -> tuple[SceneSpec, np.ndarray]:
-    """The episode's canonical start and new box (local extents): scene `job["index"]` of
+def draw_start(job: Ch5Job) -> tuple[SceneSpec, np.ndarray]:
+    """The episode's canonical start and new box (local extents): scene `job.index` of
     its stream, redrawn while a family of NO_FREE_PLACE offers a free candidate for it."""
-    cond: Ch5ConditionConfig = job["cond"]
-    physics: PhysicsConfig = job["physics"]
-    camera: CameraConfig = job["camera"]
-    params: Ch5TrialParams = job["params"]
-    size_m = new_box_size(job["seed"], cond.stream, job["index"], params.new_boxes)
+    cond: Ch5ConditionConfig = job.cond
+    physics: PhysicsConfig = job.physics
+    camera: CameraConfig = job.camera
+    params: Ch5TrialParams = job.params
+    size_m = new_box_size(job.seed, cond.stream, job.index, params.new_boxes)
 
     def no_free_place(spec: SceneSpec) -> str | None:
         """Thesis Fig. 5.9: a shelved start has no free placement candidate for this box."""
@@ -102,12 +103,12 @@ def draw_start(job: dict[str, Any]) -> tuple[SceneSpec, np.ndarray]:
 
     spec = draw_trial_spec(
         cond.stream,
-        job["stream_cfg"],
-        job["seed"],
-        job["index"],
+        job.stream_cfg,
+        job.seed,
+        job.index,
         physics,
         camera,
-        job["max_attempts"],
+        job.max_attempts,
         keep_groups=True,
         accept=no_free_place,
         # what no_free_place reads: the new box and the candidates' geometry
@@ -131,32 +132,32 @@ sure: docs/ch5-replenishment.md)."""
 
 
 def free_places(
-    spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray, obs: Observation | None = None
+    spec: SceneSpec, job: Ch5Job, size_m: np.ndarray, obs: Observation | None = None
 ) -> list[str]:
     """The placement candidates free at the canonical start of `spec` for a box of `size_m`,
     as "cluster:side", seen through the generator's ground-truth clusters (what the scene
     offers, whatever a detector would make of it)."""
     state = SceneState.start(spec)
     if obs is None:
-        obs = observe(world_at(spec, state, job["physics"], render=True), job["camera"])
+        obs = observe(world_at(spec, state, job.physics, render=True), job.camera)
     space = space_of(spec)
-    dets = true_clusters(spec, state, job["physics"], obs)
+    dets = true_clusters(spec, state, job.physics, obs)
     clusters = place_clusters(obs, dets, space)
     cands = candidates(obs, clusters, np.asarray(size_m, float), planner_params(job), space)
     return [f"{c.cluster}:{c.side}" for c in cands if c.free]
 
 
-def planner_params(job: dict[str, Any]) -> ReplenishParams:
-    p: Ch5TrialParams = job["params"]
+def planner_params(job: Ch5Job) -> ReplenishParams:
+    p: Ch5TrialParams = job.params
     return ReplenishParams(
         finger_m=p.finger_m,
-        prob_threshold=job["prob_threshold"],
+        prob_threshold=job.prob_threshold,
         iou_threshold=p.iou_threshold,
-        use_collapse=job["cond"].planner in COLLAPSE_PLANNERS,
+        use_collapse=job.cond.planner in COLLAPSE_PLANNERS,
         min_points=p.min_points,
         blocker_goal=p.blocker_goal,
         upright_footprint=p.upright_footprint,
-        contact=job["cond"].planner == "contact",
+        contact=job.cond.planner == "contact",
     )
 
 
@@ -166,15 +167,15 @@ COLLAPSE_PLANNERS = ("replenish", "contact")
 """Those that predict collapse (a collapse map network)."""
 
 
-def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = None):
+def replenish(spec: SceneSpec, job: Ch5Job, size_m: np.ndarray | None = None):
     """Replenish the settled `spec` with the job's planner -> the episode's record and MCAP
     events (the CLI calls this with a hand-built spec and a given box)."""
-    cond: Ch5ConditionConfig = job["cond"]
-    params: Ch5TrialParams = job["params"]
-    physics: PhysicsConfig = job["physics"]
-    camera: CameraConfig = job["camera"]
+    cond: Ch5ConditionConfig = job.cond
+    params: Ch5TrialParams = job.params
+    physics: PhysicsConfig = job.physics
+    camera: CameraConfig = job.camera
     if size_m is None:
-        size_m = new_box_size(job["seed"], cond.stream, job["index"], params.new_boxes)
+        size_m = new_box_size(job.seed, cond.stream, job.index, params.new_boxes)
     space = space_of(spec)
     rp = planner_params(job)
     planner = None
@@ -185,7 +186,7 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
     world = world_at(spec, state, physics, render=True)
     obs = observe(world, camera)
     free_at_start = free_places(spec, job, size_m, obs)
-    log = EpisodeLog(record_images=job["record_images"])
+    log = EpisodeLog(record_images=job.record_images)
     log.scene(0.0, spec.sizes_m, spec.shelf.boards(), obs.camera, obs.depth_m.shape)
     steps: list[dict[str, Any]] = []
     end, t, dt = "max_steps", 0.0, physics.timestep_s
@@ -206,12 +207,12 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
                 log.heatmap(t, "/planner/collapse_map", heat)
         elif cond.planner == "random":  # uniform over the action set, then as drawn
             options = action_set(obs, dets, size_m, rp, space)
-            rng = policy_rng(job["seed"], cond.stream, job["index"], f"ch5_random/{len(steps)}")
+            rng = policy_rng(job.seed, cond.stream, job.index, f"ch5_random/{len(steps)}")
             seq = options[int(rng.integers(len(options)))] if options else []
             plan, queued = (seq[0], seq[1:]) if seq else (Plan("none", None, None), [])
         else:
             views = [dets]
-            if job.get("oracle_detector"):  # the detector's actions too: no planner beats it
+            if job.oracle_detector:  # the detector's actions too: no planner beats it
                 views.append(perceive(job, spec, state, obs, "detector"))
             seq, tried = oracle_choice(spec, state, obs, views, size_m, rp, space, job)
             simulated += tried
@@ -223,7 +224,7 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
             why = {re.sub(r" by -?\d+$", "", w) for w in plan.info.get("why_not", []) if w}
             gave_up_why = sorted(why)
             break
-        out = execute(world, obs, plan, size_m, params, state.removed, job["collapse_free"])
+        out = execute(world, obs, plan, size_m, params, state.removed, job.collapse_free)
         steps.append(out.record)
         t += world.steps_taken * dt
         log.poses(t, world.poses())
@@ -241,13 +242,13 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
         (s["branch"] for s in steps if s["placed"]), steps[-1]["branch"] if steps else "none"
     )
     record = {
-        "condition": job["condition"],
-        "episode": job["index"],
-        "seed": job["seed"],
+        "condition": job.condition,
+        "episode": job.index,
+        "seed": job.seed,
         "stream": cond.stream,
         "family": spec.family,
         **benchmark.scene_fields(spec),
-        "scene_type": job["scene_type"],
+        "scene_type": job.scene_type,
         "n_objects": spec.n,
         "planner": cond.planner,
         "perception": cond.perception,
@@ -261,8 +262,8 @@ def replenish(spec: SceneSpec, job: dict[str, Any], size_m: np.ndarray | None = 
         "strict_success": end == "placed" and all(s["others_still"] for s in steps),
         "strict_steps": len(criteria.strict_prefix(steps)),
         "collapse_free_params": {
-            "drop_m": job["collapse_free"].drop_m,
-            "tilt_deg": job["collapse_free"].tilt_deg,
+            "drop_m": job.collapse_free.drop_m,
+            "tilt_deg": job.collapse_free.tilt_deg,
         },
         "moved_threshold_m": params.moved_threshold_m,
         "n_disturbed": int(sum(s["n_disturbed"] for s in steps)),
@@ -333,6 +334,7 @@ def _rounded(d: Any) -> Any:
 
 
 def ch5_jobs(
+    *,
     condition: str,
     cond: Ch5ConditionConfig,
     params: Ch5TrialParams,
@@ -346,29 +348,29 @@ def ch5_jobs(
     scene_type: str,
     oracle_detector: bool = False,
     collapse_free: CollapseFreeConfig | None = None,
-) -> list[dict[str, Any]]:
+) -> list[Ch5Job]:
     """One job per episode; `oracle_detector`: an oracle also simulates the actions seen
     through the detector (set when any condition perceives with it); `collapse_free`:
     trials.collapse_free (None: its defaults)."""
     return [
-        {
-            "condition": condition,
-            "cond": cond,
-            "params": params,
-            "stream_cfg": stream_cfg,
-            "index": i,
-            "seed": seed,
-            "physics": physics,
-            "camera": camera,
-            "model_path": Path(f"models/{params.model}/best.pt"),
-            "detector_path": Path("models/detector/best.pt"),
-            "prob_threshold": prob_threshold,
-            "max_attempts": max_attempts,
-            "record_images": record_images,
-            "scene_type": scene_type,
-            "oracle_detector": oracle_detector,
-            "collapse_free": collapse_free or CollapseFreeConfig(),
-        }
+        Ch5Job(
+            condition=condition,
+            cond=cond,
+            params=params,
+            stream_cfg=stream_cfg,
+            index=i,
+            seed=seed,
+            physics=physics,
+            camera=camera,
+            model_path=Path(f"models/{params.model}/best.pt"),
+            detector_path=Path("models/detector/best.pt"),
+            prob_threshold=prob_threshold,
+            max_attempts=max_attempts,
+            record_images=record_images,
+            scene_type=scene_type,
+            oracle_detector=oracle_detector,
+            collapse_free=collapse_free or CollapseFreeConfig(),
+        )
         for i in range(cond.episodes)
     ]
 

@@ -4,7 +4,7 @@ as they would be executed and takes the first that succeeds."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -32,6 +32,9 @@ from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch5.execution import execute
 from clutterbench.trials.config import Ch5TrialParams
+
+if TYPE_CHECKING:
+    from clutterbench.trials.ch5.jobs import Ch5Job
 
 
 # -- the floor and the ceiling -------------------------------------------------------------
@@ -103,17 +106,17 @@ def oracle_choice(
     size_m: np.ndarray,
     rp: ReplenishParams,
     space: WorkingSpace,
-    job: dict[str, Any],
+    job: Ch5Job,
 ) -> tuple[list[Plan], int]:
     """The first action sequence (in action_set's order, for each set of detections in
     `views` in turn) that succeeds under the strict criterion when simulated from the present
     state exactly as it would be executed, else the first that is collapse-free (a ceiling
     under each criterion: a strict success is collapse-free); none: the first one (it
     fails), or no plan."""
-    contact = job["cond"].planner != "oracle_no_contact"
+    contact = job.cond.planner != "oracle_no_contact"
     options = [seq for dets in views for seq in action_set(obs, dets, size_m, rp, space, contact)]
-    params: Ch5TrialParams = job["params"]
-    physics: PhysicsConfig = job["physics"]
+    params: Ch5TrialParams = job.params
+    physics: PhysicsConfig = job.physics
     tried = 0
     free: list[Plan] | None = None
     for seq in options[: params.oracle_budget]:
@@ -123,8 +126,8 @@ def oracle_choice(
         for k, plan in enumerate(seq):
             world = world_at(spec, now, physics, render=k > 0)
             if k > 0:  # what execution will see before its next step
-                view = observe(world, job["camera"])
-            out = execute(world, view, plan, size_m, params, now.removed, job["collapse_free"])
+                view = observe(world, job.camera)
+            out = execute(world, view, plan, size_m, params, now.removed, job.collapse_free)
             lost = out.placed_box is None and plan.candidate is not None
             ok = {key: ok[key] and out.record[key] and not lost for key in ok}
             if not ok["success"]:

@@ -5,7 +5,7 @@ loaded once per worker process."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -16,6 +16,9 @@ from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.pull import SceneState
 from clutterbench.sim.spec import SceneSpec
+
+if TYPE_CHECKING:
+    from clutterbench.trials.ch5.jobs import Ch5Job
 
 _MODELS: dict[str, Any] = {}
 
@@ -40,31 +43,31 @@ def true_clusters(spec: SceneSpec, state: SceneState, physics: PhysicsConfig, ob
 
 
 def perceive(
-    job: dict[str, Any],
+    job: Ch5Job,
     spec: SceneSpec,
     state: SceneState,
     obs: Observation,
     perception: str | None = None,
 ):
-    if (perception or job["cond"].perception) == "clusters":
-        return true_clusters(spec, state, job["physics"], obs)
+    if (perception or job.cond.perception) == "clusters":
+        return true_clusters(spec, state, job.physics, obs)
     from clutterbench.collapse.detector import ArrangementDetector
 
     detector = _cached(
-        str(job["detector_path"]),
-        lambda: ArrangementDetector.from_checkpoint(Path(job["detector_path"])),
+        str(job.detector_path),
+        lambda: ArrangementDetector.from_checkpoint(Path(job.detector_path)),
     )
     return detector.detect(obs.depth_m)
 
 
-def collapse_map_fn(job: dict[str, Any]):
+def collapse_map_fn(job: Ch5Job):
     """(obs, target mask) -> collapse probabilities, through the ch. 5 network."""
     from clutterbench.collapse.predict import CollapsePredictor
 
-    path = str(job["model_path"])
+    path = str(job.model_path)
     predictor = _cached(
         path,
-        lambda: CollapsePredictor.from_checkpoint(Path(path), image_size=job["camera"].image_size),
+        lambda: CollapsePredictor.from_checkpoint(Path(path), image_size=job.camera.image_size),
     )
 
     def collapse_map(obs: Observation, mask: np.ndarray) -> np.ndarray:

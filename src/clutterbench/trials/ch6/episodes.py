@@ -30,6 +30,7 @@ from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.pull import SceneState, execute_pull, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
+from clutterbench.trials.ch6.jobs import Ch6Job
 from clutterbench.trials.ch6.oracle import SearchOracle
 from clutterbench.trials.ch6.planners import (  # noqa: F401  (register_planner, PLANNERS: the documented entry points)
     CP_PLANNERS,
@@ -45,7 +46,9 @@ from clutterbench.trials.config import (
     PULL_HEAD_PLANNERS,
     PULL_MAP_HEADS,
     Ch6TrialParams,
+    ConditionConfig,
     SceneStreamConfig,
+    TrialsConfig,
     support_method,
 )
 from clutterbench.trials.core.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
@@ -144,27 +147,25 @@ def execute_decision(
     return record | step_notes(decision.state) | arm_fields, state, elapsed
 
 
-def job_spec(job: dict[str, Any]) -> SceneSpec:
-    """The settled scene `job["index"]` of the job's stream."""
+def job_spec(job: Ch6Job) -> SceneSpec:
+    """The settled scene `job.index` of the job's stream."""
     return draw_trial_spec(
-        job["stream"],
-        job["stream_cfg"],
-        job["seed"],
-        job["index"],
-        job["physics"],
-        job["camera"],
-        job["max_attempts"],
+        job.stream,
+        job.stream_cfg,
+        job.seed,
+        job.index,
+        job.physics,
+        job.camera,
+        job.max_attempts,
     )
 
 
-def run_ch6_episode(job: dict[str, Any]) -> EpisodeResult:
-    """One ch. 6 extraction episode on scene `job["index"]` of its stream."""
+def run_ch6_episode(job: Ch6Job) -> EpisodeResult:
+    """One ch. 6 extraction episode on scene `job.index` of its stream."""
     return run_extraction(job_spec(job), job)
 
 
-def run_extraction(
-    spec: SceneSpec, job: dict[str, Any], target: int | None = None
-) -> EpisodeResult:
+def run_extraction(spec: SceneSpec, job: Ch6Job, target: int | None = None) -> EpisodeResult:
     """Extract `target` (None: drawn from the stream's target stream) from the settled `spec`
     with the job's planner under the episode protocol (trials/core/protocol.py) -> the episode's
     record and MCAP events."""
@@ -190,23 +191,23 @@ class Extraction:
     Algorithm 1 does; a planner that reads the world (oracle, truth maps) is handed the
     state in `before_decision`."""
 
-    def __init__(self, spec: SceneSpec, job: dict[str, Any], target: int | None = None):
+    def __init__(self, spec: SceneSpec, job: Ch6Job, target: int | None = None):
         self.spec, self.job = spec, job
-        self.physics: PhysicsConfig = job["physics"]
-        self.camera: CameraConfig = job["camera"]
-        self.params: Ch6TrialParams = job["params"]
+        self.physics: PhysicsConfig = job.physics
+        self.camera: CameraConfig = job.camera
+        self.params: Ch6TrialParams = job.params
         self.state = SceneState.start(spec)
         self.world = world_at(spec, self.state, self.physics, render=True)
-        self.log = EpisodeLog(record_images=job["record_images"])
+        self.log = EpisodeLog(record_images=job.record_images)
         self.obs = observe(self.world, self.camera)
         self.log.scene(
             0.0, spec.sizes_m, spec.shelf.boards(), self.obs.camera, self.obs.depth_m.shape
         )
         if target is None:
             target = draw_target(
-                job["seed"],
-                job["stream"],
-                job["index"],
+                job.seed,
+                job.stream,
+                job.index,
                 self.obs,
                 self.params.min_target_pixels,
                 spec,
@@ -247,7 +248,7 @@ class Extraction:
         self.log.json(
             t, DECISION_TOPIC, {"pull": decision.pull, "hold": decision.hold} | decision.state
         )
-        arm = job.get("executor", "kinematic") == "arm"
+        arm = job.executor == "arm"
         step, self.state, elapsed = execute_decision(
             self.world,
             self.obs,
@@ -255,12 +256,12 @@ class Extraction:
             planner,
             self.camera,
             params,
-            job["cp_max"],
+            job.cp_max,
             self.state.removed,
             self.log,
-            job["collapse_free"],
+            job.collapse_free,
             t,
-            arm=(spec, self.state, job["arm"]) if arm else None,
+            arm=(spec, self.state, job.arm) if arm else None,
         )
         self.steps.append(step)
         self.t = t + elapsed
@@ -296,28 +297,26 @@ class Extraction:
             params.moved_threshold_m,
         )
         record = {
-            "condition": job["condition"],
-            "episode": job["index"],
-            "seed": job["seed"],
-            "stream": job["stream"],
+            "condition": job.condition,
+            "episode": job.index,
+            "seed": job.seed,
+            "stream": job.stream,
             "family": spec.family,
             **benchmark.scene_fields(spec),
             "n_objects": spec.n,
             "target": self.target,
-            "planner": job["planner"],
+            "planner": job.planner,
             "perception": "instance",
-            "rule": job["rule"] if job["planner"] in CP_PLANNERS else None,
-            "support_method": support_method(
-                job["planner"], job["rule"], job["params"].pull_map_meaning
-            )
-            if job["planner"] in CP_PLANNERS
+            "rule": job.rule if job.planner in CP_PLANNERS else None,
+            "support_method": support_method(job.planner, job.rule, job.params.pull_map_meaning)
+            if job.planner in CP_PLANNERS
             else None,
             "collapse_maps": None
-            if job["planner"] not in CP_PLANNERS
+            if job.planner not in CP_PLANNERS
             else (
                 (
-                    f"predicted by the {PULL_MAP_HEADS[job['params'].pull_map_meaning]} head"
-                    if job["planner"] in PULL_HEAD_PLANNERS
+                    f"predicted by the {PULL_MAP_HEADS[job.params.pull_map_meaning]} head"
+                    if job.planner in PULL_HEAD_PLANNERS
                     else "predicted"
                 )
                 if truth is None
@@ -325,15 +324,15 @@ class Extraction:
             ),
             "rejected_starts": dict(spec.meta.get("rejected", {})),
             "collapse_free_params": {
-                "drop_m": job["collapse_free"].drop_m,
-                "tilt_deg": job["collapse_free"].tilt_deg,
+                "drop_m": job.collapse_free.drop_m,
+                "tilt_deg": job.collapse_free.tilt_deg,
             },
             "moved_threshold_m": params.moved_threshold_m,
             "steps": [_rounded(s) for s in steps],
             "n_disturbed": overall.n_disturbed,
             "disturbance_m": overall.disturbance_m,
         } | judge_episode(steps, self.end, self.target)
-        if job.get("executor", "kinematic") == "arm":  # kinematic records keep their old fields
+        if job.executor == "arm":  # kinematic records keep their old fields
             record["executor"] = "arm"
         if truth is not None:
             record["truth_simulations"] = truth.simulations
@@ -376,14 +375,15 @@ def planner_support(
 
 
 def condition_jobs(
+    *,
     name: str,
-    cond: Any,
-    trials: Any,
+    cond: ConditionConfig,
+    trials: TrialsConfig,
     seed: int,
     physics: PhysicsConfig,
     camera: CameraConfig,
     thresholds: Path,
-) -> tuple[list[dict[str, Any]], SupportParams, float]:
+) -> tuple[list[Ch6Job], SupportParams, float]:
     """Condition `cond`'s episode jobs, with its support rule's thresholds (chosen on
     validation scenes by the support stage, `thresholds`) and its abort threshold cp_max;
     one-line errors when a network is missing."""
@@ -397,54 +397,55 @@ def condition_jobs(
         )
     support, cp_max = planner_support(thresholds, cond.planner, cond.rule, trials.ch6)
     jobs = ch6_jobs(
-        name,
-        cond,
-        trials,
-        trials.streams[cond.stream],
-        seed,
-        physics,
-        camera,
-        support,
-        cp_max,
-        Path(f"models/{trials.ch6.model}/best.pt"),
+        condition=name,
+        cond=cond,
+        trials=trials,
+        stream_cfg=trials.streams[cond.stream],
+        seed=seed,
+        physics=physics,
+        camera=camera,
+        support=support,
+        cp_max=cp_max,
+        model_path=Path(f"models/{trials.ch6.model}/best.pt"),
     )
     return jobs, support, cp_max
 
 
 def ch6_jobs(
+    *,
     condition: str,
-    cond: Any,
-    trials: Any,
+    cond: ConditionConfig,
+    trials: TrialsConfig,
     stream_cfg: SceneStreamConfig,
     seed: int,
     physics: PhysicsConfig,
     camera: CameraConfig,
     support: SupportParams | None,
     cp_max: float,
-    model_path: Path,
-) -> list[dict[str, Any]]:
+    model_path: Path | None,
+) -> list[Ch6Job]:
     """Condition `condition`'s episode jobs (collapse-free thresholds: trials.collapse_free)."""
     return [
-        {
-            "condition": condition,
-            "planner": cond.planner,
-            "rule": cond.rule,
-            "stream": cond.stream,
-            "stream_cfg": stream_cfg,
-            "index": i,
-            "seed": seed,
-            "physics": physics,
-            "camera": camera,
-            "params": trials.ch6,
-            "collapse_free": trials.collapse_free,
-            "support": support,
-            "cp_max": cp_max,
-            "model_path": model_path,
-            "ch4_model_path": Path(f"models/{trials.ch6.ch4_model}/best.pt"),
-            "max_attempts": trials.max_attempts,
-            "record_images": trials.mcap_images,
-            "executor": cond.executor,
-            "arm": trials.arm,
-        }
+        Ch6Job(
+            condition=condition,
+            planner=cond.planner,
+            rule=cond.rule,
+            stream=cond.stream,
+            stream_cfg=stream_cfg,
+            index=i,
+            seed=seed,
+            physics=physics,
+            camera=camera,
+            params=trials.ch6,
+            collapse_free=trials.collapse_free,
+            support=support,
+            cp_max=cp_max,
+            model_path=model_path,
+            ch4_model_path=Path(f"models/{trials.ch6.ch4_model}/best.pt"),
+            max_attempts=trials.max_attempts,
+            record_images=trials.mcap_images,
+            executor=cond.executor,
+            arm=trials.arm,
+        )
         for i in range(cond.episodes)
     ]

@@ -8,7 +8,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -28,6 +28,9 @@ from clutterbench.trials.config import PLANNERS as BUILT_IN
 from clutterbench.trials.config import PULL_MAP_HEADS, Ch6TrialParams
 from clutterbench.trials.core.harness import load_predictor
 from clutterbench.trials.core.scenes import policy_rng
+
+if TYPE_CHECKING:
+    from clutterbench.trials.ch6.jobs import Ch6Job
 
 
 class SupportWhilePullPlanner:
@@ -58,7 +61,7 @@ class SupportWhilePullPlanner:
         return Decision(target, hold, state)
 
 
-PLANNERS: dict[str, Callable[[dict[str, Any], SceneSpec], Any]] = {}
+PLANNERS: dict[str, Callable[[Ch6Job, SceneSpec], Any]] = {}
 """ch. 6 planner name -> factory(job, spec): the registry the conditions' `planner` names."""
 
 
@@ -89,67 +92,63 @@ def register_planner(name: str):
 
 
 @register_planner("pull_target")
-def _pull_target(job: dict[str, Any], spec: SceneSpec):
+def _pull_target(job: Ch6Job, spec: SceneSpec):
     return TargetFirstPlanner()
 
 
 @register_planner("single_step")
-def _single_step(job: dict[str, Any], spec: SceneSpec):
+def _single_step(job: Ch6Job, spec: SceneSpec):
     return SupportWhilePullPlanner(
-        load_predictor(job["ch4_model_path"], job["camera"].image_size), job["params"]
+        load_predictor(job.ch4_model_path, job.camera.image_size), job.params
     )
 
 
 @register_planner("random")
-def _random(job: dict[str, Any], spec: SceneSpec):
-    rng = policy_rng(job["seed"], job["stream"], job["index"], job["planner"])
-    return RandomOrderPlanner(rng, job["params"].min_pixels)
+def _random(job: Ch6Job, spec: SceneSpec):
+    rng = policy_rng(job.seed, job.stream, job.index, job.planner)
+    return RandomOrderPlanner(rng, job.params.min_pixels)
 
 
 @register_planner("oracle")
-def _oracle(job: dict[str, Any], spec: SceneSpec):
-    return SearchOracle(
-        spec, job["physics"], job["camera"], job["params"], False, job["collapse_free"]
-    )
+def _oracle(job: Ch6Job, spec: SceneSpec):
+    return SearchOracle(spec, job.physics, job.camera, job.params, False, job.collapse_free)
 
 
 @register_planner("oracle_hold")
-def _oracle_hold(job: dict[str, Any], spec: SceneSpec):
+def _oracle_hold(job: Ch6Job, spec: SceneSpec):
     """May hold one box during any pull: the ceiling of every planner that holds, the
     bimanual pull planners' idle hold included."""
     return SearchOracle(
         spec,
-        job["physics"],
-        job["camera"],
-        job["params"],
+        job.physics,
+        job.camera,
+        job.params,
         True,
-        job["collapse_free"],
+        job.collapse_free,
         hold_any_pull=True,
     )
 
 
-def _cpg_planner(
-    job: dict[str, Any], bimanual: bool, spec: SceneSpec | None = None, pull: bool = False
-):
+def _cpg_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec | None = None, pull: bool = False):
     """Algorithm 1 with the collapse predictor, or (`spec` given) with physics-truth maps of
     that scene through the same interface (`pull`: maps of the trials' pull, else of
     deleting the box; the bimanual plan clears the held box's load first and an abort teaches
     the graph what it feared for, trials.ch6.abort_response): the same planner and
     rule. `pull` without `spec`: the collapse predictor's pull head, with the thresholds
     chosen for it (the job's `support`, trials.config.support_method)."""
-    params: Ch6TrialParams = job["params"]
+    params: Ch6TrialParams = job.params
     if spec is None:
         head = PULL_MAP_HEADS[params.pull_map_meaning] if pull else "deletion"
-        predictor = load_predictor(job["model_path"], job["camera"].image_size, head)
+        predictor = load_predictor(job.model_path, job.camera.image_size, head)
     else:
         action = (params.pull_increment_m, params.grasp_lift_m) if pull else None
-        falls = job["collapse_free"] if pull and params.pull_map_meaning == "collapse" else None
-        predictor = TruthCollapseMaps(spec, job["physics"], params.moved_threshold_m, action, falls)
+        falls = job.collapse_free if pull and params.pull_map_meaning == "collapse" else None
+        predictor = TruthCollapseMaps(spec, job.physics, params.moved_threshold_m, action, falls)
     simulate_hold = spec is not None and pull and bimanual and params.truth_hold == "simulate"
     return CollapseGraphPlanner(
         predictor,
-        job["support"],
-        job["cp_max"],
+        job.support,
+        job.cp_max,
         params.min_pixels,
         bimanual=bimanual,
         clear_hold_load=pull,  # the pull planners clear the held box's load first
@@ -165,46 +164,46 @@ def _cpg_planner(
 
 
 @register_planner("multi_step")
-def _multi_step(job: dict[str, Any], spec: SceneSpec):
+def _multi_step(job: Ch6Job, spec: SceneSpec):
     return _cpg_planner(job, bimanual=False)
 
 
 @register_planner("bimanual")
-def _bimanual(job: dict[str, Any], spec: SceneSpec):
+def _bimanual(job: Ch6Job, spec: SceneSpec):
     return _cpg_planner(job, bimanual=True)
 
 
 @register_planner("multi_step_truth")
-def _multi_step_truth(job: dict[str, Any], spec: SceneSpec):
+def _multi_step_truth(job: Ch6Job, spec: SceneSpec):
     return _cpg_planner(job, bimanual=False, spec=spec)
 
 
 @register_planner("bimanual_truth")
-def _bimanual_truth(job: dict[str, Any], spec: SceneSpec):
+def _bimanual_truth(job: Ch6Job, spec: SceneSpec):
     return _cpg_planner(job, bimanual=True, spec=spec)
 
 
 @register_planner("multi_step_pull_truth")
-def _multi_step_pull_truth(job: dict[str, Any], spec: SceneSpec):
+def _multi_step_pull_truth(job: Ch6Job, spec: SceneSpec):
     return _cpg_planner(job, bimanual=False, spec=spec, pull=True)
 
 
 @register_planner("bimanual_pull_truth")
-def _bimanual_pull_truth(job: dict[str, Any], spec: SceneSpec):
+def _bimanual_pull_truth(job: Ch6Job, spec: SceneSpec):
     return _cpg_planner(job, bimanual=True, spec=spec, pull=True)
 
 
 @register_planner("multi_step_pull")
-def _multi_step_pull(job: dict[str, Any], spec: SceneSpec):
+def _multi_step_pull(job: Ch6Job, spec: SceneSpec):
     return _cpg_planner(job, bimanual=False, pull=True)
 
 
 @register_planner("bimanual_pull")
-def _bimanual_pull(job: dict[str, Any], spec: SceneSpec):
+def _bimanual_pull(job: Ch6Job, spec: SceneSpec):
     return _cpg_planner(job, bimanual=True, pull=True)
 
 
-def _physics_from_depth(job: dict[str, Any], spec: SceneSpec, holding: bool):
+def _physics_from_depth(job: Ch6Job, spec: SceneSpec, holding: bool):
     """The physics-from-depth planner (planning/ch6/physics_depth.py): boxes fitted to each
     observation, searched in SAPIEN by the oracle's code on that estimate, with the action
     set of the oracle it mirrors (`holding`: oracle_hold's, a box may be held during any
@@ -213,27 +212,27 @@ def _physics_from_depth(job: dict[str, Any], spec: SceneSpec, holding: bool):
     from clutterbench.planning.ch6.physics_depth import PhysicsFromDepthPlanner
     from clutterbench.trials.ch6.physics_model import EstimatedWorldModel, make_estimator
 
-    params: Ch6TrialParams = job["params"]
+    params: Ch6TrialParams = job.params
     model = EstimatedWorldModel(
         spec.shelf,
-        job["camera"],
-        job["physics"],
+        job.camera,
+        job.physics,
         params,
         holding,
-        job["collapse_free"],
+        job.collapse_free,
         functools.partial(SearchOracle, hold_any_pull=True),
     )
-    estimate = make_estimator(job["stream_cfg"].catalogue, params.min_pixels)
+    estimate = make_estimator(job.stream_cfg.catalogue, params.min_pixels)
     return PhysicsFromDepthPlanner(estimate, model, holding)
 
 
 @register_planner("physics_from_depth")
-def _pfd(job: dict[str, Any], spec: SceneSpec):
+def _pfd(job: Ch6Job, spec: SceneSpec):
     return _physics_from_depth(job, spec, holding=False)
 
 
 @register_planner("physics_from_depth_hold")
-def _pfd_hold(job: dict[str, Any], spec: SceneSpec):
+def _pfd_hold(job: Ch6Job, spec: SceneSpec):
     return _physics_from_depth(job, spec, holding=True)
 
 
@@ -273,11 +272,11 @@ def load_planners(modules: Sequence[str], names: Sequence[str]) -> None:
             )
 
 
-def make_planner(job: dict[str, Any], spec: SceneSpec):
+def make_planner(job: Ch6Job, spec: SceneSpec):
     try:
-        factory = PLANNERS[job["planner"]]
+        factory = PLANNERS[job.planner]
     except KeyError:
         raise ClutterbenchError(
-            f"planner '{job['planner']}': not registered (known: {', '.join(PLANNERS)})"
+            f"planner '{job.planner}': not registered (known: {', '.join(PLANNERS)})"
         ) from None
     return factory(job, spec)

@@ -14,13 +14,14 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from clutterbench.logs.mcap_episode import EpisodeWriter
 from clutterbench.observation import CameraModel
 from clutterbench.parallel import ParallelConfig, map_in_workers
+from clutterbench.trials.core.jobs import EpisodeJob
 
 EPISODE_GAP_S = 1.0
 """Simulated seconds left empty between two episodes on the condition's MCAP timeline."""
@@ -125,13 +126,14 @@ class EpisodeResult:
     """Wall-clock seconds the episode took (the machine's, never written to an output)."""
 
 
-EpisodeFn = Callable[[dict[str, Any]], EpisodeResult]
+J = TypeVar("J", bound=EpisodeJob)
+"""An episode job type (trials.core.jobs)."""
 
 
 def run_episodes(
     label: str,
-    fn: EpisodeFn,
-    jobs: Sequence[dict[str, Any]],
+    fn: Callable[[J], EpisodeResult],
+    jobs: Sequence[J],
     workers: int,
     parallel: ParallelConfig | None = None,
 ) -> list[EpisodeResult]:
