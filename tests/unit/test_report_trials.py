@@ -10,7 +10,6 @@ import pandas as pd
 import pytest
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.report.support_figure import SupportPanel, support_figure
 from clutterbench.report.table_6_2 import mutual_support_note, support_table, thresholds_text
 from clutterbench.report.table_6_3 import (
     _gap_text,
@@ -20,6 +19,7 @@ from clutterbench.report.table_6_3 import (
     trial_params_note,
 )
 from clutterbench.report.tables import load_thesis_figures, thesis_row
+from clutterbench.support.figure import SupportPanel, support_figure
 from clutterbench.trials.config import Ch6TrialParams
 from clutterbench.trials.core.stats import cluster_bootstrap_interval
 

@@ -22,7 +22,6 @@ from clutterbench.parallel import ParallelConfig
 from clutterbench.planning.ch6.support import oracle_heatmaps
 from clutterbench.precision import Precision, inference_from_params
 from clutterbench.progress import progress_bar
-from clutterbench.report.support_figure import SupportPanel, support_figure
 from clutterbench.sim.config import SimConfig
 from clutterbench.support.config import SupportEvalConfig
 from clutterbench.support.evaluate import (
@@ -40,6 +39,7 @@ from clutterbench.support.evaluate import (
     sweep_all,
     val_metrics_at,
 )
+from clutterbench.support.figure import SupportPanel, support_figure
 from clutterbench.trials.ch6.physics_model import SUPPORT_METHOD, SUPPORT_RULE, PhysicsDepthSupport
 from clutterbench.trials.config import Ch6TrialParams, TrialsConfig
 from clutterbench.trials.core.scenes import stream_key
