@@ -6,9 +6,10 @@ grouped (scene encoded once) vs per-pair paths of the collapse networks (`groupe
 support-graph latency and wall time per trial (`trials`), a Yamakuzushi game's parts
 (`ch3`), an arm-level step against the kinematic one (`arm`), the physics-from-depth
 planner's decision time per step (`physics_depth`), every registered environment made
-with defaults, reset and stepped (`envs`), and the same simulation jobs on both parallel
+with defaults, reset and stepped (`envs`), the same simulation jobs on both parallel
 backends, processes and Ray, with 1 and 2 workers (`ray`: `bench/scaling.py`, its
-workloads built in `bench/workloads.py`; it also costs the paper scale from them). Results go
+workloads built in `bench/workloads.py`; it also costs the paper scale from them), and how
+much of this CPU's matmul rate training the networks reaches (`train_rate`). Results go
 to reports/bench/: one JSON per part and a markdown table beside most; each records the CPU
 model it ran on.
 """

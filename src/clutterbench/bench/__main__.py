@@ -16,6 +16,7 @@ from clutterbench.bench.physics_depth import bench_physics_depth
 from clutterbench.bench.replenish import bench_ch5
 from clutterbench.bench.scaling import bench_ray
 from clutterbench.bench.sim import bench_replay, bench_sim
+from clutterbench.bench.train_rate import bench_train_rate
 from clutterbench.bench.trials import bench_trials
 from clutterbench.bench.yamakuzushi import bench_ch3
 
@@ -39,6 +40,7 @@ PARTS: list[tuple[str, Callable[[], object]]] = [
     ("physics_depth", bench_physics_depth),  # physics_depth.json, .md (no network needed)
     ("envs", bench_envs),  # envs.json, envs.md (every registered env: make, reset, 5 steps)
     ("ray", bench_ray),  # ray.json, ray.md (both parallel backends, 1 and 2 workers; needs ray)
+    ("train_rate", bench_train_rate),  # train_rate.json, .md (training FLOP/s vs matmul; no data)
 ]
 
 
