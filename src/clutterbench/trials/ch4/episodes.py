@@ -103,6 +103,40 @@ def run_ch4_episode(job: Ch4Job) -> EpisodeResult:
             job.seed, cond.stream, job.index, obs, params.min_target_pixels, spec
         )
         target_k = target_segment(seg, obs.instance, target_box)
+    decision, chosen, risk, ties = _choose(job, spec, obs, seg, boxes, target_k)
+    x_box = boxes[chosen[0]] if chosen[0] is not None else None
+    s_box = boxes[chosen[1]] if chosen[1] is not None else None
+    valid = x_box is not None and s_box is not None and x_box != s_box
+    decision |= {"extract": chosen[0], "support": chosen[1], "boxes": [x_box, s_box]}
+    finite = risk is not None and np.isfinite(risk)
+    log.json(0.0, DECISION_TOPIC, decision | {"risk": round(risk, 4) if finite else None})
+    out = _execute(job, spec, world, log, x_box, s_box)
+    if cond.executor != "arm" or x_box is None:  # the arm's pull logged its own poses
+        log.poses(world.steps_taken * physics.timestep_s, world.poses(), world.removed)
+    out.pop("displacement_m", None)
+    out.pop("displacement_held_m", None)
+    valid = bool(valid and (target_box is None or x_box == target_box))
+    out = count_if_valid(out, valid)
+    record = _record(job, spec, seg, decision, target_box, x_box, s_box, risk, ties, valid)
+    record = record | {k: _plain(v) for k, v in out.items()}
+    if cond.executor == "arm":  # kinematic records keep their old fields
+        record["executor"] = "arm"
+    return EpisodeResult(record, log)
+
+
+def _choose(
+    job: Ch4Job,
+    spec: SceneSpec,
+    obs: Observation,
+    seg: Segmentation,
+    boxes: list[int | None],
+    target_k: int | None,
+) -> tuple[dict[str, Any], tuple[int | None, int | None], Any, int | None]:
+    """The planner's (extract, support) segment pair: the decision message so far, the pair,
+    its risk and how many candidates tie at it (the risk planner's; None otherwise)."""
+    cond: Ch4ConditionConfig = job.cond
+    params: Ch4TrialParams = job.params
+    physics: PhysicsConfig = job.physics
     decision: dict[str, Any] = {"candidates": 0}
     chosen: tuple[int | None, int | None] = (None, None)  # segment indices
     risk, ties = None, None
@@ -149,14 +183,23 @@ def run_ch4_episode(job: Ch4Job) -> EpisodeResult:
                 )
                 chosen = pairs[usable[k]]
                 decision["simulated"] = tried
-    x_box = boxes[chosen[0]] if chosen[0] is not None else None
-    s_box = boxes[chosen[1]] if chosen[1] is not None else None
-    valid = x_box is not None and s_box is not None and x_box != s_box
-    decision |= {"extract": chosen[0], "support": chosen[1], "boxes": [x_box, s_box]}
-    finite = risk is not None and np.isfinite(risk)
-    log.json(0.0, DECISION_TOPIC, decision | {"risk": round(risk, 4) if finite else None})
-    if x_box is not None and cond.executor == "arm":
-        out = arm_pull_outcome(
+    return decision, chosen, risk, ties
+
+
+def _execute(
+    job: Ch4Job,
+    spec: SceneSpec,
+    world: BoxWorld,
+    log: EpisodeLog,
+    x_box: int | None,
+    s_box: int | None,
+) -> dict[str, Any]:
+    """The chosen pull executed from the canonical start and judged (by the arm, or in
+    `world`); nothing pulled when no box was chosen to extract."""
+    params: Ch4TrialParams = job.params
+    physics: PhysicsConfig = job.physics
+    if x_box is not None and job.cond.executor == "arm":
+        return arm_pull_outcome(
             spec,
             physics,
             x_box,
@@ -166,8 +209,8 @@ def run_ch4_episode(job: Ch4Job) -> EpisodeResult:
             job,
             log,
         )
-    elif x_box is not None:
-        out = pull_outcome(
+    if x_box is not None:
+        return pull_outcome(
             spec,
             physics,
             x_box,
@@ -176,35 +219,45 @@ def run_ch4_episode(job: Ch4Job) -> EpisodeResult:
             job.collapse_free,
             world=world,
         )
-    else:  # nothing graspable chosen (no pair, or a segment of no box): nothing was pulled
-        out = {
-            "executed": False,
-            "aborted_before_motion": True,
-            "aborted_after_motion": False,
-            "extracted": False,
-            "target_out": False,
-            "others_still": True,
-            "collapse_free": True,
-            "judged": False,
-            "counted": True,
-            "strict_counted": True,
-            "n_left_shelf": 0,
-            "n_disturbed": 0,
-            "n_collapsed": 0,
-            "disturbance_m": 0.0,
-            "box_motion": [],
-            "success": False,
-            "strict_success": False,
-            "success_held": False,
-            "strict_success_held": False,
-        }
-    if cond.executor != "arm" or x_box is None:  # the arm's pull logged its own poses
-        log.poses(world.steps_taken * physics.timestep_s, world.poses(), world.removed)
-    out.pop("displacement_m", None)
-    out.pop("displacement_held_m", None)
-    valid = bool(valid and (target_box is None or x_box == target_box))
-    out = count_if_valid(out, valid)
-    record = {
+    # nothing graspable chosen (no pair, or a segment of no box): nothing was pulled
+    return {
+        "executed": False,
+        "aborted_before_motion": True,
+        "aborted_after_motion": False,
+        "extracted": False,
+        "target_out": False,
+        "others_still": True,
+        "collapse_free": True,
+        "judged": False,
+        "counted": True,
+        "strict_counted": True,
+        "n_left_shelf": 0,
+        "n_disturbed": 0,
+        "n_collapsed": 0,
+        "disturbance_m": 0.0,
+        "box_motion": [],
+        "success": False,
+        "strict_success": False,
+        "success_held": False,
+        "strict_success_held": False,
+    }
+
+
+def _record(
+    job: Ch4Job,
+    spec: SceneSpec,
+    seg: Segmentation,
+    decision: dict[str, Any],
+    target_box: int | None,
+    x_box: int | None,
+    s_box: int | None,
+    risk: Any,
+    ties: int | None,
+    valid: bool,
+) -> dict[str, Any]:
+    """The trial record's fields before the judged outcome."""
+    cond: Ch4ConditionConfig = job.cond
+    return {
         "condition": job.condition,
         "episode": job.index,
         "seed": job.seed,
@@ -230,11 +283,8 @@ def run_ch4_episode(job: Ch4Job) -> EpisodeResult:
             "drop_m": job.collapse_free.drop_m,
             "tilt_deg": job.collapse_free.tilt_deg,
         },
-        "moved_threshold_m": params.moved_threshold_m,
-    } | {k: _plain(v) for k, v in out.items()}
-    if cond.executor == "arm":  # kinematic records keep their old fields
-        record["executor"] = "arm"
-    return EpisodeResult(record, log)
+        "moved_threshold_m": job.params.moved_threshold_m,
+    }
 
 
 OUTCOMES = ("target_out", "success", "strict_success", "success_held", "strict_success_held")
