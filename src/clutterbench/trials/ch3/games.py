@@ -182,17 +182,9 @@ def _targets(variant: str, job: Ch3Job, top: Observation, rng) -> list[Target]:
 
 def run_ch3_game(job: Ch3Job) -> EpisodeResult:
     """One game of one variant on the pile of `job.seed`."""
-    from clutterbench.sim import benchmark
-    from clutterbench.sim.pile import (
-        PileWorld,
-        generate_pile,
-        on_board,
-        pile_hash,
-        slide,
-        top_observation,
-    )
+    from clutterbench.sim.pile import PileWorld, generate_pile, top_observation
 
-    cfg, variant = job.cfg, job.condition
+    cfg = job.cfg
     spec = generate_pile(cfg.pile, job.seed)
     poses = np.array(spec.poses, dtype=np.float64)
     rng = np.random.default_rng(job.seed + 7)
@@ -207,87 +199,141 @@ def run_ch3_game(job: Ch3Job) -> EpisodeResult:
             break
         world = PileWorld.from_poses(poses, cfg.pile, render=True)
         top = top_observation(world, cfg.camera)
-        if step == 0:
-            sizes = np.tile(np.array(PIECE_SIZE_M), (len(poses), 1))
-            board = (
-                "board",
-                np.array([*np.asarray(cfg.pile.board_size_m) / 2, 0.005]),
-                np.array([0.0, 0.0, -0.005]),
-            )
-            log.scene(t, sizes, [board], top.camera, top.depth_m.shape)
-        log.poses(t, np.nan_to_num(poses), [k for k in range(len(poses)) if np.isnan(poses[k, 0])])
-        log.observation(t, top.depth_m, top.instance)
-        facts: dict[str, Any] = {}
-        chosen: Target | None = None
-        result = None
-        if variant == "oracle":
-            chosen, result, tried = _oracle_choice(poses, top, cfg)
-            facts = {"slides_simulated": tried}
-        else:
-            offered = _targets(variant, job, top, rng)
-            refused = []
-            for target in offered:
-                if variant in ("random", "convnet_no_pomdp"):
-                    chosen = target
-                    break
-                ok, facts, t = run_pomdp(world, target, top, cfg, log, t)
-                if ok:
-                    chosen = target
-                    break
-                refused.append({"piece": target.piece, "probability": target.probability, **facts})
-            facts = {**facts, "offered": len(offered), "refused": refused}
+        _log_observation(log, t, step, poses, top, cfg)
+        chosen, result, facts, t = _choose(job, world, top, poses, rng, log, t)
         if chosen is None:
             end = "nothing_worth_sliding"
             stop = {"offered": facts.get("offered", 0), "refused": facts.get("refused", [])}
             log.json(t, "/planner/decision", {"step": step, "action": "stop", **facts})
             break
-        angle = chosen.angle_rad(cfg.scan.n_directions)
-        log.json(
-            t,
-            "/planner/decision",
-            {
-                "step": step,
-                "action": "slide",
-                "piece": chosen.piece,
-                "start_xy": list(chosen.start_xy),
-                "direction_deg": float(np.degrees(angle)),
-                "probability": chosen.probability,
-            },
-        )
-        if result is None:
-            result = slide(PileWorld.from_poses(poses, cfg.pile), chosen.piece, angle, cfg.slide)
-        t += STEP_S
-        after = np.array(result.poses_after, dtype=np.float64)
-        after[chosen.piece] = np.nan
-        others = [k for k in range(len(poses)) if k != chosen.piece and np.isfinite(poses[k, 0])]
-        motion = criteria.box_motion(
-            poses, result.poses_after, on_board(result.poses_after, cfg.pile.board_size_m), others
-        )
-        steps.append(
-            {
-                "step": step,
-                "piece": chosen.piece,
-                "direction": chosen.direction,
-                "probability": chosen.probability,
-                **slide_outcome(bool(result.target_out), bool(result.others_still)),
-                "collapse_free": criteria.collapse_free(motion, job.collapse_free),
-                "box_motion": motion,
-                "moved": list(result.moved),
-                "max_displacement_m": float(np.nanmax(result.displacement_m, initial=0.0)),
-                "observations": int(facts.get("observations", 0)),
-                **{k: v for k, v in facts.items() if k in ("slides_simulated", "offered")},
-            }
-        )
-        log.json(t, "/trial/slide", steps[-1])
+        result, after, t = _slide(job, step, poses, chosen, result, facts, steps, log, t)
         if not result.success:
             end = "slide_failed"
             break
         poses = after
     if end == "max_slides" and not np.isfinite(poses).all(axis=1).any():
         end = "cleared"
+    return EpisodeResult(record=_game_record(job, spec, steps, end, stop), log=log)
+
+
+def _log_observation(
+    log: EpisodeLog, t: float, step: int, poses: np.ndarray, top: Observation, cfg: Ch3Config
+) -> None:
+    """The pile before a slide: the scene (first step only), the poses and the top view."""
+    if step == 0:
+        sizes = np.tile(np.array(PIECE_SIZE_M), (len(poses), 1))
+        board = (
+            "board",
+            np.array([*np.asarray(cfg.pile.board_size_m) / 2, 0.005]),
+            np.array([0.0, 0.0, -0.005]),
+        )
+        log.scene(t, sizes, [board], top.camera, top.depth_m.shape)
+    log.poses(t, np.nan_to_num(poses), [k for k in range(len(poses)) if np.isnan(poses[k, 0])])
+    log.observation(t, top.depth_m, top.instance)
+
+
+def _choose(
+    job: Ch3Job,
+    world: Any,
+    top: Observation,
+    poses: np.ndarray,
+    rng: np.random.Generator,
+    log: EpisodeLog,
+    t: float,
+) -> tuple[Target | None, Any, dict[str, Any], float]:
+    """The variant's slide: (target or None, the oracle's simulated result or None, the
+    decision's facts, the time after any POMDP observations)."""
+    cfg, variant = job.cfg, job.condition
+    facts: dict[str, Any] = {}
+    chosen: Target | None = None
+    result = None
+    if variant == "oracle":
+        chosen, result, tried = _oracle_choice(poses, top, cfg)
+        facts = {"slides_simulated": tried}
+    else:
+        offered = _targets(variant, job, top, rng)
+        refused = []
+        for target in offered:
+            if variant in ("random", "convnet_no_pomdp"):
+                chosen = target
+                break
+            ok, facts, t = run_pomdp(world, target, top, cfg, log, t)
+            if ok:
+                chosen = target
+                break
+            refused.append({"piece": target.piece, "probability": target.probability, **facts})
+        facts = {**facts, "offered": len(offered), "refused": refused}
+    return chosen, result, facts, t
+
+
+def _slide(
+    job: Ch3Job,
+    step: int,
+    poses: np.ndarray,
+    chosen: Target,
+    result: Any,
+    facts: dict[str, Any],
+    steps: list[dict[str, Any]],
+    log: EpisodeLog,
+    t: float,
+) -> tuple[Any, np.ndarray, float]:
+    """The chosen slide logged, executed (unless the oracle's simulation is its result) and
+    judged, its record appended to `steps`; (its result, the poses after, the time)."""
+    from clutterbench.sim.pile import PileWorld, on_board, slide
+
+    cfg = job.cfg
+    angle = chosen.angle_rad(cfg.scan.n_directions)
+    log.json(
+        t,
+        "/planner/decision",
+        {
+            "step": step,
+            "action": "slide",
+            "piece": chosen.piece,
+            "start_xy": list(chosen.start_xy),
+            "direction_deg": float(np.degrees(angle)),
+            "probability": chosen.probability,
+        },
+    )
+    if result is None:
+        result = slide(PileWorld.from_poses(poses, cfg.pile), chosen.piece, angle, cfg.slide)
+    t += STEP_S
+    after = np.array(result.poses_after, dtype=np.float64)
+    after[chosen.piece] = np.nan
+    others = [k for k in range(len(poses)) if k != chosen.piece and np.isfinite(poses[k, 0])]
+    motion = criteria.box_motion(
+        poses, result.poses_after, on_board(result.poses_after, cfg.pile.board_size_m), others
+    )
+    steps.append(
+        {
+            "step": step,
+            "piece": chosen.piece,
+            "direction": chosen.direction,
+            "probability": chosen.probability,
+            **slide_outcome(bool(result.target_out), bool(result.others_still)),
+            "collapse_free": criteria.collapse_free(motion, job.collapse_free),
+            "box_motion": motion,
+            "moved": list(result.moved),
+            "max_displacement_m": float(np.nanmax(result.displacement_m, initial=0.0)),
+            "observations": int(facts.get("observations", 0)),
+            **{k: v for k, v in facts.items() if k in ("slides_simulated", "offered")},
+        }
+    )
+    log.json(t, "/trial/slide", steps[-1])
+    return result, after, t
+
+
+def _game_record(
+    job: Ch3Job, spec: Any, steps: list[dict[str, Any]], end: str, stop: dict[str, Any]
+) -> dict[str, Any]:
+    """The game's record: its pile, how it ended, and its slides."""
+    from clutterbench.sim import benchmark
+    from clutterbench.sim.pile import pile_hash
+
+    cfg = job.cfg
     removed = sum(s["success"] for s in steps)
-    record = {
-        "condition": variant,
+    return {
+        "condition": job.condition,
         "game": job.index,
         "seed": job.seed,
         "moved_threshold_m": cfg.slide.moved_threshold_m,
@@ -303,7 +349,6 @@ def run_ch3_game(job: Ch3Job) -> EpisodeResult:
         "steps": steps,
         "stop": stop,
     }
-    return EpisodeResult(record=record, log=log)
 
 
 def slide_outcome(target_out: bool, others_still: bool) -> dict[str, Any]:
