@@ -11,6 +11,7 @@ planner.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -113,31 +114,10 @@ def execute_decision(
         )
         state, elapsed = SceneState.of(world), world.steps_taken * dt
     else:
-        from clutterbench.trials.core.executors import arm_pull
-
-        spec, start, arm_cfg = arm
-        done_by_arm = arm_pull(
-            spec,
-            start,
-            box,
-            hold,
-            params.pull_increment_m,
-            params.grasp_lift_m,
-            world.cfg,
-            arm_cfg,
-            log,
-            t0,
-            go_on=lambda done, now: score(done, now, t0),
-            camera=camera,
+        result, arm_fields, state, elapsed = _execute_by_arm(
+            world, box, hold, camera, params, log, t0, arm, score
         )
-        result, arm_fields = done_by_arm.result, done_by_arm.fields
-        state, elapsed = done_by_arm.state, done_by_arm.elapsed_s
-    if arm is None:
-        step = judge_pull(result, box, hold, gone, params.moved_threshold_m, cf)
-    else:
-        from clutterbench.trials.core.executors import judge_arm_step
-
-        step = judge_arm_step(result, box, hold, gone, params.moved_threshold_m, cf)
+    step = _judge(result, box, hold, gone, params, cf, by_arm=arm is not None)
     record = {
         "box": box,
         "hold": hold,
@@ -145,6 +125,59 @@ def execute_decision(
         "max_cp": round(max_cp, 4),
     } | step
     return record | step_notes(decision.state) | arm_fields, state, elapsed
+
+
+def _execute_by_arm(
+    world: BoxWorld,
+    box: int,
+    hold: int | None,
+    camera: CameraConfig,
+    params: Ch6TrialParams,
+    log: EpisodeLog,
+    t0: float,
+    arm: tuple[SceneSpec, SceneState, ArmConfig],
+    score: Callable[[int, Observation | None, float], bool],
+) -> tuple[Any, dict[str, Any], SceneState, float]:
+    """execute_decision's pull executed arm-level (trials/core/executors.py), checked by
+    `score` -> the pull's result, the arm's record fields, the state it left, its duration."""
+    from clutterbench.trials.core.executors import arm_pull
+
+    spec, start, arm_cfg = arm
+    done_by_arm = arm_pull(
+        spec,
+        start,
+        box,
+        hold,
+        params.pull_increment_m,
+        params.grasp_lift_m,
+        world.cfg,
+        arm_cfg,
+        log,
+        t0,
+        go_on=lambda done, now: score(done, now, t0),
+        camera=camera,
+    )
+    result, arm_fields = done_by_arm.result, done_by_arm.fields
+    state, elapsed = done_by_arm.state, done_by_arm.elapsed_s
+    return result, arm_fields, state, elapsed
+
+
+def _judge(
+    result: Any,
+    box: int,
+    hold: int | None,
+    gone: frozenset[int],
+    params: Ch6TrialParams,
+    cf: CollapseFreeConfig,
+    *,
+    by_arm: bool,
+) -> dict[str, Any]:
+    """The executed pull judged: by the kinematic judge, or the arm's."""
+    if not by_arm:
+        return judge_pull(result, box, hold, gone, params.moved_threshold_m, cf)
+    from clutterbench.trials.core.executors import judge_arm_step
+
+    return judge_arm_step(result, box, hold, gone, params.moved_threshold_m, cf)
 
 
 def job_spec(job: Ch6Job) -> SceneSpec:
