@@ -198,26 +198,10 @@ def replenish(spec: SceneSpec, job: Ch5Job, size_m: np.ndarray | None = None):
         log.poses(t, state.poses)
         dets = perceive(job, spec, state, obs)
         log.json(t, "/perception/detections", _detections_json(dets))
-        if queued:  # the oracle's simulated sequence goes on as simulated
-            plan = queued.pop(0)
-        elif planner is not None:
-            plan = planner.plan(obs, dets, size_m)
-            if plan.move is not None and planner.collapse_map is not None and rp.use_collapse:
-                heat = planner.collapse_map(obs, _cluster_mask(obs, plan, space))
-                log.heatmap(t, "/planner/collapse_map", heat)
-        elif cond.planner == "random":  # uniform over the action set, then as drawn
-            options = action_set(obs, dets, size_m, rp, space)
-            rng = policy_rng(job.seed, cond.stream, job.index, f"ch5_random/{len(steps)}")
-            seq = options[int(rng.integers(len(options)))] if options else []
-            plan, queued = (seq[0], seq[1:]) if seq else (Plan("none", None, None), [])
-        else:
-            views = [dets]
-            if job.oracle_detector:  # the detector's actions too: no planner beats it
-                views.append(perceive(job, spec, state, obs, "detector"))
-            seq, tried = oracle_choice(spec, state, obs, views, size_m, rp, space, job)
-            simulated += tried
-            plan = seq[0]
-            queued = seq[1:]
+        plan, queued, tried = _next_plan(
+            job, spec, state, obs, dets, size_m, rp, space, planner, queued, len(steps), log, t
+        )
+        simulated += tried
         log.json(t, DECISION_TOPIC, plan_json(plan))
         if plan.branch == "none":
             end = "gave_up"
@@ -238,10 +222,69 @@ def replenish(spec: SceneSpec, job: Ch5Job, size_m: np.ndarray | None = None):
         world = world_at(spec, state, physics, render=True)  # the next step's canonical start
         obs = observe(world, camera)
     log.json(t, "/trial/result", {"end": end})
+    record = _episode_record(job, spec, size_m, steps, end, free_at_start, gave_up_why)
+    if cond.planner in ("oracle", "oracle_no_contact"):
+        record["simulated"] = simulated
+    return EpisodeResult(_rounded(record), log)
+
+
+def _next_plan(
+    job: Ch5Job,
+    spec: SceneSpec,
+    state: SceneState,
+    obs: Observation,
+    dets: list[Detection],
+    size_m: np.ndarray,
+    rp: ReplenishParams,
+    space: WorkingSpace,
+    planner: ReplenishPlanner | None,
+    queued: list[Plan],
+    n_steps: int,
+    log: EpisodeLog,
+    t: float,
+) -> tuple[Plan, list[Plan], int]:
+    """The step's plan: the next of a queued sequence, else the planner's, a random one of the
+    action set, or the oracle's -> (the plan, the sequence still queued, slides simulated)."""
+    cond: Ch5ConditionConfig = job.cond
+    tried = 0
+    if queued:  # the oracle's simulated sequence goes on as simulated
+        plan = queued.pop(0)
+    elif planner is not None:
+        plan = planner.plan(obs, dets, size_m)
+        if plan.move is not None and planner.collapse_map is not None and rp.use_collapse:
+            heat = planner.collapse_map(obs, _cluster_mask(obs, plan, space))
+            log.heatmap(t, "/planner/collapse_map", heat)
+    elif cond.planner == "random":  # uniform over the action set, then as drawn
+        options = action_set(obs, dets, size_m, rp, space)
+        rng = policy_rng(job.seed, cond.stream, job.index, f"ch5_random/{n_steps}")
+        seq = options[int(rng.integers(len(options)))] if options else []
+        plan, queued = (seq[0], seq[1:]) if seq else (Plan("none", None, None), [])
+    else:
+        views = [dets]
+        if job.oracle_detector:  # the detector's actions too: no planner beats it
+            views.append(perceive(job, spec, state, obs, "detector"))
+        seq, tried = oracle_choice(spec, state, obs, views, size_m, rp, space, job)
+        plan = seq[0]
+        queued = seq[1:]
+    return plan, queued, tried
+
+
+def _episode_record(
+    job: Ch5Job,
+    spec: SceneSpec,
+    size_m: np.ndarray,
+    steps: list[dict[str, Any]],
+    end: str,
+    free_at_start: Any,
+    gave_up_why: list[str],
+) -> dict[str, Any]:
+    """The episode's record (before rounding and the oracles' simulated count)."""
+    cond: Ch5ConditionConfig = job.cond
+    params: Ch5TrialParams = job.params
     branch = next(
         (s["branch"] for s in steps if s["placed"]), steps[-1]["branch"] if steps else "none"
     )
-    record = {
+    record: dict[str, Any] = {
         "condition": job.condition,
         "episode": job.index,
         "seed": job.seed,
@@ -273,9 +316,7 @@ def replenish(spec: SceneSpec, job: Ch5Job, size_m: np.ndarray | None = None):
     }
     if end == "gave_up":  # why no candidate had a plan (planning/ch5/replenish.py why_not)
         record["gave_up_why"] = gave_up_why
-    if cond.planner in ("oracle", "oracle_no_contact"):
-        record["simulated"] = simulated
-    return EpisodeResult(_rounded(record), log)
+    return record
 
 
 def _cluster_mask(obs: Observation, plan: Plan, space: WorkingSpace) -> np.ndarray:
