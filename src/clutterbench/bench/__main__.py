@@ -16,6 +16,7 @@ from clutterbench.bench.physics_depth import bench_physics_depth
 from clutterbench.bench.replenish import bench_ch5
 from clutterbench.bench.scaling import bench_ray
 from clutterbench.bench.sim import bench_replay, bench_sim
+from clutterbench.bench.train_profile import bench_train_profile
 from clutterbench.bench.train_rate import bench_train_rate
 from clutterbench.bench.trials import bench_trials
 from clutterbench.bench.yamakuzushi import bench_ch3
@@ -41,6 +42,7 @@ PARTS: list[tuple[str, Callable[[], object]]] = [
     ("envs", bench_envs),  # envs.json, envs.md (every registered env: make, reset, 5 steps)
     ("ray", bench_ray),  # ray.json, ray.md (both parallel backends, 1 and 2 workers; needs ray)
     ("train_rate", bench_train_rate),  # train_rate.json, .md (training FLOP/s vs matmul; no data)
+    ("train_profile", bench_train_profile),  # train_profile.json, .md (a cp_focal epoch's slice)
 ]
 
 
