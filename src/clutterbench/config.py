@@ -8,6 +8,7 @@ whole run switches scale with one override: ``dvc exp run -S base.scale=paper``.
 from __future__ import annotations
 
 import dataclasses
+import os
 import types
 import typing
 from collections.abc import Mapping
@@ -38,14 +39,56 @@ def bounded(
     return dataclasses.field(**kwargs)
 
 
+AUTO = "auto"
+"""A core count (base.cores, base.torch_threads, a stage's `workers`) written as this means:
+base.cores, and base.cores itself means this machine's count (machine_cores)."""
+
+
+def machine_cores() -> int:
+    """The CPUs this process may run on: its affinity mask's count where the OS has one (a
+    container or taskset may allow fewer than the machine has), else os.cpu_count()."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def resolve_cores(value: Any, cores: int | None = None, key: str = "base.cores") -> int:
+    """A core-count parameter as an int: `auto` -> `cores` (base.cores; None: the machine's
+    count), an integer >= 1 as it is; anything else is a one-line error naming `key`."""
+    if value == AUTO:
+        return machine_cores() if cores is None else cores
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ClutterbenchError(f"{key}: {value!r} is not {AUTO} or an integer >= 1")
+    return value
+
+
+def cores_field(default: int | str) -> Any:
+    """A dataclass field of a core count (annotated int): params may write it as an integer
+    >= 1 or `auto` (base.cores), resolved to an int when params are parsed (resolve_cores)."""
+    return dataclasses.field(default=default, metadata={"cores": True})
+
+
 @dataclasses.dataclass(frozen=True)
 class BaseConfig:
     seed: int = bounded(0, ge=0)
     """Base random seed; every scene and every training run derives its seed from it."""
-    torch_threads: int = bounded(2, ge=1)
-    """Threads torch may use (intra-op)."""
+    cores: int = cores_field(AUTO)
+    """CPU cores the pipeline may use: an integer >= 1, or auto (this machine's: the CPUs
+    this process may run on). Every other core count written `auto` (torch_threads, the
+    simulation stages' `workers`) means this."""
+    torch_threads: int = cores_field(2)
+    """Threads torch may use (intra-op); auto: `cores`."""
     scale: Literal["tiny", "default", "paper"] = "default"
     """Scale profile: tiny (tests), default (2 CPU cores, ~1 h), paper (thesis sizes)."""
+
+    def __post_init__(self) -> None:
+        # `auto` here also where BaseConfig is built directly rather than parsed
+        cores = resolve_cores(self.cores, None, "base.cores")
+        object.__setattr__(self, "cores", cores)
+        object.__setattr__(
+            self, "torch_threads", resolve_cores(self.torch_threads, cores, "base.torch_threads")
+        )
 
 
 def load_params(path: Path | str = "params.yaml") -> dict[str, Any]:
@@ -94,8 +137,10 @@ def resolve_scale(value: Any, scale: str, key: str) -> Any:
     return value
 
 
-def parse(cls: type[T], data: Any, key: str) -> T:
-    """Build dataclass `cls` from `data`, rejecting unknown keys, wrong types, bad ranges."""
+def parse(cls: type[T], data: Any, key: str, cores: int | None = None) -> T:
+    """Build dataclass `cls` from `data`, rejecting unknown keys, wrong types, bad ranges.
+    A core-count field (cores_field) written `auto` becomes `cores` (base.cores; None: this
+    machine's count)."""
     if not isinstance(data, Mapping):
         raise ClutterbenchError(f"{key}: expected a mapping, got {type(data).__name__}")
     hints = typing.get_type_hints(cls)
@@ -110,7 +155,10 @@ def parse(cls: type[T], data: Any, key: str) -> T:
             if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
                 raise ClutterbenchError(f"{sub}: missing required key")
             continue
-        value = _coerce(hints[name], data[name], sub)
+        if f.metadata.get("cores"):
+            value = resolve_cores(data[name], cores, sub)
+        else:
+            value = _coerce(hints[name], data[name], sub, cores)
         _check_range(f, value, sub)
         kwargs[name] = value
     try:
@@ -134,12 +182,12 @@ def _check_range(f: dataclasses.Field, value: Any, key: str) -> None:
             raise ClutterbenchError(f"{key}: {v} is out of range (must be <= {meta['le']})")
 
 
-def _coerce(tp: Any, value: Any, key: str) -> Any:
+def _coerce(tp: Any, value: Any, key: str, cores: int | None = None) -> Any:
     origin, args = get_origin(tp), get_args(tp)
     if tp is Any:  # parsed later by whoever knows its type (e.g. a network's own config)
         return value
     if dataclasses.is_dataclass(tp):
-        return parse(tp, value, key)
+        return parse(tp, value, key, cores)
     if origin is Literal:
         if value not in args:
             raise ClutterbenchError(f"{key}: {value!r} is not one of {', '.join(map(str, args))}")
@@ -147,7 +195,7 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
     if origin in (types.UnionType, typing.Union):
         for option in args:
             try:
-                return _coerce(option, value, key)
+                return _coerce(option, value, key, cores)
             except ClutterbenchError:
                 continue
         raise ClutterbenchError(f"{key}: {value!r} has the wrong type (expected {tp})")
@@ -180,13 +228,16 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
         if len(value) != len(item_types):
             raise ClutterbenchError(f"{key}: expected {len(item_types)} items, got {len(value)}")
         return tuple(
-            _coerce(t, v, f"{key}[{i}]") for i, (t, v) in enumerate(zip(item_types, value))
+            _coerce(t, v, f"{key}[{i}]", cores) for i, (t, v) in enumerate(zip(item_types, value))
         )
     if origin in (dict, Mapping):
         if not isinstance(value, Mapping):
             raise ClutterbenchError(f"{key}: expected a mapping, got {value!r}")
         kt, vt = args
-        return {_coerce(kt, k, key): _coerce(vt, v, f"{key}.{k}") for k, v in value.items()}
+        return {
+            _coerce(kt, k, key, cores): _coerce(vt, v, f"{key}.{k}", cores)
+            for k, v in value.items()
+        }
     raise TypeError(f"unsupported config type {tp} at {key}")
 
 
@@ -206,7 +257,7 @@ def load_section(
         if not isinstance(raw, Mapping) or part not in raw:
             raise ClutterbenchError(f"{section}: section missing from params")
         raw = raw[part]
-    return parse(cls, resolve_scale(raw, base.scale, section), section)
+    return parse(cls, resolve_scale(raw, base.scale, section), section, base.cores)
 
 
 def load_base(params: Mapping[str, Any]) -> BaseConfig:
@@ -216,7 +267,9 @@ def load_base(params: Mapping[str, Any]) -> BaseConfig:
     scale = raw.get("scale", "default") if isinstance(raw, Mapping) else "default"
     if scale not in SCALES:
         raise ClutterbenchError(f"base.scale: {scale!r} is not one of {', '.join(SCALES)}")
-    return parse(BaseConfig, resolve_scale(raw, scale, "base"), "base")
+    raw = resolve_scale(raw, scale, "base")
+    cores = raw.get("cores", AUTO) if isinstance(raw, Mapping) else AUTO
+    return parse(BaseConfig, raw, "base", resolve_cores(cores, None, "base.cores"))
 
 
 def as_dict(cfg: Any) -> Any:

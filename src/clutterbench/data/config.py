@@ -6,7 +6,7 @@ import dataclasses
 from collections.abc import Mapping
 from typing import Literal
 
-from clutterbench.config import bounded
+from clutterbench.config import bounded, cores_field
 from clutterbench.sim.catalog import CATALOGUES
 from clutterbench.sim.config import FAMILY_MAX_OBJECTS, FAMILY_NAMES
 
@@ -59,8 +59,8 @@ class DatasetConfig:
 class GenerateConfig:
     shard_size: int = bounded(50, ge=1)
     """Scenes per shard file (the unit of resuming and of parallel work)."""
-    workers: int = bounded(2, ge=1)
-    """Worker processes, each with its own renderer."""
+    workers: int = cores_field(2)
+    """Worker processes, each with its own renderer; auto: base.cores."""
     max_attempts: int = bounded(30, ge=1)
     """A scene is redrawn (counted as rejected) at most this often before the stage fails."""
     datasets: Mapping[str, DatasetConfig] = dataclasses.field(default_factory=dict)

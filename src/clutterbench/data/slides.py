@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from clutterbench.config import as_dict, bounded
+from clutterbench.config import as_dict, bounded, cores_field
 from clutterbench.data.slide_crops import (
     ScanConfig,
     height_image,
@@ -50,8 +50,8 @@ class SlideDataConfig:
     """Samples kept after balancing (at most; half success, half failure; thesis 12,000)."""
     val_fraction: float = bounded(0.1, gt=0.0, le=0.5)
     """Fraction of the piles held out for validation (thesis 10%)."""
-    workers: int = bounded(2, ge=1)
-    """Worker processes simulating piles."""
+    workers: int = cores_field(2)
+    """Worker processes simulating piles; auto: base.cores."""
 
 
 def pile_seed(base_seed: int, stream: str, index: int) -> int:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from clutterbench.config import bounded
+from clutterbench.config import bounded, cores_field
 from clutterbench.trials.config import SceneStreamConfig
 
 
@@ -44,7 +44,7 @@ class SupportEvalConfig:
     nearer than this; null: no such test (the thesis' rule alone)."""
     figure_scenes: int = bounded(6, ge=1)
     """Test scenes drawn in the figure (thesis Fig. 6.8: six)."""
-    workers: int = bounded(2, ge=1)
-    """Worker processes simulating the test scenes' truth."""
+    workers: int = cores_field(2)
+    """Worker processes simulating the test scenes' truth; auto: base.cores."""
     max_attempts: int = bounded(30, ge=1)
     """A test scene is redrawn at most this often."""
