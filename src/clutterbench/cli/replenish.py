@@ -63,14 +63,14 @@ def replenish(
     with user_errors():
         import numpy as np
 
+        import clutterbench.trials.ch5.episodes as ch5
+        import clutterbench.trials.ch5.perception as ch5_perception
         from clutterbench.config import load_section
         from clutterbench.planning.ch5.replenish import ReplenishPlanner
         from clutterbench.sim.physics import BoxWorld
         from clutterbench.sim.pull import SceneState
         from clutterbench.sim.render import observe
         from clutterbench.sim.spec import SceneSpec
-        from clutterbench.trials.ch5.episodes import episodes as ch5
-        from clutterbench.trials.ch5.episodes import perception as ch5_perception
         from clutterbench.trials.config import (
             CH5_PLANNERS,
             Ch5ConditionConfig,
