@@ -195,6 +195,73 @@ def train_model(
     mcfg = cfg.models[name]
     seed = model_seed(base_seed, name)
     torch.manual_seed(seed)
+    heads = tuple(mcfg.labels)
+    train_ds, val_ds, size = _open_splits(name, cfg, threshold_m, seed, paths, collapse_free)
+    device = train_device()
+    precision = ("bf16" if cfg.bf16 else "fp32") if device.type == "cpu" else "fp32"
+    model = build_model(mcfg.arch, mcfg.net).to(device)
+    if cfg.channels_last:
+        model = model.to(memory_format=torch.channels_last)
+    opt, loss, head_loss, schedule = _optimiser(model, cfg, mcfg)
+    # Shard-local shuffle (a uniform one would decompress a shard for nearly every pair),
+    # each scene's targets together so that its depth image is encoded once.
+    train_loader = GroupedLoader(
+        train_ds, sampler=train_ds.group_sampler(mcfg.batch_size, mcfg.scene_group, seed)
+    )
+    val_loader = GroupedLoader(val_ds, batch_size=max(mcfg.batch_size, 32))
+    log = CsvLog(paths.report_dir / "log.csv", log_columns(heads))
+    sample = val_ds[len(val_ds) // 2]  # the heatmap followed epoch by epoch in the MCAP
+    best = {"epoch": 0, "val_loss": float("inf")}
+    stale, started, epoch_s = 0, time.perf_counter(), []
+    meta = _checkpoint_meta(name, mcfg, threshold_m, size, seed, precision)
+    with EpisodeWriter(paths.model_dir / "train.mcap", {"model": name, **meta}) as mcap:
+        _write_truth(mcap, sample, heads)
+        for epoch in range(1, mcfg.epochs + 1):
+            t0 = time.perf_counter()
+            train_loss = _train_epoch(model, train_loader, opt, loss, cfg, f"{name} {epoch}")
+            if schedule is not None:
+                schedule.step()
+            val_loss, scores = evaluate_loss(
+                model, val_loader, loss, cfg, cfg.val_threshold, heads, head_loss
+            )
+            row = {"epoch": epoch, "train_loss": train_loss, "val_loss": val_loss}
+            row |= {f"val_{k}": v for k, v in scores.items()}
+            log.append(row)
+            epoch_s.append(round(time.perf_counter() - t0, 1))
+            _write_epoch(mcap, row, model, sample, device, cfg, heads, name)
+            if val_loss < best["val_loss"]:
+                best = {
+                    "epoch": epoch,
+                    "val_loss": val_loss,
+                    **{f"val_{k}": v for k, v in scores.items()},
+                }
+                save_checkpoint(
+                    paths.model_dir / "best.pt", mcfg.arch, model, meta | {"epoch": epoch}
+                )
+                stale = 0
+            else:
+                stale += 1
+                if stale >= mcfg.patience:
+                    break
+        summary = _summary(name, mcfg, epoch, best, (train_ds, val_ds), model, precision)
+        mcap.set_outcome({"best_epoch": best["epoch"], "best_val_loss": best["val_loss"]})
+    write_json(paths.report_dir / "summary.json", summary)
+    timing = {"model": name, "seconds": time.perf_counter() - started, "epoch_seconds": epoch_s}
+    write_json(paths.timing_file, timing)
+    return summary
+
+
+def _open_splits(
+    name: str,
+    cfg: TrainConfig,
+    threshold_m: float,
+    seed: int,
+    paths: TrainPaths,
+    collapse_free: tuple[float, float] | None,
+) -> tuple[PairDataset, PairDataset, int]:
+    """The model's train and val pairs (train with noise and flips) and their image size;
+    a one-line error when a split is empty or the images do not fit the network."""
+    mcfg = cfg.models[name]
     noise = cfg.noise if mcfg.noise else None
     n_masks, heads = mcfg.net.n_masks, tuple(mcfg.labels)
     train_ds = open_pairs(
@@ -227,11 +294,15 @@ def train_model(
             f"train.models.{name}.net.input_size is {mcfg.net.input_size} but dataset "
             f"'{mcfg.dataset}' has {size}x{size} images (sim.camera.image_size)"
         )
-    device = train_device()
-    precision = ("bf16" if cfg.bf16 else "fp32") if device.type == "cpu" else "fp32"
-    model = build_model(mcfg.arch, mcfg.net).to(device)
-    if cfg.channels_last:
-        model = model.to(memory_format=torch.channels_last)
+    return train_ds, val_ds, size
+
+
+def _optimiser(
+    model: nn.Module, cfg: TrainConfig, mcfg: TrainModelConfig
+) -> tuple[torch.optim.Optimizer, Loss, Loss | None, Any]:
+    """Adam over the trainable parameters, the loss, the loss of one head (several heads
+    only) and the learning-rate schedule (None: constant)."""
+    heads = tuple(mcfg.labels)
     params = [p for p in model.parameters() if p.requires_grad]
     opt = torch.optim.Adam(params, lr=mcfg.lr)
     loss = loss_fn(cfg, mcfg)
@@ -241,16 +312,19 @@ def train_model(
         if mcfg.lr_schedule == "cosine"
         else None
     )
-    # Shard-local shuffle (a uniform one would decompress a shard for nearly every pair),
-    # each scene's targets together so that its depth image is encoded once.
-    train_loader = GroupedLoader(
-        train_ds, sampler=train_ds.group_sampler(mcfg.batch_size, mcfg.scene_group, seed)
-    )
-    val_loader = GroupedLoader(val_ds, batch_size=max(mcfg.batch_size, 32))
-    log = CsvLog(paths.report_dir / "log.csv", log_columns(heads))
-    sample = val_ds[len(val_ds) // 2]  # the heatmap followed epoch by epoch in the MCAP
-    best = {"epoch": 0, "val_loss": float("inf")}
-    stale, started, epoch_s = 0, time.perf_counter(), []
+    return opt, loss, head_loss, schedule
+
+
+def _checkpoint_meta(
+    name: str,
+    mcfg: TrainModelConfig,
+    threshold_m: float,
+    size: int,
+    seed: int,
+    precision: str,
+) -> dict[str, Any]:
+    """What the checkpoint and the MCAP file record of the run."""
+    heads = tuple(mcfg.labels)
     train_meta = as_dict(dataclasses.replace(mcfg, net={}))
     if heads == DEFAULT_HEADS:  # deletion-only checkpoints stay byte for byte as before heads
         del train_meta["labels"]
@@ -265,65 +339,68 @@ def train_model(
     }
     if heads != DEFAULT_HEADS:
         meta["heads"] = list(heads)  # output channel k predicts labels of kind heads[k]
-    with EpisodeWriter(paths.model_dir / "train.mcap", {"model": name, **meta}) as mcap:
-        mcap.write_depth(0.0, sample["depth_m"][0].numpy())
-        for mask, topic in zip(sample["target"], ("/val/target", "/val/support")):
-            mcap.write_mono8(0.0, topic, _to_mono8(mask))
-        for k, topic in enumerate(_head_topics(heads)):
-            mcap.write_mono8(0.0, f"{topic}/truth", _to_mono8(sample["collapse"][k]))
-        for epoch in range(1, mcfg.epochs + 1):
-            t0 = time.perf_counter()
-            train_loss = _train_epoch(model, train_loader, opt, loss, cfg, f"{name} {epoch}")
-            if schedule is not None:
-                schedule.step()
-            val_loss, scores = evaluate_loss(
-                model, val_loader, loss, cfg, cfg.val_threshold, heads, head_loss
-            )
-            row = {"epoch": epoch, "train_loss": train_loss, "val_loss": val_loss}
-            row |= {f"val_{k}": v for k, v in scores.items()}
-            log.append(row)
-            epoch_s.append(round(time.perf_counter() - t0, 1))
-            mcap.write_json(float(epoch), "/train/epoch", row)
-            depth, target = (sample[k][None].to(device) for k in ("depth_m", "target"))
-            for k, topic in enumerate(_head_topics(heads)):
-                channel = k if len(heads) > 1 else None
-                heat = forward_probs(model, depth, target, cfg.bf16, channel=channel)
-                mcap.write_mono8(float(epoch), f"{topic}/heatmap", _to_mono8(heat[0, 0].cpu()))
-            print(
-                f"{name} epoch {epoch}: train {train_loss:.4f} val {val_loss:.4f} "
-                f"IoU {scores['iou']:.3f}",
-                flush=True,
-            )
-            if val_loss < best["val_loss"]:
-                best = {
-                    "epoch": epoch,
-                    "val_loss": val_loss,
-                    **{f"val_{k}": v for k, v in scores.items()},
-                }
-                save_checkpoint(
-                    paths.model_dir / "best.pt", mcfg.arch, model, meta | {"epoch": epoch}
-                )
-                stale = 0
-            else:
-                stale += 1
-                if stale >= mcfg.patience:
-                    break
-        summary = {
-            "model": name,
-            "epochs_run": epoch,
-            "stopped_early": epoch < mcfg.epochs,
-            "best": best,
-            "train_pairs": len(train_ds),
-            "val_pairs": len(val_ds),
-            "parameters": sum(p.numel() for p in model.parameters()),
-            "precision": precision,
-        }
-        if heads != DEFAULT_HEADS:
-            summary["heads"] = list(heads)
-        mcap.set_outcome({"best_epoch": best["epoch"], "best_val_loss": best["val_loss"]})
-    write_json(paths.report_dir / "summary.json", summary)
-    timing = {"model": name, "seconds": time.perf_counter() - started, "epoch_seconds": epoch_s}
-    write_json(paths.timing_file, timing)
+    return meta
+
+
+def _write_truth(
+    mcap: EpisodeWriter, sample: dict[str, torch.Tensor], heads: tuple[str, ...]
+) -> None:
+    """The followed sample's depth image, masks and each head's labels, at time 0."""
+    mcap.write_depth(0.0, sample["depth_m"][0].numpy())
+    for mask, topic in zip(sample["target"], ("/val/target", "/val/support")):
+        mcap.write_mono8(0.0, topic, _to_mono8(mask))
+    for k, topic in enumerate(_head_topics(heads)):
+        mcap.write_mono8(0.0, f"{topic}/truth", _to_mono8(sample["collapse"][k]))
+
+
+def _write_epoch(
+    mcap: EpisodeWriter,
+    row: dict[str, Any],
+    model: nn.Module,
+    sample: dict[str, torch.Tensor],
+    device: torch.device,
+    cfg: TrainConfig,
+    heads: tuple[str, ...],
+    name: str,
+) -> None:
+    """The epoch's log row and each head's heatmap of the followed sample to the MCAP file,
+    and a line to stdout."""
+    epoch = row["epoch"]
+    mcap.write_json(float(epoch), "/train/epoch", row)
+    depth, target = (sample[k][None].to(device) for k in ("depth_m", "target"))
+    for k, topic in enumerate(_head_topics(heads)):
+        channel = k if len(heads) > 1 else None
+        heat = forward_probs(model, depth, target, cfg.bf16, channel=channel)
+        mcap.write_mono8(float(epoch), f"{topic}/heatmap", _to_mono8(heat[0, 0].cpu()))
+    print(
+        f"{name} epoch {epoch}: train {row['train_loss']:.4f} val {row['val_loss']:.4f} "
+        f"IoU {row['val_iou']:.3f}",
+        flush=True,
+    )
+
+
+def _summary(
+    name: str,
+    mcfg: TrainModelConfig,
+    epoch: int,
+    best: dict[str, Any],
+    splits: tuple[PairDataset, PairDataset],
+    model: nn.Module,
+    precision: str,
+) -> dict[str, Any]:
+    """summary.json: the epochs run, the best epoch's row, the data and the network's size."""
+    summary = {
+        "model": name,
+        "epochs_run": epoch,
+        "stopped_early": epoch < mcfg.epochs,
+        "best": best,
+        "train_pairs": len(splits[0]),
+        "val_pairs": len(splits[1]),
+        "parameters": sum(p.numel() for p in model.parameters()),
+        "precision": precision,
+    }
+    if tuple(mcfg.labels) != DEFAULT_HEADS:
+        summary["heads"] = list(mcfg.labels)
     return summary
 
 
