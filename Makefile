@@ -58,6 +58,12 @@ test: lint
 bench: setup
 	python -m clutterbench.bench
 
+# After a whole `make repro`: the wall time each stage recorded (reports/timing/stages/), as the
+# measured record reports/run_times/<scale>_<cpu>.{json,md} that docs/run-times.md quotes
+.PHONY: run-times
+run-times: setup
+	python -m clutterbench.bench.run_times
+
 # Does this machine reproduce the recorded results? A tiny pipeline with 400 test scenes and
 # 300 episodes each of multi_step and oracle in a temporary copy, compared statistically
 # with reports/crosscheck/expected.json (docs/determinism.md); exit 1 when a rate differs.

@@ -80,7 +80,8 @@ class BaseConfig:
     torch_threads: int = cores_field(2)
     """Threads torch may use (intra-op); auto: `cores`."""
     scale: Literal["tiny", "default", "paper"] = "default"
-    """Scale profile: tiny (tests), default (2 CPU cores, ~1 h), paper (thesis sizes)."""
+    """Scale profile: tiny (the tests; a stage in seconds), default (the whole pipeline on 2
+    CPU cores: docs/run-times.md), paper (thesis sizes, bigger hardware)."""
 
     def __post_init__(self) -> None:
         # `auto` here also where BaseConfig is built directly rather than parsed

@@ -5,13 +5,22 @@ from __future__ import annotations
 import os
 import random
 import sys
+import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from clutterbench.config import BaseConfig, load_base, load_params
 from clutterbench.errors import ClutterbenchError
+from clutterbench.io import write_json
+from clutterbench.platform_info import cpu_model
+
+STAGE_TIMING = Path("reports/timing/stages")
+"""Where each stage run leaves its wall time (no dvc output: a rerun leaves every tracked
+output byte-identical); `python -m clutterbench.bench.run_times` collects them after a whole
+run into the measured record."""
 
 
 def seed_everything(seed: int, torch_threads: int | None = None) -> None:
@@ -33,7 +42,31 @@ def run_stage(main: Callable[[dict[str, Any], BaseConfig], None]) -> None:
         params = load_params("params.yaml")
         base = load_base(params)
         seed_everything(base.seed, base.torch_threads)
+        started = time.perf_counter()
         main(params, base)
+        record_wall_time(time.perf_counter() - started, base)
     except ClutterbenchError as exc:
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)
+
+
+def stage_name(argv: list[str]) -> str:
+    """dvc's name of the stage a command line runs: stages/train.py cp_focal -> train@cp_focal."""
+    stem = Path(argv[0]).stem
+    return f"{stem}@{'_'.join(argv[1:])}" if argv[1:] else stem
+
+
+def record_wall_time(seconds: float, base: BaseConfig) -> None:
+    """reports/timing/stages/<stage>.json: this run's wall time, scale and machine."""
+    name = stage_name(sys.argv)
+    write_json(
+        STAGE_TIMING / f"{name}.json",
+        {
+            "stage": name,
+            "seconds": round(seconds, 3),
+            "scale": base.scale,
+            "cores": base.cores,
+            "cpu_model": cpu_model(),
+            "logical_cpus": os.cpu_count(),
+        },
+    )

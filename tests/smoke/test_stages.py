@@ -241,6 +241,15 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     assert "changed" not in status
 
 
+def test_every_stage_leaves_its_wall_time_for_the_record(repro_twice):
+    from clutterbench.bench.run_times import collect
+
+    a, _ = repro_twice
+    record = collect(a / "reports/timing/stages")
+    assert set(record["groups"]) == set(yaml.safe_load((a / "dvc.yaml").read_text())["stages"])
+    assert record["scale"] == "tiny" and record["total_minutes"] > 0
+
+
 def test_same_params_give_byte_identical_data_and_tables(repro_twice):
     a, b = repro_twice
     trees = ("data", "models", "reports/train", "reports/evaluate", "reports/tables")
