@@ -23,7 +23,10 @@ from clutterbench.cli.common import (
 from clutterbench.errors import ClutterbenchError
 
 if TYPE_CHECKING:
-    pass
+    from clutterbench.sim.config import PhysicsConfig
+    from clutterbench.sim.spec import SceneSpec
+    from clutterbench.trials.ch5.jobs import Ch5Job
+    from clutterbench.trials.config import TrialsConfig
 
 
 @app.command("replenish")
@@ -71,26 +74,11 @@ def replenish(
         from clutterbench.sim.pull import SceneState
         from clutterbench.sim.render import observe
         from clutterbench.sim.spec import SceneSpec
-        from clutterbench.trials.config import (
-            CH5_PLANNERS,
-            Ch5ConditionConfig,
-            SceneStreamConfig,
-            TrialsConfig,
-        )
+        from clutterbench.trials.config import TrialsConfig
         from clutterbench.trials.core.harness import write_mcap
 
-        try:
-            w, d, h = (float(v) / 1000.0 for v in box.split(","))
-        except ValueError:
-            raise ClutterbenchError(f"--box {box}: expected W,D,H in mm, e.g. 100,120,30") from None
-        if min(w, d, h) <= 0:
-            raise ClutterbenchError(f"--box {box}: sizes must be positive")
-        if planner not in CH5_PLANNERS:
-            raise ClutterbenchError(f"--planner {planner}: not one of {', '.join(CH5_PLANNERS)}")
-        if perception not in ("clusters", "detector"):
-            raise ClutterbenchError(f"--perception {perception}: not clusters or detector")
-        if mcap is not None:
-            check_out_file(mcap, "--mcap", "episode.mcap")
+        w, d, h = _box_m(box)
+        _check_options(planner, perception, mcap)
         size_m = np.array([d, w, h])
         spec = SceneSpec.load(spec_path)
         physics = physics_config()
@@ -99,36 +87,7 @@ def replenish(
         trials = (
             load_section(TrialsConfig, "trials", params) if "trials" in params else TrialsConfig()
         )
-        model_path = default_path(model, f"models/{trials.ch5.model}/best.pt")
-        if planner in ch5.COLLAPSE_PLANNERS:
-            require_file(model_path, "--model", f"`dvc repro train@{trials.ch5.model}` makes it")
-        detector = default_path(None, "models/detector/best.pt")
-        if perception == "detector":
-            require_file(detector, "detector", "`dvc repro detector` makes it")
-        prob = trials.ch5.prob_threshold
-        if prob is None:
-            metrics = default_path(None, f"reports/evaluate/{trials.ch5.model}_ch5/metrics.json")
-            prob = (
-                float(json.loads(metrics.read_text())["val_chosen_threshold"])
-                if metrics.exists()
-                else 0.5
-            )
-        cond = Ch5ConditionConfig(planner=planner, stream="cli", perception=perception)
-        job = ch5.ch5_jobs(
-            condition="cli",
-            cond=cond,
-            params=trials.ch5,
-            stream_cfg=SceneStreamConfig(families={"shelved": 1.0}),
-            seed=0,
-            physics=physics,
-            camera=spec.camera,
-            max_attempts=trials.max_attempts,
-            record_images=mcap is not None,
-            prob_threshold=prob,
-            scene_type="cli",
-            collapse_free=trials.collapse_free,
-        )[0]
-        job = dataclasses.replace(job, model_path=model_path, detector_path=detector)
+        job = _cli_job(trials, planner, perception, model, physics, spec, mcap)
         state = SceneState.start(spec)
         obs = observe(BoxWorld.from_spec(spec, physics, render=True), spec.camera)
         dets = ch5_perception.perceive(job, spec, state, obs)
@@ -149,3 +108,72 @@ def replenish(
                 for k in ("success", "end", "branch", "n_disturbed", "disturbance_m", "steps")
             }
         typer.echo(json.dumps(out))
+
+
+def _box_m(box: str) -> tuple[float, float, float]:
+    """--box W,D,H in mm -> (w, d, h) in m, each positive."""
+    try:
+        w, d, h = (float(v) / 1000.0 for v in box.split(","))
+    except ValueError:
+        raise ClutterbenchError(f"--box {box}: expected W,D,H in mm, e.g. 100,120,30") from None
+    if min(w, d, h) <= 0:
+        raise ClutterbenchError(f"--box {box}: sizes must be positive")
+    return w, d, h
+
+
+def _check_options(planner: str, perception: str, mcap: Path | None) -> None:
+    """--planner a ch. 5 planner, --perception clusters or detector, --mcap a writable file."""
+    from clutterbench.trials.config import CH5_PLANNERS
+
+    if planner not in CH5_PLANNERS:
+        raise ClutterbenchError(f"--planner {planner}: not one of {', '.join(CH5_PLANNERS)}")
+    if perception not in ("clusters", "detector"):
+        raise ClutterbenchError(f"--perception {perception}: not clusters or detector")
+    if mcap is not None:
+        check_out_file(mcap, "--mcap", "episode.mcap")
+
+
+def _cli_job(
+    trials: TrialsConfig,
+    planner: str,
+    perception: str,
+    model: Path | None,
+    physics: PhysicsConfig,
+    spec: SceneSpec,
+    mcap: Path | None,
+) -> Ch5Job:
+    """The episode job of the command line: its networks checked for, the collapse threshold
+    of trials.ch5 (else the evaluate stage's choice, else 0.5)."""
+    import clutterbench.trials.ch5.episodes as ch5
+    from clutterbench.trials.config import Ch5ConditionConfig, SceneStreamConfig
+
+    model_path = default_path(model, f"models/{trials.ch5.model}/best.pt")
+    if planner in ch5.COLLAPSE_PLANNERS:
+        require_file(model_path, "--model", f"`dvc repro train@{trials.ch5.model}` makes it")
+    detector = default_path(None, "models/detector/best.pt")
+    if perception == "detector":
+        require_file(detector, "detector", "`dvc repro detector` makes it")
+    prob = trials.ch5.prob_threshold
+    if prob is None:
+        metrics = default_path(None, f"reports/evaluate/{trials.ch5.model}_ch5/metrics.json")
+        prob = (
+            float(json.loads(metrics.read_text())["val_chosen_threshold"])
+            if metrics.exists()
+            else 0.5
+        )
+    cond = Ch5ConditionConfig(planner=planner, stream="cli", perception=perception)
+    job = ch5.ch5_jobs(
+        condition="cli",
+        cond=cond,
+        params=trials.ch5,
+        stream_cfg=SceneStreamConfig(families={"shelved": 1.0}),
+        seed=0,
+        physics=physics,
+        camera=spec.camera,
+        max_attempts=trials.max_attempts,
+        record_images=mcap is not None,
+        prob_threshold=prob,
+        scene_type="cli",
+        collapse_free=trials.collapse_free,
+    )[0]
+    return dataclasses.replace(job, model_path=model_path, detector_path=detector)
