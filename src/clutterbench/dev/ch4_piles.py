@@ -338,28 +338,12 @@ def markdown(result: Mapping[str, Any]) -> str:
 
 
 # -- the command -----------------------------------------------------------------------------
-def ch4_piles(
-    params: Mapping[str, Any],
-    data_dir: Path = Path("data"),
-    scratch: Path = SCRATCH,
-    out_dir: Path = OUT,
-) -> dict[str, Any]:
-    """Run the recheck of dev.ch4_piles; writes out_dir/ch4_piles.{json,md}."""
+def ch4_dataset(cfg: Ch4PilesConfig, params: Mapping[str, Any]) -> tuple[str, Any]:
+    """The dataset of dev.ch4_piles.model, which must be a ch. 4 network -> (its name, its
+    generate config)."""
     from clutterbench.collapse.config import TrainConfig
     from clutterbench.data.config import GenerateConfig
-    from clutterbench.platform_info import cpu_description
-    from clutterbench.precision import inference_from_params
-    from clutterbench.trials.ch4.episodes import run_ch4_episode
-    from clutterbench.trials.config import TrialsConfig
-    from clutterbench.trials.core.harness import run_episodes
-    from clutterbench.trials.core.records import write_records
 
-    started = time.perf_counter()
-    base = load_section(BaseConfig, "base", params)
-    dev = load_section(DevConfig, "dev", params)
-    trials = load_section(TrialsConfig, "trials", params)
-    check_dev_streams(dev, trials)
-    cfg = dev.ch4_piles
     train = load_section(TrainConfig, "train", params)
     if cfg.model not in train.models:
         known = ", ".join(train.models)
@@ -371,6 +355,14 @@ def ch4_piles(
             f"dev.ch4_piles.model: '{cfg.model}' is not a ch. 4 network (2 masks in, "
             "trained on pulls)"
         )
+    return dataset, ds
+
+
+def candidate_networks(
+    cfg: Ch4PilesConfig, dataset: str, params: Mapping[str, Any], data_dir: Path, scratch: Path
+) -> list[dict[str, Any]]:
+    """One network per range of dev.ch4_piles.pile_ranges, on its data (candidate_data,
+    candidate_network) -> the report's facts of each."""
     candidates = []
     for piles in cfg.pile_ranges:
         label = piles_label(piles)
@@ -385,6 +377,31 @@ def ch4_piles(
             | net
         )
         print(f"piles {label}: best epoch {net['summary']['best']['epoch']}", flush=True)
+    return candidates
+
+
+def ch4_piles(
+    params: Mapping[str, Any],
+    data_dir: Path = Path("data"),
+    scratch: Path = SCRATCH,
+    out_dir: Path = OUT,
+) -> dict[str, Any]:
+    """Run the recheck of dev.ch4_piles; writes out_dir/ch4_piles.{json,md}."""
+    from clutterbench.platform_info import cpu_description
+    from clutterbench.precision import inference_from_params
+    from clutterbench.trials.ch4.episodes import run_ch4_episode
+    from clutterbench.trials.config import TrialsConfig
+    from clutterbench.trials.core.harness import run_episodes
+    from clutterbench.trials.core.records import write_records
+
+    started = time.perf_counter()
+    base = load_section(BaseConfig, "base", params)
+    dev = load_section(DevConfig, "dev", params)
+    trials = load_section(TrialsConfig, "trials", params)
+    check_dev_streams(dev, trials)
+    cfg = dev.ch4_piles
+    dataset, ds = ch4_dataset(cfg, params)
+    candidates = candidate_networks(cfg, dataset, params, data_dir, scratch)
     precision = inference_from_params(params)
     t0 = time.perf_counter()
     jobs = trial_jobs(candidates, dev, params)
