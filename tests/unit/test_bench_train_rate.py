@@ -7,24 +7,22 @@ from __future__ import annotations
 import pytest
 import torch
 
-from clutterbench.bench import train_rate
-from clutterbench.bench.train_rate import (
+from clutterbench.bench import cpu_rates
+from clutterbench.bench.cpu_rates import (
     ConvShape,
     Gate,
-    build_training,
     combined_rate,
     conv_case,
     gflops_per_s,
-    markdown,
     matmul_flops,
     others_share,
     rate_row,
     shares_of,
     step_convs,
-    step_row,
-    step_table,
     timed,
 )
+from clutterbench.bench.train_rate_md import markdown, step_table
+from clutterbench.bench.train_steps import build_training, step_row
 from clutterbench.collapse.config import TrainConfig
 from clutterbench.config import load_params, load_section
 
@@ -97,7 +95,7 @@ class _FakeContention:
 
 
 def test_gate_repeats_disturbed_runs_and_keeps_the_fastest(monkeypatch):
-    monkeypatch.setattr(train_rate, "Contention", _FakeContention)
+    monkeypatch.setattr(cpu_rates, "Contention", _FakeContention)
     gate = Gate(idle_wait_s=0.0, attempts=3, clean=0.05)
     runs = iter([[0.5, 0.4], [0.3, 0.35], [0.6]])
     _FakeContention.script = [0.4, 0.2, 0.01]  # disturbed, disturbed, clean

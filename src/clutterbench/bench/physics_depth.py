@@ -26,8 +26,8 @@ def bench_physics_depth(out_dir: Path = Path("reports/bench"), episodes: int = E
 
     from clutterbench.planning.ch6 import physics_depth
     from clutterbench.sim.config import SimConfig
-    from clutterbench.trials.ch6.episodes import ch6_jobs, physics_model, run_ch6_episode
-    from clutterbench.trials.config import ConditionConfig, TrialsConfig
+    from clutterbench.trials.ch6 import physics_model
+    from clutterbench.trials.config import TrialsConfig
 
     torch.set_num_threads(1)
     params = load_params("params.yaml")
@@ -58,41 +58,71 @@ def bench_physics_depth(out_dir: Path = Path("reports/bench"), episodes: int = E
         for planner in ("physics_from_depth", "physics_from_depth_hold"):
             for k in times:
                 times[k].clear()
-            cond = ConditionConfig(planner=planner, stream="ch6_3_10", episodes=episodes)
-            jobs = ch6_jobs(
-                condition="bench",
-                cond=cond,
-                trials=trials,
-                stream_cfg=trials.streams["ch6_3_10"],
-                seed=99,
-                physics=sim.physics,
-                camera=sim.camera,
-                support=None,
-                cp_max=1.0,
-                model_path=Path("unused"),
-            )
-            walls = []
-            for job in jobs:
-                t0 = time.perf_counter()
-                run_ch6_episode(dataclasses.replace(job, stream="bench", record_images=False))
-                walls.append(time.perf_counter() - t0)
-            result[f"{planner}_decision_s_median"] = float(np.median(times["decision"]))
-            result[f"{planner}_decision_s_p90"] = float(np.percentile(times["decision"], 90))
-            # CPU seconds of this process: what a core of its own would take, whatever else
-            # runs on the machine (wall times above include waiting for a shared core)
-            result[f"{planner}_decision_cpu_s_median"] = float(np.median(times["decision_cpu"]))
-            result[f"{planner}_decision_cpu_s_p90"] = float(
-                np.percentile(times["decision_cpu"], 90)
-            )
-            result[f"{planner}_decisions"] = len(times["decision"])
-            result[f"{planner}_estimated_scene_s_median"] = float(np.median(times["scene"]))
-            result[f"{planner}_episode_s_median"] = float(np.median(walls))
+            walls = _episode_walls(planner, episodes, trials, sim)
+            result |= _planner_times(planner, times, walls)
     finally:
         physics_depth.PhysicsFromDepthPlanner.decide = decide
         physics_model.EstimatedWorldModel.scene = scene
-    # the box fit alone, on the bench scenes' first observations
+    result |= _box_fit_times(episodes, trials, sim)
+    result["load_average_1min"] = float(__import__("os").getloadavg()[0])
+    result["node_budget"] = trials.ch6.physics_depth_node_budget
+    lines = header("Physics from depth: decision time per step (one core)", result)
+    lines += measure_table(
+        result, skip=("cpu_model", "machine", "cpu_flags", "torch_cpu_capability")
+    )
+    write_result(out_dir, "physics_depth", result, lines)
+    for k, v in result.items():
+        if k.endswith(("_median", "_p90")):
+            print(f"{k}: {v:.3f}")
+    return result
+
+
+def _episode_walls(planner: str, episodes: int, trials, sim) -> list[float]:
+    """Wall seconds of each bench episode of `planner` (stream ch6_3_10, seed 99)."""
+    from clutterbench.trials.ch6.episodes import ch6_jobs, run_ch6_episode
+    from clutterbench.trials.config import ConditionConfig
+
+    cond = ConditionConfig(planner=planner, stream="ch6_3_10", episodes=episodes)
+    jobs = ch6_jobs(
+        condition="bench",
+        cond=cond,
+        trials=trials,
+        stream_cfg=trials.streams["ch6_3_10"],
+        seed=99,
+        physics=sim.physics,
+        camera=sim.camera,
+        support=None,
+        cp_max=1.0,
+        model_path=Path("unused"),
+    )
+    walls = []
+    for job in jobs:
+        t0 = time.perf_counter()
+        run_ch6_episode(dataclasses.replace(job, stream="bench", record_images=False))
+        walls.append(time.perf_counter() - t0)
+    return walls
+
+
+def _planner_times(planner: str, times: dict[str, list[float]], walls: list[float]) -> dict:
+    """The result's rows of one planner: its decision, estimated-scene and episode times."""
+    result: dict = {}
+    result[f"{planner}_decision_s_median"] = float(np.median(times["decision"]))
+    result[f"{planner}_decision_s_p90"] = float(np.percentile(times["decision"], 90))
+    # CPU seconds of this process: what a core of its own would take, whatever else
+    # runs on the machine (wall times above include waiting for a shared core)
+    result[f"{planner}_decision_cpu_s_median"] = float(np.median(times["decision_cpu"]))
+    result[f"{planner}_decision_cpu_s_p90"] = float(np.percentile(times["decision_cpu"], 90))
+    result[f"{planner}_decisions"] = len(times["decision"])
+    result[f"{planner}_estimated_scene_s_median"] = float(np.median(times["scene"]))
+    result[f"{planner}_episode_s_median"] = float(np.median(walls))
+    return result
+
+
+def _box_fit_times(episodes: int, trials, sim) -> dict:
+    """The box fit alone, on the bench scenes' first observations: wall and CPU medians."""
     from clutterbench.sim.pull import SceneState, world_at
     from clutterbench.sim.render import observe
+    from clutterbench.trials.ch6 import physics_model
     from clutterbench.trials.core.scenes import draw_trial_spec
 
     fit = physics_model.make_estimator(trials.streams["ch6_3_10"].catalogue, trials.ch6.min_pixels)
@@ -106,16 +136,7 @@ def bench_physics_depth(out_dir: Path = Path("reports/bench"), episodes: int = E
         fit(obs)
         fits.append(time.perf_counter() - t0)
         fits_cpu.append(time.process_time() - c0)
-    result["box_fit_s_median"] = float(np.median(fits))
-    result["box_fit_cpu_s_median"] = float(np.median(fits_cpu))
-    result["load_average_1min"] = float(__import__("os").getloadavg()[0])
-    result["node_budget"] = trials.ch6.physics_depth_node_budget
-    lines = header("Physics from depth: decision time per step (one core)", result)
-    lines += measure_table(
-        result, skip=("cpu_model", "machine", "cpu_flags", "torch_cpu_capability")
-    )
-    write_result(out_dir, "physics_depth", result, lines)
-    for k, v in result.items():
-        if k.endswith(("_median", "_p90")):
-            print(f"{k}: {v:.3f}")
-    return result
+    return {
+        "box_fit_s_median": float(np.median(fits)),
+        "box_fit_cpu_s_median": float(np.median(fits_cpu)),
+    }

@@ -38,14 +38,10 @@ def bench_ch5(out_dir: Path = Path("reports/bench")) -> dict:
 
     from clutterbench.errors import ClutterbenchError
     from clutterbench.parallel import worker_init
-    from clutterbench.planning.ch5.replenish import ReplenishPlanner, place_clusters
     from clutterbench.sim.config import SimConfig
-    from clutterbench.sim.pull import SceneState, world_at
-    from clutterbench.sim.render import ensure_renderer, observe
-    from clutterbench.trials.ch5.episodes import episodes as ch5
-    from clutterbench.trials.ch5.episodes import perception as ch5_perception
+    from clutterbench.sim.render import ensure_renderer
+    from clutterbench.trials.ch5 import episodes as ch5
     from clutterbench.trials.config import TrialsConfig
-    from clutterbench.trials.core.scenes import draw_trial_spec
 
     params = load_params("params.yaml")
     params = {**params, "base": {**params["base"], "scale": "default"}}
@@ -68,52 +64,12 @@ def bench_ch5(out_dir: Path = Path("reports/bench")) -> dict:
         for planner in PLANNERS:
             name = f"{planner}_{scene_type}"
             cond = trials.ch5_conditions[name]
-            jobs = ch5.ch5_jobs(
-                condition=name,
-                cond=cond,
-                params=trials.ch5,
-                stream_cfg=trials.streams[cond.stream],
-                seed=SEED,
-                physics=sim.physics,
-                camera=sim.camera,
-                max_attempts=trials.max_attempts,
-                record_images=False,
-                prob_threshold=prob,
-                scene_type=scene_type,
-                oracle_detector=True,
-            )[:N_SCENES]
+            jobs = _bench_jobs(name, cond, scene_type, trials, sim, prob)
             ch5.run_ch5_episode(jobs[0])  # warm-up: models loaded, shaders compiled
             episodes[name] = [_timed(ch5.run_ch5_episode, job)[1] for job in jobs]
             if planner != "replenish":
                 continue
-            for job in jobs:
-                spec, t = _timed(
-                    draw_trial_spec,
-                    cond.stream,
-                    job.stream_cfg,
-                    job.seed,
-                    job.index,
-                    sim.physics,
-                    sim.camera,
-                    job.max_attempts,
-                    keep_groups=True,
-                )
-                parts["draw"].append(t)
-                state = SceneState.start(spec)
-                obs, t = _timed(
-                    observe, world_at(spec, state, sim.physics, render=True), sim.camera
-                )
-                parts["observe"].append(t)
-                dets, t = _timed(ch5_perception.perceive, job, spec, state, obs)
-                parts["detect"].append(t)
-                space = ch5.space_of(spec)
-                cmap = ch5_perception.collapse_map_fn(job)
-                clusters = place_clusters(obs, dets, space)
-                if clusters:
-                    parts["collapse_map"].append(_timed(cmap, obs, clusters[0].mask)[1])
-                size = ch5.new_box_size(job.seed, cond.stream, job.index, trials.ch5.new_boxes)
-                plan = ReplenishPlanner(ch5.planner_params(job), space, cmap).plan
-                parts["plan"].append(_timed(plan, obs, dets, size)[1])
+            _time_parts(jobs, cond, trials, sim, parts)
     result: dict = {**cpu_description(), "scenes_per_type": N_SCENES}
     for k, v in parts.items():
         result[f"{k}_median_s"] = statistics.median(v)
@@ -124,3 +80,61 @@ def bench_ch5(out_dir: Path = Path("reports/bench")) -> dict:
     for k, v in result.items():
         print(f"{k}: {v}")
     return result
+
+
+def _bench_jobs(name: str, cond, scene_type: str, trials, sim, prob: float) -> list:
+    """The first N_SCENES episodes of condition `name` on the bench's seed."""
+    from clutterbench.trials.ch5 import episodes as ch5
+
+    return ch5.ch5_jobs(
+        condition=name,
+        cond=cond,
+        params=trials.ch5,
+        stream_cfg=trials.streams[cond.stream],
+        seed=SEED,
+        physics=sim.physics,
+        camera=sim.camera,
+        max_attempts=trials.max_attempts,
+        record_images=False,
+        prob_threshold=prob,
+        scene_type=scene_type,
+        oracle_detector=True,
+    )[:N_SCENES]
+
+
+def _time_parts(jobs: list, cond, trials, sim, parts: dict[str, list[float]]) -> None:
+    """Each job's draw, observation, detection, one collapse map and one plan, timed and
+    appended to `parts`."""
+    from clutterbench.planning.ch5.replenish import ReplenishPlanner, place_clusters
+    from clutterbench.sim.pull import SceneState, world_at
+    from clutterbench.sim.render import observe
+    from clutterbench.trials.ch5 import episodes as ch5
+    from clutterbench.trials.ch5 import perception as ch5_perception
+    from clutterbench.trials.core.scenes import draw_trial_spec
+
+    for job in jobs:
+        spec, t = _timed(
+            draw_trial_spec,
+            cond.stream,
+            job.stream_cfg,
+            job.seed,
+            job.index,
+            sim.physics,
+            sim.camera,
+            job.max_attempts,
+            keep_groups=True,
+        )
+        parts["draw"].append(t)
+        state = SceneState.start(spec)
+        obs, t = _timed(observe, world_at(spec, state, sim.physics, render=True), sim.camera)
+        parts["observe"].append(t)
+        dets, t = _timed(ch5_perception.perceive, job, spec, state, obs)
+        parts["detect"].append(t)
+        space = ch5.space_of(spec)
+        cmap = ch5_perception.collapse_map_fn(job)
+        clusters = place_clusters(obs, dets, space)
+        if clusters:
+            parts["collapse_map"].append(_timed(cmap, obs, clusters[0].mask)[1])
+        size = ch5.new_box_size(job.seed, cond.stream, job.index, trials.ch5.new_boxes)
+        plan = ReplenishPlanner(ch5.planner_params(job), space, cmap).plan
+        parts["plan"].append(_timed(plan, obs, dets, size)[1])

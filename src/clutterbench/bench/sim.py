@@ -51,42 +51,9 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
     # calls; the rest is the pipeline's overhead (placement, rest checks, state restore).
     sapien_s = sum(s.sapien_s for s in scenes)
 
-    # Issue 50's pull-consequence labels: the trials' whole pull of every box, against the
-    # deletion labels every dataset scene already pays for, on the same scenes.
     ch6 = load_section(TrialsConfig, "trials", params).ch6
-    pull = (ch6.pull_increment_m, ch6.grasp_lift_m)
-    t0 = time.perf_counter()
-    for sc in scenes:
-        removal_matrix(sc.spec, sim.physics)
-    removals_s = (time.perf_counter() - t0) / n_scenes
-    t0 = time.perf_counter()
-    for sc in scenes:
-        pull_outcomes(sc.spec, sim.physics, pull)
-    pulls_s = (time.perf_counter() - t0) / n_scenes
-
-    # Render: per picture of the pipeline's own function, and SAPIEN's raw take_picture.
-    world = build_world(warm.spec, sim.physics, render=True)
-    render_depth_instance(world, sim.camera)
-    t0 = time.perf_counter()
-    for _ in range(n_scenes):
-        render_depth_instance(world, sim.camera)
-    render_s = (time.perf_counter() - t0) / n_scenes
-    cam = world.scene.add_camera(
-        "raw",
-        sim.camera.image_size,
-        sim.camera.image_size,
-        np.deg2rad(sim.camera.fovy_deg),
-        sim.camera.near_m,
-        sim.camera.far_m,
-    )
-    world.scene.update_render()
-    cam.take_picture()
-    t0 = time.perf_counter()
-    for _ in range(n_scenes):
-        world.scene.update_render()
-        cam.take_picture()
-        cam.get_picture("Position")
-    raw_picture_s = (time.perf_counter() - t0) / n_scenes
+    removals_s, pulls_s = _label_costs(scenes, sim, ch6, n_scenes)
+    render_s, raw_picture_s = _render_costs(warm, sim, n_scenes)
 
     result = {
         "dataset": BENCH_DATASET,
@@ -119,6 +86,49 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
     ]
     write_result(out_dir, "sim", result, lines)
     return result
+
+
+def _label_costs(scenes: list, sim: SimConfig, ch6, n_scenes: int) -> tuple[float, float]:
+    """Seconds per scene of the deletion labels (every box removed) and of the
+    pull-consequence labels (the trials' whole pull of every box), on the same scenes."""
+    pull = (ch6.pull_increment_m, ch6.grasp_lift_m)
+    t0 = time.perf_counter()
+    for sc in scenes:
+        removal_matrix(sc.spec, sim.physics)
+    removals_s = (time.perf_counter() - t0) / n_scenes
+    t0 = time.perf_counter()
+    for sc in scenes:
+        pull_outcomes(sc.spec, sim.physics, pull)
+    pulls_s = (time.perf_counter() - t0) / n_scenes
+    return removals_s, pulls_s
+
+
+def _render_costs(warm, sim: SimConfig, n_scenes: int) -> tuple[float, float]:
+    """Seconds per picture of the pipeline's own render function and of SAPIEN's raw
+    take_picture, each over n_scenes pictures of the warm-up scene after one untimed."""
+    world = build_world(warm.spec, sim.physics, render=True)
+    render_depth_instance(world, sim.camera)
+    t0 = time.perf_counter()
+    for _ in range(n_scenes):
+        render_depth_instance(world, sim.camera)
+    render_s = (time.perf_counter() - t0) / n_scenes
+    cam = world.scene.add_camera(
+        "raw",
+        sim.camera.image_size,
+        sim.camera.image_size,
+        np.deg2rad(sim.camera.fovy_deg),
+        sim.camera.near_m,
+        sim.camera.far_m,
+    )
+    world.scene.update_render()
+    cam.take_picture()
+    t0 = time.perf_counter()
+    for _ in range(n_scenes):
+        world.scene.update_render()
+        cam.take_picture()
+        cam.get_picture("Position")
+    raw_picture_s = (time.perf_counter() - t0) / n_scenes
+    return render_s, raw_picture_s
 
 
 def bench_replay(

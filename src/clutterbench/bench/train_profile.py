@@ -30,17 +30,13 @@ import torch
 from torch.profiler import ProfilerActivity, profile, record_function
 
 from clutterbench.bench import header, write_result
-from clutterbench.bench.train_rate import (
+from clutterbench.bench.cpu_rates import SOFT_LIMIT_S, THREADS, Contention, Gate, torch_threads
+from clutterbench.bench.train_rate_md import pct
+from clutterbench.bench.train_steps import (
     PROFILED,
-    SOFT_LIMIT_S,
-    THREADS,
-    Contention,
-    Gate,
     build_training,
     default_params,
-    pct,
     synthetic_pairs,
-    torch_threads,
 )
 from clutterbench.collapse.config import TrainConfig
 from clutterbench.collapse.train import evaluate_loss, loss_fn, train_step
@@ -147,56 +143,14 @@ def bench_train_profile(out_dir: Path = Path("reports/bench")) -> dict[str, Any]
         for _ in range(WARMUP_STEPS):
             train_step(model, next(batches), opt, loss, cfg)
 
-        def loading_alone() -> dict[str, float]:
-            t0 = time.perf_counter()
-            pairs = sum(len(next(batches)["target"]) for _ in range(LOADING_BATCHES))
-            load_s = time.perf_counter() - t0
+        def measure() -> dict[str, Any]:
             return {
-                "batches": LOADING_BATCHES,
-                "pairs": pairs,
-                "seconds": load_s,
-                "ms_per_batch": 1e3 * load_s / LOADING_BATCHES,
-                "pairs_per_s": pairs / load_s,
+                "loading": _loading_alone(batches),
+                "plain_s": _unprofiled(model, batches, opt, loss, cfg),
+                **_profiled(model, batches, opt, loss, cfg, val_loader, n_val, head_loss),
             }
 
-        def unprofiled() -> float:
-            model.train()
-            t0 = time.perf_counter()
-            for _ in range(PROFILE_STEPS):
-                train_step(model, next(batches), opt, loss, cfg)
-            return time.perf_counter() - t0
-
-        def profiled() -> dict[str, Any]:
-            model.train()
-            with profile(activities=[ProfilerActivity.CPU]) as prof:
-                t0 = time.perf_counter()
-                for _ in range(PROFILE_STEPS):
-                    with record_function("data_loading"):
-                        batch = next(batches)
-                    train_step(model, batch, opt, loss, cfg)
-                train_s = time.perf_counter() - t0
-                with record_function("validation"):
-                    val = list(itertools.islice(val_loader, n_val))
-                    # a list of batches stands in for the loader: evaluate_loss iterates it
-                    evaluate_loss(model, val, loss, cfg, cfg.val_threshold, heads, head_loss)  # type: ignore[arg-type]
-                wall_s = time.perf_counter() - t0
-            groups, ops = group_times(prof.events())
-            return {"train_s": train_s, "wall_s": wall_s, "groups": groups, "ops": ops}
-
-        # shared cores: wait for idle ones, and repeat a slice other processes disturbed
-        gate = Gate(idle_wait_s=60.0, deadline=time.perf_counter() + SOFT_LIMIT_S)
-        best: dict[str, Any] | None = None
-        for attempt in range(1, gate.attempts + 1):
-            gate.wait_idle()
-            with Contention() as c:
-                got = {"loading": loading_alone(), "plain_s": unprofiled(), **profiled()}
-            got |= {"others": c.others, "attempts": attempt}
-            print({k: v for k, v in got.items() if k != "ops"}, flush=True)
-            if best is None or (c.others or 0.0) < (best["others"] or 0.0):
-                best = got
-            if c.others is None or c.others <= gate.clean or time.perf_counter() > gate.deadline:
-                break
-        assert best is not None
+        best = _least_disturbed(measure)
         groups, ops, wall_s = best["groups"], best["ops"], best["wall_s"]
     result: dict[str, Any] = {
         "model": PROFILED,
@@ -227,6 +181,71 @@ def bench_train_profile(out_dir: Path = Path("reports/bench")) -> dict[str, Any]
     }
     write_result(out_dir, "train_profile", result, markdown(result))
     return result
+
+
+def _loading_alone(batches: Iterator[dict[str, torch.Tensor]]) -> dict[str, float]:
+    """LOADING_BATCHES of the loader on their own, without training."""
+    t0 = time.perf_counter()
+    pairs = sum(len(next(batches)["target"]) for _ in range(LOADING_BATCHES))
+    load_s = time.perf_counter() - t0
+    return {
+        "batches": LOADING_BATCHES,
+        "pairs": pairs,
+        "seconds": load_s,
+        "ms_per_batch": 1e3 * load_s / LOADING_BATCHES,
+        "pairs_per_s": pairs / load_s,
+    }
+
+
+def _unprofiled(model, batches, opt, loss, cfg: TrainConfig) -> float:
+    """Seconds of PROFILE_STEPS training steps without the profiler."""
+    model.train()
+    t0 = time.perf_counter()
+    for _ in range(PROFILE_STEPS):
+        train_step(model, next(batches), opt, loss, cfg)
+    return time.perf_counter() - t0
+
+
+def _profiled(
+    model, batches, opt, loss, cfg: TrainConfig, val_loader, n_val: int, head_loss
+) -> dict[str, Any]:
+    """PROFILE_STEPS training steps and n_val validation batches under torch.profiler: the
+    seconds of both, and the operators' self times by group and by (group, op)."""
+    heads = tuple(cfg.models[PROFILED].labels)
+    model.train()
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        t0 = time.perf_counter()
+        for _ in range(PROFILE_STEPS):
+            with record_function("data_loading"):
+                batch = next(batches)
+            train_step(model, batch, opt, loss, cfg)
+        train_s = time.perf_counter() - t0
+        with record_function("validation"):
+            val = list(itertools.islice(val_loader, n_val))
+            # a list of batches stands in for the loader: evaluate_loss iterates it
+            evaluate_loss(model, val, loss, cfg, cfg.val_threshold, heads, head_loss)  # type: ignore[arg-type]
+        wall_s = time.perf_counter() - t0
+    groups, ops = group_times(prof.events())
+    return {"train_s": train_s, "wall_s": wall_s, "groups": groups, "ops": ops}
+
+
+def _least_disturbed(measure) -> dict[str, Any]:
+    """`measure()` on shared cores: wait for idle ones, and repeat a slice other processes
+    disturbed; the least disturbed run, with the others' CPU share and its attempt."""
+    gate = Gate(idle_wait_s=60.0, deadline=time.perf_counter() + SOFT_LIMIT_S)
+    best: dict[str, Any] | None = None
+    for attempt in range(1, gate.attempts + 1):
+        gate.wait_idle()
+        with Contention() as c:
+            got = measure()
+        got |= {"others": c.others, "attempts": attempt}
+        print({k: v for k, v in got.items() if k != "ops"}, flush=True)
+        if best is None or (c.others or 0.0) < (best["others"] or 0.0):
+            best = got
+        if c.others is None or c.others <= gate.clean or time.perf_counter() > gate.deadline:
+            break
+    assert best is not None
+    return best
 
 
 def markdown(result: dict[str, Any]) -> list[str]:
