@@ -480,3 +480,22 @@ def test_evaluate_agent_writes_records_and_summary(tmp_path: Path) -> None:
     summary = json.loads((out / "summary.json").read_text())
     assert len(records) == 1 and records[0]["stream"] == "ch6_3_10"
     assert summary["success_n"] == 1 and "strict_success_k" in summary
+
+
+def test_replenish_places_a_box_and_judges_it_without_a_checkpoint(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "dvc.yaml").write_text("stages: {}\n")  # a project without models or reports
+    args = ["replenish", str(STACK3), "--box", "60,40,80", "--planner", "random", "--execute"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.output.strip().splitlines()[-1])
+    assert out["box_mm"] == [60.0, 40.0, 80.0] and out["planner"] == "random"
+    assert out["execute"]["steps"] and "success" in out["execute"]
+
+
+def test_replenish_refuses_a_bad_box_in_one_line():
+    result = runner.invoke(app, ["replenish", str(STACK3), "--box", "60,x,80"])
+    assert result.exit_code != 0
+    assert result.output.strip().splitlines() == [
+        "error: --box 60,x,80: expected W,D,H in mm, e.g. 100,120,30"
+    ]
