@@ -19,6 +19,8 @@ from clutterbench.data.config import GenerateConfig
 from clutterbench.data.slides import SlideDataConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.support.config import SupportEvalConfig
+from clutterbench.trials.ch3.config import GamesConfig
+from clutterbench.trials.config import TrialsConfig
 
 
 @pytest.fixture
@@ -72,6 +74,35 @@ def test_params_yaml_gives_todays_counts_on_two_cores(root, cores, scale):
     )
     data = load_section(SlideDataConfig, "yamakuzushi.data", params)
     assert data.workers == 2
+    trials = load_section(TrialsConfig, "trials", params)
+    assert trials.workers == (1 if scale == "tiny" else 2)
+    assert load_section(GamesConfig, "yamakuzushi.games", params).workers == 2
+
+
+@pytest.mark.parametrize(
+    "cls, section", [(TrialsConfig, "trials"), (GamesConfig, "yamakuzushi.games")]
+)
+def test_trials_workers_auto_are_base_cores(cores, cls, section):
+    cores(6)
+    params = {"base": {"scale": "tiny"}, "trials": {"workers": "auto"}}
+    params["yamakuzushi"] = {"games": {"workers": "auto"}}
+    assert load_section(cls, section, params).workers == 6
+    params["base"]["cores"] = 3
+    assert load_section(cls, section, params).workers == 3
+    params["trials"]["workers"] = params["yamakuzushi"]["games"]["workers"] = 5
+    assert load_section(cls, section, params).workers == 5
+    params["trials"]["workers"] = params["yamakuzushi"]["games"]["workers"] = 0
+    with pytest.raises(ClutterbenchError, match=rf"^{section}\.workers: 0 is not auto or an"):
+        load_section(cls, section, params)
+
+
+@pytest.mark.parametrize("n", [1, 16])
+def test_params_yaml_trials_at_paper_scale_take_every_core(root, cores, n):
+    cores(n)
+    params = load_params(root / "params.yaml")
+    params["base"]["scale"] = "paper"
+    assert load_section(TrialsConfig, "trials", params).workers == n
+    assert load_section(GamesConfig, "yamakuzushi.games", params).workers == n
 
 
 @pytest.mark.parametrize("bad", ["many", 0, -2, 1.5, True, None])

@@ -9,7 +9,7 @@ import dataclasses
 from collections.abc import Mapping
 from typing import Literal
 
-from clutterbench.config import bounded
+from clutterbench.config import bounded, cores_field
 from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.data.config import DatasetConfig
 from clutterbench.maniskill.config import ArmConfig
@@ -341,8 +341,9 @@ class ArmConditionConfig:
 
 @dataclasses.dataclass(frozen=True)
 class TrialsConfig:
-    workers: int = bounded(2, ge=1)
-    """Worker processes per condition, each with its own renderer and one torch thread."""
+    workers: int = cores_field(2)
+    """Worker processes per condition, each with its own renderer and one torch thread;
+    auto: base.cores."""
     streams: Mapping[str, SceneStreamConfig] = dataclasses.field(default_factory=dict)
     """Scene stream name -> the scenes it draws (seeded from base.seed and its name)."""
     ch6: Ch6TrialParams = Ch6TrialParams()

@@ -7,7 +7,7 @@ import dataclasses
 from typing import Literal
 
 from clutterbench.collapse.slide_train import SlideTrainConfig
-from clutterbench.config import bounded
+from clutterbench.config import bounded, cores_field
 from clutterbench.data.slide_crops import ScanConfig
 from clutterbench.data.slides import SlideDataConfig
 from clutterbench.planning.ch3.yamakuzushi import PomdpConfig, SelectConfig
@@ -33,8 +33,8 @@ class GamesConfig:
     """Variants played."""
     max_slides: int = bounded(10, ge=1)
     """A game ends after this many slides at most (a pile has at most 10 pieces)."""
-    workers: int = bounded(2, ge=1)
-    """Worker processes playing games."""
+    workers: int = cores_field(2)
+    """Worker processes playing games; auto: base.cores."""
     mcap_images: bool = True
     """Write depth images (top and sensor views) into the variants' MCAP files."""
 
