@@ -77,13 +77,20 @@ def worker_init(torch_threads: int = 1) -> None:
 
 
 JOB_KEYS = ("condition", "stream", "planner", "index", "episode", "game", "shard", "seed")
-"""The fields of a job (a dict) that name it in an error, in this order, where present."""
+"""The fields of a job (a dict's keys, a job dataclass's attributes) that name it in an
+error, in this order, where present."""
 
 
 def job_name(job: Any) -> str:
-    """'condition multi_step, stream ch6_3_10, index 7, seed 0' for a job dict; repr otherwise."""
+    """'condition multi_step, stream ch6_3_10, index 7, seed 0' for a job dict or a job
+    dataclass (trials.core.jobs: its fields of the same names); repr otherwise."""
     if isinstance(job, dict):
         named = [f"{k} {job[k]}" for k in JOB_KEYS if k in job and _plain(job[k])]
+        if named:
+            return ", ".join(named)
+    elif dataclasses.is_dataclass(job) and not isinstance(job, type):
+        values = [(k, getattr(job, k)) for k in JOB_KEYS if hasattr(job, k)]
+        named = [f"{k} {v}" for k, v in values if _plain(v)]
         if named:
             return ", ".join(named)
     text = repr(job)

@@ -4,6 +4,7 @@ and the default backend runs without Ray (its own tests: test_parallel_ray.py)."
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 import subprocess
@@ -12,8 +13,10 @@ import sys
 import pytest
 
 from clutterbench.config import load_section
+from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.parallel import ParallelConfig, job_name, map_in_workers
+from clutterbench.trials.core.jobs import EpisodeJob
 
 
 def _episode(job: dict) -> int:
@@ -30,6 +33,49 @@ def test_a_job_is_named_by_its_fields():
         "condition multi_step, stream ch6_3_10, index 1, seed 7"
     )
     assert job_name(3) == "3"
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True, repr=False)
+class _PlannerJob(EpisodeJob):
+    """A trial job as the chapters' are: a frozen dataclass on EpisodeJob."""
+
+    stream: str
+    planner: str
+    params: object = None
+
+
+def _job(index: int) -> _PlannerJob:
+    return _PlannerJob(
+        condition="c",
+        stream="s",
+        planner="p",
+        index=index,
+        seed=0,
+        record_images=False,
+        collapse_free=CollapseFreeConfig(),
+    )
+
+
+def _job_episode(job: _PlannerJob) -> int:
+    if job.index == 1:
+        raise KeyError("box_6")
+    return job.index
+
+
+def test_a_job_dataclass_is_named_by_its_fields_as_a_dict_was():
+    assert job_name(_job(1)) == "condition c, stream s, planner p, index 1, seed 0"
+    as_dict = {k: getattr(_job(1), k) for k in ("condition", "stream", "planner", "index")}
+    assert job_name(_job(1)) == job_name(as_dict | {"seed": 0, "params": None})
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_raising_job_dataclass_is_one_line_naming_it(workers, monkeypatch):
+    monkeypatch.delenv("CLUTTERBENCH_TRACEBACK", raising=False)
+    with pytest.raises(ClutterbenchError) as err:
+        map_in_workers("trials", _job_episode, [_job(i) for i in range(3)], workers)
+    assert str(err.value) == (
+        "trials: condition c, stream s, planner p, index 1, seed 0: KeyError: 'box_6'"
+    )
 
 
 @pytest.mark.parametrize("workers", [1, 2])
