@@ -79,7 +79,7 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
         "",
         "Targets: >= 20 labelled scenes / s / core; overhead_ratio <= 2 "
         "(pipeline time / time inside SAPIEN step + render calls in the same run).",
-        "Pull-outcome labels (generate.datasets.<name>.pull_outcomes, issue 50): the trials' "
+        "Pull-outcome labels (generate.datasets.<name>.pull_outcomes): the trials' "
         "whole pull of every box of the same scenes, per scene, against the deletion labels "
         "(removal of every box) each labelled scene already includes; "
         "pull_outcome_labels_vs_scene is what they add to a labelled scene's time.",
