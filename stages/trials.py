@@ -43,13 +43,7 @@ def trials(params: dict, base: BaseConfig) -> None:
     jobs, about = [], {}
     for name, cond in conditions.items():
         mine, support, cp_max = condition_jobs(
-            name=name,
-            cond=cond,
-            trials=cfg,
-            seed=base.seed,
-            physics=sim.physics,
-            camera=sim.camera,
-            thresholds=THRESHOLDS,
+            name, cond, trials=cfg, sim=sim, seed=base.seed, thresholds=THRESHOLDS
         )
         jobs += mine
         about[name] = {

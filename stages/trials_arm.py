@@ -43,13 +43,7 @@ def trials_arm(params: dict, base: BaseConfig) -> None:
             )
             load_planners(cfg.planner_modules, [cond.planner])
             mine, _, _ = condition_jobs(
-                name=name,
-                cond=cond,
-                trials=cfg,
-                seed=base.seed,
-                physics=sim.physics,
-                camera=sim.camera,
-                thresholds=THRESHOLDS,
+                name, cond, trials=cfg, sim=sim, seed=base.seed, thresholds=THRESHOLDS
             )
             chapter = 6
         else:
@@ -60,19 +54,7 @@ def trials_arm(params: dict, base: BaseConfig) -> None:
                 raise ClutterbenchError(
                     f"models/{cond.model}/best.pt missing; run train@{cond.model}"
                 )
-            mine = ch4_jobs(
-                condition=name,
-                cond=cond,
-                params=cfg.ch4,
-                stream_cfg=cfg.streams[cond.stream],
-                seed=base.seed,
-                physics=sim.physics,
-                camera=sim.camera,
-                max_attempts=cfg.max_attempts,
-                record_images=cfg.mcap_images,
-                arm=cfg.arm,
-                collapse_free=cfg.collapse_free,
-            )
+            mine = ch4_jobs(name, cond, trials=cfg, sim=sim, seed=base.seed, arm=cfg.arm)
             chapter = 4
         jobs += mine
         about[name] = {

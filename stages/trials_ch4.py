@@ -36,18 +36,7 @@ def trials_ch4(params: dict, base: BaseConfig) -> None:
     for name, cond in cfg.ch4_conditions.items():
         if cond.model is not None and not Path(f"models/{cond.model}/best.pt").exists():
             raise ClutterbenchError(f"models/{cond.model}/best.pt missing; run train@{cond.model}")
-        jobs += ch4_jobs(
-            condition=name,
-            cond=cond,
-            params=cfg.ch4,
-            stream_cfg=cfg.streams[cond.stream],
-            seed=base.seed,
-            physics=sim.physics,
-            camera=sim.camera,
-            max_attempts=cfg.max_attempts,
-            record_images=cfg.mcap_images,
-            collapse_free=cfg.collapse_free,
-        )
+        jobs += ch4_jobs(name, cond, trials=cfg, sim=sim, seed=base.seed)
     parallel = load_section(ParallelConfig, "parallel", params)
     results = run_episodes("trials_ch4", run_ch4_episode, jobs, cfg.workers, parallel)
     records = [r.record for r in results]

@@ -41,19 +41,14 @@ def trials_ch5(params: dict, base: BaseConfig) -> None:
     jobs = []
     for name, cond in cfg.ch5_conditions.items():
         jobs += ch5_jobs(
-            condition=name,
-            cond=cond,
-            params=cfg.ch5,
-            stream_cfg=cfg.streams[cond.stream],
+            name,
+            cond,
+            trials=cfg,
+            sim=sim,
             seed=base.seed,
-            physics=sim.physics,
-            camera=sim.camera,
-            max_attempts=cfg.max_attempts,
-            record_images=cfg.mcap_images,
             prob_threshold=prob,
             scene_type=cond.stream.removeprefix("ch5_"),
             oracle_detector=with_detector,
-            collapse_free=cfg.collapse_free,
         )
     parallel = load_section(ParallelConfig, "parallel", params)
     results = run_episodes("trials_ch5", run_ch5_episode, jobs, cfg.workers, parallel)

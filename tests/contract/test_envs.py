@@ -471,22 +471,22 @@ class _AbortAfterFirstIncrement:
 
 
 def _trials_records(env, planner: str, episodes: int, support, cp_max: float, cp: Path):
+    from clutterbench.sim.config import SimConfig
     from clutterbench.trials.ch6.episodes import ch6_jobs, run_ch6_episode
     from clutterbench.trials.config import ConditionConfig
 
     src = env.unwrapped.source
     cond = ConditionConfig(planner=planner, stream=src.name, episodes=episodes, rule="coverage")
     jobs = ch6_jobs(
-        condition=planner,
-        cond=cond,
+        planner,
+        cond,
         trials=src.trials,
-        stream_cfg=src.cfg,
+        sim=SimConfig(physics=src.physics, camera=src.camera),
         seed=src.seed,
-        physics=src.physics,
-        camera=src.camera,
         support=support,
         cp_max=cp_max,
         model_path=cp,
+        stream_cfg=src.cfg,
     )
     return [run_ch6_episode(dataclasses.replace(j, record_images=False)).record for j in jobs]
 

@@ -13,7 +13,7 @@ from clutterbench.perception.box_fit import fit_boxes
 from clutterbench.planning.ch6.physics_depth import PhysicsFromDepthPlanner
 from clutterbench.planning.ch6.support import SupportParams
 from clutterbench.sim.catalog import box_extents_m
-from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
 from clutterbench.sim.estimated import estimated_scene, resolve_overlaps
 from clutterbench.sim.geometry import quat_from_axis_angle
 from clutterbench.sim.pull import SceneState, world_at
@@ -98,13 +98,11 @@ def _job(planner: str) -> dict:
     cond = ConditionConfig(planner=planner, stream="s", episodes=1)
     support = SupportParams("coverage", 0.5, 0.3, 2, 0.0)
     job = ch6_jobs(
-        condition="c",
-        cond=cond,
+        "c",
+        cond,
         trials=cfg,
-        stream_cfg=stream,
+        sim=SimConfig(camera=CAM),
         seed=0,
-        physics=PhysicsConfig(),
-        camera=CAM,
         support=support,
         cp_max=0.3,
         model_path=Path("x"),

@@ -17,7 +17,7 @@ from clutterbench.perception.masks import masks_from_instance
 from clutterbench.planning.ch4.risk import risk_index, soft_collapse
 from clutterbench.planning.ch4.risk_planner import plan_risk
 from clutterbench.report.risk_figure import draw_figure
-from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import ensure_renderer, observe
 from clutterbench.sim.spec import SceneSpec
@@ -163,18 +163,21 @@ def test_equal_risks_go_to_the_least_expected_collapse(stack3, physics):
 def _jobs(tiny_ch4: Path, **cond) -> list[dict]:
     stream = SceneStreamConfig(families={"pile": 1}, n_objects=(5, 5), catalogue="various")
     c = Ch4ConditionConfig(stream="s", episodes=2, **cond)
-    cfg = TrialsConfig(streams={"s": stream}, ch4_conditions={"c": c})
     params = Ch4TrialParams(min_pixels=5, min_target_pixels=10)
-    jobs = ch4_jobs(
-        condition="c",
-        cond=cfg.ch4_conditions["c"],
-        params=params,
-        stream_cfg=stream,
-        seed=0,
-        physics=PhysicsConfig(),
-        camera=CAM,
+    cfg = TrialsConfig(
+        streams={"s": stream},
+        ch4_conditions={"c": c},
+        ch4=params,
         max_attempts=30,
-        record_images=True,
+        mcap_images=True,
+    )
+    jobs = ch4_jobs(
+        "c",
+        cfg.ch4_conditions["c"],
+        trials=cfg,
+        sim=SimConfig(camera=CAM),
+        seed=0,
+        collapse_free=CollapseFreeConfig(),
     )
     return [
         dataclasses.replace(j, model_path=tiny_ch4 if c.model is not None else None) for j in jobs

@@ -15,7 +15,7 @@ import clutterbench.trials.ch5.perception as ch5_perception
 from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.logs.mcap_episode import read_episode
 from clutterbench.planning.ch5.replenish import ReplenishParams, ReplenishPlanner
-from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
 from clutterbench.sim.pull import SceneState, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
@@ -97,17 +97,15 @@ def test_episode_record_and_mcap(tmp_path):
     spec = crowded_row()
     cond = Ch5ConditionConfig(planner="no_collapse", stream="ch5_shelved", perception="clusters")
     job = ch5.ch5_jobs(
-        condition="hand",
-        cond=cond,
-        params=TrialsConfig().ch5,
-        stream_cfg=SceneStreamConfig(families={"shelved": 1.0}, n_objects=(4, 6)),
+        "hand",
+        cond,
+        trials=TrialsConfig(max_attempts=5, mcap_images=True),
+        sim=SimConfig(camera=CAM),
         seed=0,
-        physics=PhysicsConfig(),
-        camera=CAM,
-        max_attempts=5,
-        record_images=True,
         prob_threshold=0.5,
         scene_type="shelved",
+        stream_cfg=SceneStreamConfig(families={"shelved": 1.0}, n_objects=(4, 6)),
+        collapse_free=CollapseFreeConfig(),
     )[0]
     result = ch5.replenish(spec, job, NEW_BOX)
     rec = result.record
@@ -415,19 +413,15 @@ def test_shelved_starts_offer_no_free_place():
         families={"replenish_shelved": 1.0}, n_objects=(4, 6), catalogue="various"
     )
     cond = Ch5ConditionConfig(planner="oracle", stream="ch5_shelved", perception="clusters")
-    cfg = TrialsConfig().ch5
     jobs = ch5.ch5_jobs(
-        condition="shelved",
-        cond=cond,
-        params=cfg,
-        stream_cfg=stream,
+        "shelved",
+        cond,
+        trials=TrialsConfig(streams={"ch5_shelved": stream}, max_attempts=40, mcap_images=False),
+        sim=SimConfig(camera=CAM),
         seed=0,
-        physics=PhysicsConfig(),
-        camera=CAM,
-        max_attempts=40,
-        record_images=False,
         prob_threshold=0.5,
         scene_type="shelved",
+        collapse_free=CollapseFreeConfig(),
     )
     leaning = 0
     for job in jobs[:12]:

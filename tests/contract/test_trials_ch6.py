@@ -12,7 +12,7 @@ from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.logs.mcap_episode import read_episode
 from clutterbench.planning.ch6.extraction import Decision
 from clutterbench.planning.ch6.support import SupportParams
-from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
 from clutterbench.sim.pull import SceneState, execute_pull, world_at
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch6.episodes import (
@@ -128,13 +128,11 @@ def _job(planner: str, episodes: int = 1, cp: Path | None = None) -> dict:
     cond = ConditionConfig(planner="random", stream="s", episodes=episodes)
     support = SupportParams("coverage", 0.5, 0.3, 2, 0.0)
     jobs = ch6_jobs(
-        condition="c",
-        cond=cond,
+        "c",
+        cond,
         trials=cfg,
-        stream_cfg=stream,
+        sim=SimConfig(camera=CAM),
         seed=0,
-        physics=PhysicsConfig(),
-        camera=CAM,
         support=support,
         cp_max=0.3,
         model_path=cp,

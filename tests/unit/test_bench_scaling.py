@@ -142,19 +142,15 @@ def test_the_ch5_workload_is_the_stages_jobs_of_its_network_free_conditions():
     assert [j.index for j in jobs] == [0] * len(names) + [1]
     first = trials.ch5_conditions[names[0]]
     own = ch5_jobs(
-        condition=f"bench_{names[0]}",
-        cond=dataclasses.replace(first, episodes=2),
-        params=trials.ch5,
-        stream_cfg=trials.streams[first.stream],
+        f"bench_{names[0]}",
+        dataclasses.replace(first, episodes=2),
+        trials=trials,
+        sim=sim,
         seed=SEED,
-        physics=sim.physics,
-        camera=sim.camera,
-        max_attempts=trials.max_attempts,
-        record_images=False,
         prob_threshold=0.5,
         scene_type=first.stream.removeprefix("ch5_"),
         oracle_detector=False,
-        collapse_free=trials.collapse_free,
+        record_images=False,
     )
     assert jobs[0] == own[0] and jobs[-1] == own[1]
     assert all(j.seed == SEED and not j.oracle_detector for j in jobs)

@@ -19,6 +19,7 @@ from clutterbench.dev.ch6_pull import (
 )
 from clutterbench.dev.config import Ch6PullConfig, DevConfig
 from clutterbench.errors import ClutterbenchError
+from clutterbench.sim.config import SimConfig
 from clutterbench.trials.ch6.episodes import make_planner
 from clutterbench.trials.config import TrialsConfig
 
@@ -221,7 +222,7 @@ def test_pull_thresholds_reach_only_the_pull_head_planners(root, tmp_path, monke
     cond = ConditionConfig("bimanual_pull", "ch6_3_10", 1, "coverage_gap")
     staged = dataclasses.replace(trials, ch6=ch6)
     jobs, support, cp_max = condition_jobs(
-        name="c", cond=cond, trials=staged, seed=0, physics=None, camera=None, thresholds=path
+        "c", cond, trials=staged, sim=SimConfig(physics=None, camera=None), seed=0, thresholds=path
     )
     assert (jobs[0].support.prob_threshold, jobs[0].cp_max, cp_max) == (0.2, 0.8, 0.8)
     monkeypatch.setattr(ch6_pull, "THRESHOLDS", path)

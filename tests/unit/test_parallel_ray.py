@@ -21,7 +21,7 @@ from clutterbench.data.config import DatasetConfig, GenerateConfig
 from clutterbench.data.generate import generate_dataset
 from clutterbench.errors import ClutterbenchError
 from clutterbench.parallel import ParallelConfig, connect_ray, map_in_workers
-from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
+from clutterbench.sim.config import CameraConfig, SimConfig
 
 ray = pytest.importorskip("ray", reason="the ray backend needs ray (make setup installs it)")
 
@@ -148,13 +148,11 @@ def episodes(tmp_path_factory):
     support = SupportParams("coverage", 0.5, 0.3, 2, 0.0)
     cam = CameraConfig(image_size=64)
     jobs = ch6_jobs(
-        condition="c",
-        cond=cond,
+        "c",
+        cond,
         trials=cfg,
-        stream_cfg=stream,
+        sim=SimConfig(camera=cam),
         seed=0,
-        physics=PhysicsConfig(),
-        camera=cam,
         support=support,
         cp_max=0.3,
         model_path=cp,

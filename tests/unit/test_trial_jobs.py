@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from clutterbench.planning.ch6.support import SupportParams
-from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.config import CameraConfig, SimConfig
 from clutterbench.trials.ch3.config import Ch3Config
 from clutterbench.trials.ch3.games import Ch3Job, ch3_jobs
 from clutterbench.trials.ch4.episodes import Ch4Job, ch4_jobs
@@ -26,38 +26,28 @@ from clutterbench.trials.config import (
 from clutterbench.trials.core.jobs import EpisodeJob, ShelfJob
 
 STREAM = SceneStreamConfig(families={"stacked": 1}, n_objects=(3, 5))
-TRIALS = TrialsConfig(streams={"s": STREAM})
-SCENE = {
-    "seed": 0,
-    "physics": PhysicsConfig(),
-    "camera": CameraConfig(image_size=64),
-    "stream_cfg": STREAM,
-}
+TRIALS = TrialsConfig(streams={"s": STREAM}, max_attempts=30)
+SCENE = {"trials": TRIALS, "sim": SimConfig(camera=CameraConfig(image_size=64)), "seed": 0}
 
 
 def _jobs() -> dict[type, EpisodeJob]:
     ch6 = ch6_jobs(
-        condition="c6",
-        cond=ConditionConfig(planner="random", stream="s", episodes=2),
-        trials=TRIALS,
+        "c6",
+        ConditionConfig(planner="random", stream="s", episodes=2),
         support=SupportParams("coverage", 0.5, 0.3, 2, 0.0),
         cp_max=0.3,
         model_path=Path("models/m/best.pt"),
         **SCENE,
     )
     ch4 = ch4_jobs(
-        condition="c4",
-        cond=Ch4ConditionConfig(planner="oracle", stream="s", episodes=2),
-        params=TRIALS.ch4,
-        max_attempts=30,
+        "c4",
+        Ch4ConditionConfig(planner="oracle", stream="s", episodes=2),
         record_images=False,
         **SCENE,
     )
     ch5 = ch5_jobs(
-        condition="c5",
-        cond=Ch5ConditionConfig(planner="replenish", stream="s", episodes=2),
-        params=TRIALS.ch5,
-        max_attempts=30,
+        "c5",
+        Ch5ConditionConfig(planner="replenish", stream="s", episodes=2),
         record_images=False,
         prob_threshold=0.5,
         scene_type="s",

@@ -62,3 +62,16 @@ def write_result(
     write_json(out_dir / f"{name}.json", result)
     if markdown is not None:
         write_text(out_dir / f"{name}.md", "\n".join(markdown) + "\n")
+
+
+def bench_ch6_jobs(
+    planner: str, episodes: int, trials: Any, sim: Any, support: Any, cp_max: float, model: Path
+) -> list[Any]:
+    """Ch. 6 planner `planner`'s first `episodes` jobs on stream ch6_3_10, seed 99, condition
+    "bench": the trials, grouped and physics-depth benches' episodes."""
+    from clutterbench.trials.ch6.episodes import ch6_jobs
+    from clutterbench.trials.config import ConditionConfig
+
+    cond = ConditionConfig(planner=planner, stream="ch6_3_10", episodes=episodes)
+    kw = {"support": support, "cp_max": cp_max, "model_path": model}
+    return ch6_jobs("bench", cond, trials=trials, sim=sim, seed=99, **kw)

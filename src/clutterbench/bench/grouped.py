@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from clutterbench.bench import header, write_result
+from clutterbench.bench import bench_ch6_jobs, header, write_result
 from clutterbench.collapse.config import TrainConfig
 from clutterbench.collapse.predict import CollapsePredictor, predict_collapse
 from clutterbench.collapse.train import loss_fn, model_seed, train_step
@@ -200,8 +200,8 @@ def bench_trial_cp(params: dict[str, Any], episodes: int) -> dict[str, float]:
     from clutterbench.planning.ch6.support import SupportParams
     from clutterbench.sim.config import SimConfig
     from clutterbench.sim.render import ensure_renderer
-    from clutterbench.trials.ch6.episodes import ch6_jobs, run_ch6_episode
-    from clutterbench.trials.config import ConditionConfig, TrialsConfig
+    from clutterbench.trials.ch6.episodes import run_ch6_episode
+    from clutterbench.trials.config import TrialsConfig
 
     sim = load_section(SimConfig, "sim", params)
     trials = load_section(TrialsConfig, "trials", params)
@@ -210,22 +210,11 @@ def bench_trial_cp(params: dict[str, Any], episodes: int) -> dict[str, float]:
     )
     model = Path(f"models/{trials.ch6.model}/best.pt")
     ensure_renderer()
-    cond = ConditionConfig(planner="multi_step", stream="ch6_3_10", episodes=episodes)
     out: dict[str, float] = {}
     for path, once in (("per_pair", False), ("grouped", True)):
         predictor = _use_predictor(model, sim.camera.image_size, once)
-        jobs = ch6_jobs(
-            condition="bench",
-            cond=cond,
-            trials=trials,
-            stream_cfg=trials.streams["ch6_3_10"],
-            seed=99,
-            physics=sim.physics,
-            camera=sim.camera,
-            support=support,
-            cp_max=support.score_threshold,
-            model_path=model,
-        )
+        cp_max = support.score_threshold
+        jobs = bench_ch6_jobs("multi_step", episodes, trials, sim, support, cp_max, model)
         run_ch6_episode(jobs[0])  # warm-up
         predictor.seconds, wall = 0.0, time.perf_counter()
         with _calls_recorded() as calls:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from clutterbench.bench import header, measure_table, write_result
+from clutterbench.bench import bench_ch6_jobs, header, measure_table, write_result
 from clutterbench.config import load_params, load_section
 from clutterbench.platform_info import cpu_description
 
@@ -79,22 +79,9 @@ def bench_physics_depth(out_dir: Path = Path("reports/bench"), episodes: int = E
 
 def _episode_walls(planner: str, episodes: int, trials, sim) -> list[float]:
     """Wall seconds of each bench episode of `planner` (stream ch6_3_10, seed 99)."""
-    from clutterbench.trials.ch6.episodes import ch6_jobs, run_ch6_episode
-    from clutterbench.trials.config import ConditionConfig
+    from clutterbench.trials.ch6.episodes import run_ch6_episode
 
-    cond = ConditionConfig(planner=planner, stream="ch6_3_10", episodes=episodes)
-    jobs = ch6_jobs(
-        condition="bench",
-        cond=cond,
-        trials=trials,
-        stream_cfg=trials.streams["ch6_3_10"],
-        seed=99,
-        physics=sim.physics,
-        camera=sim.camera,
-        support=None,
-        cp_max=1.0,
-        model_path=Path("unused"),
-    )
+    jobs = bench_ch6_jobs(planner, episodes, trials, sim, None, 1.0, Path("unused"))
     walls = []
     for job in jobs:
         t0 = time.perf_counter()

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from clutterbench.bench import header, measure_table, write_result
+from clutterbench.bench import bench_ch6_jobs, header, measure_table, write_result
 from clutterbench.config import load_params, load_section
 from clutterbench.io import read_json
 from clutterbench.planning.ch6.cpg import build_cpg
@@ -22,8 +22,8 @@ from clutterbench.platform_info import cpu_description
 from clutterbench.sim.config import SimConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import ensure_renderer, observe
-from clutterbench.trials.ch6.episodes import ch6_jobs, run_ch6_episode
-from clutterbench.trials.config import ConditionConfig, TrialsConfig
+from clutterbench.trials.ch6.episodes import run_ch6_episode
+from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.core.harness import load_predictor
 from clutterbench.trials.core.scenes import draw_trial_spec
 
@@ -33,6 +33,7 @@ THRESHOLDS = Path("reports/support/thresholds.json")
 def bench_ch4(trials: TrialsConfig, sim: SimConfig, scenes: int) -> dict:
     """Ch. 4 planning latency: every ordered pair of a 10-box pile through the network
     (thesis eqs. 4.1, 4.2), and the median wall time of one trial per ch. 4 planner."""
+    from clutterbench.criteria import CollapseFreeConfig
     from clutterbench.perception.masks import masks_from_instance
     from clutterbench.planning.ch4.risk_planner import plan_risk
     from clutterbench.trials.ch4.episodes import ch4_jobs, run_ch4_episode
@@ -67,15 +68,12 @@ def bench_ch4(trials: TrialsConfig, sim: SimConfig, scenes: int) -> dict:
             model=model if planner == "risk" else None,
         )
         jobs = ch4_jobs(
-            condition="bench",
-            cond=cond,
-            params=trials.ch4,
-            stream_cfg=trials.streams[cond.stream],
+            "bench",
+            cond,
+            trials=trials,
+            sim=sim,
             seed=99,
-            physics=sim.physics,
-            camera=sim.camera,
-            max_attempts=trials.max_attempts,
-            record_images=trials.mcap_images,
+            collapse_free=CollapseFreeConfig(),  # the criterion's defaults
         )
         wall = []
         for job in jobs:
@@ -116,19 +114,8 @@ def bench_trials(
         "threads": 1,
     }
     for planner_name in ("single_step", "multi_step", "bimanual", "oracle", "random"):
-        cond = ConditionConfig(planner=planner_name, stream="ch6_3_10", episodes=episodes)
-        jobs = ch6_jobs(
-            condition="bench",
-            cond=cond,
-            trials=trials,
-            stream_cfg=trials.streams["ch6_3_10"],
-            seed=99,
-            physics=sim.physics,
-            camera=sim.camera,
-            support=support,
-            cp_max=support.score_threshold,
-            model_path=model,
-        )
+        cp_max = support.score_threshold
+        jobs = bench_ch6_jobs(planner_name, episodes, trials, sim, support, cp_max, model)
         wall = []
         for job in jobs:
             t0 = time.perf_counter()

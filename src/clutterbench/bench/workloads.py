@@ -165,13 +165,11 @@ def _trials_jobs(trials: Any, sim: Any, episodes: int) -> tuple[Any, list[Ch6Job
         cond = ConditionConfig(planner=cond.planner, stream=cond.stream, episodes=per)
         by_condition.append(
             ch6_jobs(
-                condition=f"bench_{name}",
-                cond=cond,
+                f"bench_{name}",
+                cond,
                 trials=trials,
-                stream_cfg=trials.streams[cond.stream],
+                sim=sim,
                 seed=SEED,
-                physics=sim.physics,
-                camera=sim.camera,
                 support=support,
                 cp_max=0.5,
                 model_path=Path("models/none/best.pt"),  # no planner of the mix loads a network
@@ -231,17 +229,13 @@ def _bench_ch4_jobs(name: str, cond: Any, trials: Any, sim: Any) -> list[Ch4Job]
     from clutterbench.trials.ch4.episodes import ch4_jobs
 
     return ch4_jobs(
-        condition=f"bench_{name}",
-        cond=cond,
-        params=trials.ch4,
-        stream_cfg=trials.streams[cond.stream],
+        f"bench_{name}",
+        cond,
+        trials=trials,
+        sim=sim,
         seed=SEED,
-        physics=sim.physics,
-        camera=sim.camera,
-        max_attempts=trials.max_attempts,
-        record_images=False,
         arm=trials.arm if cond.executor == "arm" else None,
-        collapse_free=trials.collapse_free,
+        record_images=False,
     )
 
 
@@ -271,19 +265,15 @@ def _ch5_jobs(trials: Any, sim: Any, episodes: int) -> tuple[Any, list[Ch5Job], 
         cond = dataclasses.replace(trials.ch5_conditions[name], episodes=per)
         by_condition.append(
             ch5_jobs(
-                condition=f"bench_{name}",
-                cond=cond,
-                params=trials.ch5,
-                stream_cfg=trials.streams[cond.stream],
+                f"bench_{name}",
+                cond,
+                trials=trials,
+                sim=sim,
                 seed=SEED,
-                physics=sim.physics,
-                camera=sim.camera,
-                max_attempts=trials.max_attempts,
-                record_images=False,
                 prob_threshold=prob,
                 scene_type=cond.stream.removeprefix("ch5_"),
                 oracle_detector=False,  # oracle_detector: no detector network
-                collapse_free=trials.collapse_free,
+                record_images=False,
             )
         )
     jobs = round_robin(by_condition, episodes)
@@ -339,13 +329,7 @@ def _arm_condition_jobs(
         load_planners(trials.planner_modules, [cond.planner])
         no_images = dataclasses.replace(trials, mcap_images=False)
         jobs, _, _ = condition_jobs(
-            name=f"bench_{name}",
-            cond=cond,
-            trials=no_images,
-            seed=SEED,
-            physics=sim.physics,
-            camera=sim.camera,
-            thresholds=ARM_THRESHOLDS,
+            f"bench_{name}", cond, trials=no_images, sim=sim, seed=SEED, thresholds=ARM_THRESHOLDS
         )
         return jobs
     cond = dataclasses.replace(trials.ch4_conditions[arm.of], executor="arm", episodes=episodes)

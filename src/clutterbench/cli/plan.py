@@ -206,6 +206,7 @@ def _execute(
 ) -> dict[str, Any]:
     """The planner run on the scene until the target is out (or the episode ends), the MCAP
     written when asked -> the record's outcome fields."""
+    from clutterbench.sim.config import SimConfig
     from clutterbench.trials.ch6.episodes import ch6_jobs, run_extraction
     from clutterbench.trials.config import ConditionConfig
     from clutterbench.trials.core.harness import write_mcap
@@ -213,16 +214,15 @@ def _execute(
     cond = ConditionConfig(planner=planner, stream=next(iter(trials.streams), "cli"))
     streams = trials.streams or {}
     job = ch6_jobs(
-        condition="cli",
-        cond=cond,
+        "cli",
+        cond,
         trials=trials,
-        stream_cfg=streams.get(cond.stream),
+        sim=SimConfig(physics=physics, camera=spec.camera),
         seed=0,
-        physics=physics,
-        camera=spec.camera,
         support=support,
         cp_max=cp_max,
         model_path=model_path,
+        stream_cfg=streams.get(cond.stream),
     )[0]
     if planner == "single_step":
         job = dataclasses.replace(

@@ -145,6 +145,7 @@ def _cli_job(
     """The episode job of the command line: its networks checked for, the collapse threshold
     of trials.ch5 (else the evaluate stage's choice, else 0.5)."""
     import clutterbench.trials.ch5.episodes as ch5
+    from clutterbench.sim.config import SimConfig
     from clutterbench.trials.config import Ch5ConditionConfig, SceneStreamConfig
 
     model_path = default_path(model, f"models/{trials.ch5.model}/best.pt")
@@ -163,17 +164,14 @@ def _cli_job(
         )
     cond = Ch5ConditionConfig(planner=planner, stream="cli", perception=perception)
     job = ch5.ch5_jobs(
-        condition="cli",
-        cond=cond,
-        params=trials.ch5,
-        stream_cfg=SceneStreamConfig(families={"shelved": 1.0}),
+        "cli",
+        cond,
+        trials=trials,
+        sim=SimConfig(physics=physics, camera=spec.camera),
         seed=0,
-        physics=physics,
-        camera=spec.camera,
-        max_attempts=trials.max_attempts,
-        record_images=mcap is not None,
         prob_threshold=prob,
         scene_type="cli",
-        collapse_free=trials.collapse_free,
+        stream_cfg=SceneStreamConfig(families={"shelved": 1.0}),
+        record_images=mcap is not None,
     )[0]
     return dataclasses.replace(job, model_path=model_path, detector_path=detector)

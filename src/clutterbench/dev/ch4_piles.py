@@ -166,16 +166,13 @@ def trial_jobs(
         for label, planner, model, checkpoint in runs:
             cond = Ch4ConditionConfig(planner, stream, episodes=cfg.episodes, model=model)
             for job in ch4_jobs(
-                condition=f"{label}/{stream}",
-                cond=cond,
-                params=trials.ch4,
-                stream_cfg=dev.streams[stream],
+                f"{label}/{stream}",
+                cond,
+                trials=trials,
+                sim=sim,
                 seed=seed,
-                physics=sim.physics,
-                camera=sim.camera,
-                max_attempts=trials.max_attempts,
+                stream_cfg=dev.streams[stream],
                 record_images=False,
-                collapse_free=trials.collapse_free,
             ):
                 jobs.append(dataclasses.replace(job, model_path=checkpoint))
     return jobs

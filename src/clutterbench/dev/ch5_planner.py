@@ -84,19 +84,17 @@ def trial_jobs(dev: DevConfig, params: Mapping[str, Any]) -> list[Ch5Job]:
     jobs = []
     for name, (variant, cond) in conds.items():
         jobs += ch5_jobs(
-            condition=name,
-            cond=cond,
-            params=dataclasses.replace(trials.ch5, **cfg.variants[variant]),
-            stream_cfg=dev.streams[cond.stream],
+            name,
+            cond,
+            trials=trials,
+            sim=sim,
             seed=base.seed,
-            physics=sim.physics,
-            camera=sim.camera,
-            max_attempts=trials.max_attempts,
-            record_images=False,
             prob_threshold=prob,
             scene_type=cond.stream.removeprefix("dev_ch5_"),
             oracle_detector="detector" in cfg.perceptions,
-            collapse_free=trials.collapse_free,
+            params=dataclasses.replace(trials.ch5, **cfg.variants[variant]),
+            stream_cfg=dev.streams[cond.stream],
+            record_images=False,
         )
     return jobs
 

@@ -116,16 +116,15 @@ def trial_jobs(
             ch6 = dataclasses.replace(trials.ch6, **over)
             support, cp_max = planner_support(THRESHOLDS, planner, rule, ch6)
             jobs += ch6_jobs(
-                condition=f"{condition_label(variant, planner)}/{stream}",
-                cond=ConditionConfig(planner, stream, cfg.episodes, rule),
+                f"{condition_label(variant, planner)}/{stream}",
+                ConditionConfig(planner, stream, cfg.episodes, rule),
                 trials=dataclasses.replace(trials, ch6=ch6),
-                stream_cfg=dev.streams[stream],
+                sim=sim,
                 seed=base.seed,
-                physics=sim.physics,
-                camera=sim.camera,
                 support=support,
                 cp_max=cp_max,
                 model_path=Path(f"models/{trials.ch6.model}/best.pt"),
+                stream_cfg=dev.streams[stream],
             )
     return jobs
 

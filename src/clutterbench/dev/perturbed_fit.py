@@ -139,16 +139,15 @@ def jobs_of(dev: Any, params: Mapping[str, Any]) -> list[PerturbedJob]:
         for seed, sigma in zip(cfg.seeds, cfg.depth_noise_m):
             cond = ConditionConfig(planner=PLANNERS[0], stream=stream, episodes=cfg.scenes)
             for job in ch6_jobs(
-                condition=f"{stream}/seed{seed}",
-                cond=cond,
+                f"{stream}/seed{seed}",
+                cond,
                 trials=trials,
-                stream_cfg=dev.streams[stream],
+                sim=sim,
                 seed=seed,
-                physics=sim.physics,
-                camera=sim.camera,
                 support=None,
                 cp_max=0.0,
                 model_path=OUT / "unused",
+                stream_cfg=dev.streams[stream],
             ):
                 fields = {f.name: getattr(job, f.name) for f in dataclasses.fields(job)}
                 jobs.append(

@@ -27,7 +27,6 @@ from typing import Any
 
 import numpy as np
 
-from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.perception.depth_segmentation import shelf_roi
@@ -38,19 +37,20 @@ from clutterbench.planning.ch4.risk import (
 )
 from clutterbench.planning.ch4.risk_planner import plan_risk
 from clutterbench.sim import benchmark
-from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.config import PhysicsConfig, SimConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch4.execution import arm_pull_outcome, plan_oracle, pull_outcome
 from clutterbench.trials.ch4.jobs import Ch4Job
-from clutterbench.trials.config import Ch4ConditionConfig, Ch4TrialParams, SceneStreamConfig
+from clutterbench.trials.config import Ch4ConditionConfig, Ch4TrialParams, TrialsConfig
 from clutterbench.trials.core.harness import (
     DECISION_TOPIC,
     EpisodeLog,
     EpisodeResult,
     load_predictor,
 )
+from clutterbench.trials.core.jobs import shelf_fields
 from clutterbench.trials.core.scenes import draw_target, draw_trial_spec, policy_rng
 
 RISKS_LOGGED = 8
@@ -308,36 +308,28 @@ def _plain(v: Any) -> Any:
 
 
 def ch4_jobs(
-    *,
     condition: str,
     cond: Ch4ConditionConfig,
-    params: Ch4TrialParams,
-    stream_cfg: SceneStreamConfig,
+    *,
+    trials: TrialsConfig,
+    sim: SimConfig,
     seed: int,
-    physics: PhysicsConfig,
-    camera: CameraConfig,
-    max_attempts: int,
-    record_images: bool,
     arm: ArmConfig | None = None,
-    collapse_free: CollapseFreeConfig | None = None,
+    **override: Any,
 ) -> list[Ch4Job]:
-    """One job per episode (`collapse_free`: trials.collapse_free; None: its defaults)."""
+    """One job per episode, its fields from the configs (trials.ch4, trials.streams[cond.stream],
+    trials' max_attempts, mcap_images and collapse_free, sim's physics and camera; `arm`: None
+    for ArmConfig's defaults) but for the Ch4Job fields `override` names."""
     model_path = Path(f"models/{cond.model}/best.pt") if cond.model is not None else None
+    fields = {"params": trials.ch4} | shelf_fields(cond.stream, trials, sim, seed, override)
     return [
         Ch4Job(
             condition=condition,
             cond=cond,
-            params=params,
-            stream_cfg=stream_cfg,
             index=i,
-            seed=seed,
-            physics=physics,
-            camera=camera,
             model_path=model_path,
-            max_attempts=max_attempts,
-            record_images=record_images,
             arm=arm or ArmConfig(),
-            collapse_free=collapse_free or CollapseFreeConfig(),
+            **fields,
         )
         for i in range(cond.episodes)
     ]

@@ -32,7 +32,6 @@ from typing import Any
 import numpy as np
 
 from clutterbench import criteria
-from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import read_json
 from clutterbench.observation import Observation
@@ -49,7 +48,7 @@ from clutterbench.planning.ch5.replenish import (
 )
 from clutterbench.sim import benchmark
 from clutterbench.sim.catalog import box_extents_m
-from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
 from clutterbench.sim.pull import SceneState, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
@@ -57,8 +56,9 @@ from clutterbench.trials.ch5.execution import execute
 from clutterbench.trials.ch5.jobs import Ch5Job
 from clutterbench.trials.ch5.oracle import action_set, oracle_choice
 from clutterbench.trials.ch5.perception import collapse_map_fn, perceive, true_clusters
-from clutterbench.trials.config import Ch5ConditionConfig, Ch5TrialParams, SceneStreamConfig
+from clutterbench.trials.config import Ch5ConditionConfig, Ch5TrialParams, TrialsConfig
 from clutterbench.trials.core.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
+from clutterbench.trials.core.jobs import shelf_fields
 from clutterbench.trials.core.scenes import draw_trial_spec, policy_rng, stream_key
 
 ENDS = ("placed", "collapse", "misplaced", "gave_up", "max_steps")
@@ -375,42 +375,37 @@ def _rounded(d: Any) -> Any:
 
 
 def ch5_jobs(
-    *,
     condition: str,
     cond: Ch5ConditionConfig,
-    params: Ch5TrialParams,
-    stream_cfg: SceneStreamConfig,
+    *,
+    trials: TrialsConfig,
+    sim: SimConfig,
     seed: int,
-    physics: PhysicsConfig,
-    camera: CameraConfig,
-    max_attempts: int,
-    record_images: bool,
     prob_threshold: float,
     scene_type: str,
     oracle_detector: bool = False,
-    collapse_free: CollapseFreeConfig | None = None,
+    params: Ch5TrialParams | None = None,
+    **override: Any,
 ) -> list[Ch5Job]:
-    """One job per episode; `oracle_detector`: an oracle also simulates the actions seen
-    through the detector (set when any condition perceives with it); `collapse_free`:
-    trials.collapse_free (None: its defaults)."""
+    """One job per episode, its fields from the configs (trials.streams[cond.stream], trials'
+    max_attempts, mcap_images and collapse_free, sim's physics and camera) but for the Ch5Job
+    fields `override` names; `params`: None for trials.ch5; `oracle_detector`: an oracle also
+    simulates the actions seen through the detector (set when any condition perceives with
+    it)."""
+    params = trials.ch5 if params is None else params
+    fields = shelf_fields(cond.stream, trials, sim, seed, override)
     return [
         Ch5Job(
             condition=condition,
             cond=cond,
             params=params,
-            stream_cfg=stream_cfg,
             index=i,
-            seed=seed,
-            physics=physics,
-            camera=camera,
             model_path=Path(f"models/{params.model}/best.pt"),
             detector_path=Path("models/detector/best.pt"),
             prob_threshold=prob_threshold,
-            max_attempts=max_attempts,
-            record_images=record_images,
             scene_type=scene_type,
             oracle_detector=oracle_detector,
-            collapse_free=collapse_free or CollapseFreeConfig(),
+            **fields,
         )
         for i in range(cond.episodes)
     ]

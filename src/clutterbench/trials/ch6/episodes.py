@@ -26,7 +26,7 @@ from clutterbench.planning.ch6.extraction import (
 )
 from clutterbench.planning.ch6.support import SupportParams
 from clutterbench.sim import benchmark
-from clutterbench.sim.config import CameraConfig, PhysicsConfig
+from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.pull import SceneState, execute_pull, world_at
 from clutterbench.sim.render import observe
@@ -48,11 +48,11 @@ from clutterbench.trials.config import (
     PULL_MAP_HEADS,
     Ch6TrialParams,
     ConditionConfig,
-    SceneStreamConfig,
     TrialsConfig,
     support_method,
 )
 from clutterbench.trials.core.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
+from clutterbench.trials.core.jobs import shelf_fields
 from clutterbench.trials.core.judge import disturbance
 from clutterbench.trials.core.protocol import episode_end, judge_episode, judge_pull, step_notes
 from clutterbench.trials.core.scenes import draw_target, draw_trial_spec
@@ -408,13 +408,12 @@ def planner_support(
 
 
 def condition_jobs(
-    *,
     name: str,
     cond: ConditionConfig,
+    *,
     trials: TrialsConfig,
+    sim: SimConfig,
     seed: int,
-    physics: PhysicsConfig,
-    camera: CameraConfig,
     thresholds: Path,
 ) -> tuple[list[Ch6Job], SupportParams, float]:
     """Condition `cond`'s episode jobs, with its support rule's thresholds (chosen on
@@ -430,13 +429,11 @@ def condition_jobs(
         )
     support, cp_max = planner_support(thresholds, cond.planner, cond.rule, trials.ch6)
     jobs = ch6_jobs(
-        condition=name,
-        cond=cond,
+        name,
+        cond,
         trials=trials,
-        stream_cfg=trials.streams[cond.stream],
+        sim=sim,
         seed=seed,
-        physics=physics,
-        camera=camera,
         support=support,
         cp_max=cp_max,
         model_path=Path(f"models/{trials.ch6.model}/best.pt"),
@@ -445,40 +442,36 @@ def condition_jobs(
 
 
 def ch6_jobs(
-    *,
     condition: str,
     cond: ConditionConfig,
+    *,
     trials: TrialsConfig,
-    stream_cfg: SceneStreamConfig,
+    sim: SimConfig,
     seed: int,
-    physics: PhysicsConfig,
-    camera: CameraConfig,
     support: SupportParams | None,
     cp_max: float,
     model_path: Path | None,
+    **override: Any,
 ) -> list[Ch6Job]:
-    """Condition `condition`'s episode jobs (collapse-free thresholds: trials.collapse_free)."""
+    """Condition `condition`'s episode jobs, their fields from the configs (trials.ch6,
+    trials.streams[cond.stream], trials' max_attempts, mcap_images, collapse_free and arm,
+    sim's physics and camera) but for the Ch6Job fields `override` names."""
+    fields = shelf_fields(cond.stream, trials, sim, seed, override)
     return [
         Ch6Job(
             condition=condition,
             planner=cond.planner,
             rule=cond.rule,
             stream=cond.stream,
-            stream_cfg=stream_cfg,
             index=i,
-            seed=seed,
-            physics=physics,
-            camera=camera,
             params=trials.ch6,
-            collapse_free=trials.collapse_free,
             support=support,
             cp_max=cp_max,
             model_path=model_path,
             ch4_model_path=Path(f"models/{trials.ch6.ch4_model}/best.pt"),
-            max_attempts=trials.max_attempts,
-            record_images=trials.mcap_images,
             executor=cond.executor,
             arm=trials.arm,
+            **fields,
         )
         for i in range(cond.episodes)
     ]

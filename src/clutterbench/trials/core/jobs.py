@@ -13,12 +13,12 @@ their values are kept exactly as given (no conversion).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from clutterbench.criteria import CollapseFreeConfig
-    from clutterbench.sim.config import CameraConfig, PhysicsConfig
-    from clutterbench.trials.config import SceneStreamConfig
+    from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
+    from clutterbench.trials.config import SceneStreamConfig, TrialsConfig
 
 NAMING_FIELDS = ("condition", "stream", "planner", "index", "seed")
 """The fields that name a job in its repr (where it has them), in this order."""
@@ -56,3 +56,23 @@ class ShelfJob(EpisodeJob):
     """The camera the episode observes with."""
     max_attempts: int
     """How many draws a scene may take to settle before the stream gives up."""
+
+
+def shelf_fields(
+    stream: str, trials: TrialsConfig, sim: SimConfig, seed: int, override: dict[str, Any]
+) -> dict[str, Any]:
+    """The ShelfJob fields a shelf chapter's jobs take from the configs (stream `stream` of
+    trials.streams, trials' max_attempts, mcap_images and collapse_free, sim's physics and
+    camera), with `override`'s values in place of any it names (a dev stream's `stream_cfg`,
+    `record_images=False`, ...)."""
+    fields = {
+        "seed": seed,
+        "physics": sim.physics,
+        "camera": sim.camera,
+        "max_attempts": trials.max_attempts,
+        "record_images": trials.mcap_images,
+        "collapse_free": trials.collapse_free,
+    }
+    if "stream_cfg" not in override:
+        fields["stream_cfg"] = trials.streams[stream]
+    return fields | override
