@@ -84,7 +84,6 @@ def bench_ch5(out_dir: Path = Path("reports/bench")) -> dict:
 
 def _bench_jobs(name: str, cond, scene_type: str, trials, sim, prob: float) -> list:
     """The first N_SCENES episodes of condition `name` on the bench's seed."""
-    from clutterbench.criteria import CollapseFreeConfig
     from clutterbench.trials.ch5 import episodes as ch5
 
     return ch5.ch5_jobs(
@@ -97,7 +96,6 @@ def _bench_jobs(name: str, cond, scene_type: str, trials, sim, prob: float) -> l
         scene_type=scene_type,
         oracle_detector=True,
         record_images=False,
-        collapse_free=CollapseFreeConfig(),  # the criterion's defaults, not trials.collapse_free
     )[:N_SCENES]
 
 

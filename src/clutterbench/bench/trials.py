@@ -33,7 +33,6 @@ THRESHOLDS = Path("reports/support/thresholds.json")
 def bench_ch4(trials: TrialsConfig, sim: SimConfig, scenes: int) -> dict:
     """Ch. 4 planning latency: every ordered pair of a 10-box pile through the network
     (thesis eqs. 4.1, 4.2), and the median wall time of one trial per ch. 4 planner."""
-    from clutterbench.criteria import CollapseFreeConfig
     from clutterbench.perception.masks import masks_from_instance
     from clutterbench.planning.ch4.risk_planner import plan_risk
     from clutterbench.trials.ch4.episodes import ch4_jobs, run_ch4_episode
@@ -73,7 +72,6 @@ def bench_ch4(trials: TrialsConfig, sim: SimConfig, scenes: int) -> dict:
             trials=trials,
             sim=sim,
             seed=99,
-            collapse_free=CollapseFreeConfig(),  # the criterion's defaults
         )
         wall = []
         for job in jobs:

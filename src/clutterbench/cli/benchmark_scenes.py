@@ -95,7 +95,6 @@ def ch5_start_jobs(cfg: TrialsConfig, seed: int, sim: SimConfig) -> list[dict[st
     """The ch. 5 trials' own jobs (each a start job naming the trials' Ch5Job, "job"), one per
     distinct start (the start depends on the stream and the candidates' geometry, not on the
     planner)."""
-    from clutterbench.criteria import CollapseFreeConfig
     from clutterbench.trials.ch5.episodes import ch5_jobs
 
     jobs, seen = [], set()
@@ -109,7 +108,6 @@ def ch5_start_jobs(cfg: TrialsConfig, seed: int, sim: SimConfig) -> list[dict[st
             prob_threshold=0.5,  # the collapse threshold: no start depends on it
             scene_type=cond.stream.removeprefix("ch5_"),
             record_images=False,
-            collapse_free=CollapseFreeConfig(),  # the criterion's defaults
         ):
             if (cond.stream, job.index) not in seen:
                 seen.add((cond.stream, job.index))
