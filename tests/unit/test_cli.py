@@ -7,6 +7,7 @@ from pathlib import Path
 
 import cv2
 import pytest
+from click.testing import Result
 from typer.testing import CliRunner
 
 from clutterbench.cli import app, common
@@ -466,6 +467,23 @@ def test_an_agent_that_raises_is_one_line_or_its_trace_with_traceback(tmp_path: 
     lines = result.stderr.strip().splitlines()
     assert lines[0].startswith("Traceback") and "in act" in result.stderr
     assert lines[-1] == "error: agent make, episode 2: act() raised KeyError: 'no_such_key'"
+
+
+def _run_agent_returning(tmp_path: Path, action: str) -> Result:
+    agent = tmp_path / "odd_agent.py"
+    agent.write_text(f"def make(env):\n    return lambda obs: {action}\n")
+    args = ["evaluate-agent", f"{agent}:make", "--episodes", "1", "--scale", "tiny"]
+    return runner.invoke(app, [*args, "--out", str(tmp_path / "out")])
+
+
+def test_an_agent_returning_a_string_is_refused_in_one_line(tmp_path: Path) -> None:
+    """act() -> "pull box 2": one line naming what it returned and what an action is."""
+    result = _run_agent_returning(tmp_path, repr("pull box 2"))
+    assert result.exit_code == 2, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("error: agent make, episode 0: action refused: ")
+    assert "'pull box 2'" in lines[0] and "box to pull" in lines[0]
 
 
 def test_evaluate_agent_writes_records_and_summary(tmp_path: Path) -> None:

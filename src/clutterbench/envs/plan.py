@@ -252,11 +252,17 @@ class ClutterShelfPlanEnv(gym.Env):
         """-> (pull, hold or None, why the action is a no-op or None); a malformed action
         raises ActionError."""
         ep = self.episode
+        form = f"(box to pull, box to hold or {NO_BOX}), two integers"
         if isinstance(action, dict):
             action = (action.get("pull"), action.get("hold", NO_BOX))
-        a = np.asarray(action, dtype=np.float64) if action is not None else np.array([])
+        try:
+            a = np.asarray(action, dtype=np.float64) if action is not None else np.array([])
+        except (TypeError, ValueError):  # a string, a dict, an object: not numbers
+            raise ActionError(
+                f"action {action!r} (a {type(action).__name__}): an action is {form}"
+            ) from None
         if a.shape != (2,):
-            raise ActionError(f"action {action!r}: (box to pull, box to hold or {NO_BOX})")
+            raise ActionError(f"action {action!r}: an action is {form}")
         if np.isnan(a).any():
             raise ActionError("action holds NaN (a policy produced NaN; refused)")
         if not np.array_equal(a, np.round(a)) or a.min() < 0 or a.max() > NO_BOX:
