@@ -486,6 +486,18 @@ def test_an_agent_returning_a_string_is_refused_in_one_line(tmp_path: Path) -> N
     assert "'pull box 2'" in lines[0] and "box to pull" in lines[0]
 
 
+def test_an_agent_returning_a_dict_with_wrong_keys_is_refused_naming_the_keys(
+    tmp_path: Path,
+) -> None:
+    """act() -> {"box": 1}: refused naming the keys an action dict has, not as NaN."""
+    result = _run_agent_returning(tmp_path, repr({"box": 1}))
+    assert result.exit_code == 2, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert "NaN" not in lines[0] and "{'box': 1}" in lines[0]
+    assert "'pull'" in lines[0] and "'hold'" in lines[0]
+
+
 def test_evaluate_agent_writes_records_and_summary(tmp_path: Path) -> None:
     """The random agent of docs/environments-guide.md, one tiny episode: records, summary."""
     example = Path(__file__).resolve().parents[2] / "docs" / "examples" / "random_agent.py"

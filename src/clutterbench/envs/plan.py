@@ -18,9 +18,11 @@ MAX_BOXES) holds nothing, and as the box to pull gives up (the episode ends, "ga
 An action naming a box not in the scene, or holding the pulled box, is a no-op: nothing
 moves, reward 0, the episode goes on, `info["invalid_action"]` says why (so every action of
 the space is valid and `action_space.sample()` works; `clutterbench evaluate-agent` refuses
-such an action, one line). A malformed action (not two integers of the space, NaN) is
-refused (ActionError). `info["action_mask"]` masks the visible boxes (and the target) for
-`action_space.sample(mask=...)`; the held box must differ from the pulled one.
+such an action, one line). The action may also be a dict {"pull": box, "hold": box}
+("hold" optional). A malformed action (not two integers of the space, NaN, a string, a dict
+with other keys) is refused (ActionError). `info["action_mask"]` masks the visible boxes
+(and the target) for `action_space.sample(mask=...)`; the held box must differ from the
+pulled one.
 
 Each step is one step of the trials' episode protocol (trials.ch6.Extraction, the object the
 trials stage drives): executed by the kinematic executor from the step's canonical start,
@@ -254,7 +256,12 @@ class ClutterShelfPlanEnv(gym.Env):
         ep = self.episode
         form = f"(box to pull, box to hold or {NO_BOX}), two integers"
         if isinstance(action, dict):
-            action = (action.get("pull"), action.get("hold", NO_BOX))
+            if "pull" not in action or not set(action) <= {"pull", "hold"}:
+                raise ActionError(
+                    f"action {action!r}: an action dict has the keys 'pull' (box to pull) and "
+                    f"'hold' (box to hold, optional: {NO_BOX} for nothing held)"
+                )
+            action = (action["pull"], action.get("hold", NO_BOX))
         try:
             a = np.asarray(action, dtype=np.float64) if action is not None else np.array([])
         except (TypeError, ValueError):  # a string, a dict, an object: not numbers
