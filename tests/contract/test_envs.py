@@ -90,6 +90,40 @@ def test_seed_i_is_the_pipelines_episode_i(env):
         assert (spec.n, spec.family, target) == (rec["n_objects"], rec["family"], rec["target"])
 
 
+def test_reset_info_names_the_scene_and_its_source(env):
+    """Every id's reset info carries `scene` (the start's hash) and `scene_source`."""
+    from clutterbench.sim import benchmark
+
+    _, info = env.reset(seed=2)
+    u = env.unwrapped
+    spec = u.episode.spec if u.spec.id == PLAN_ENV_ID else u.scene_spec
+    assert {k: info[k] for k in ("scene", "scene_source")} == benchmark.scene_fields(spec)
+    assert info["scene_source"] in ("benchmark", "drawn")
+
+
+def test_a_seed_steps_alike_whether_its_scene_was_rebuilt_or_reused(env):
+    """reset(seed=i) then the same actions give the same bits whether the reset rebuilt the
+    scene (another episode before) or reused it (the same episode before)."""
+    if env.unwrapped.spec.id == PLAN_ENV_ID:
+        pytest.skip("no ManiSkill scene")
+    u = env.unwrapped
+    env.action_space.seed(1)
+    a, b = env.action_space.sample(), env.action_space.sample()
+
+    def run(seed, action):
+        env.reset(seed=seed)
+        for _ in range(10):
+            obs = env.step(action)[0]
+        return obs, u.get_state()
+
+    first = run(123, a)  # rebuilt
+    again = run(123, a)  # reused
+    run(7, b)
+    rebuilt = run(123, a)
+    for other in (again, rebuilt):
+        assert all(_equal(x, y) for x, y in zip(first, other, strict=True))
+
+
 def test_nan_actions_are_refused(env):
     _, info = env.reset(seed=0)
     action = _random_action(env, info)
@@ -303,6 +337,37 @@ def test_make_vec_async_runs_two_envs_of_every_id():
     assert run.returncode == 0, run.stderr[-2000:]
     want = [PLAN_ENV_ID, "ClutterShelfExtract-v1", "ClutterShelfBimanual-v1"]
     assert run.stdout.split() == [w for env_id in want for w in ("ok", env_id)]
+
+
+DOCS_VEC_SCRIPT = """
+import gymnasium as gym
+import clutterbench.envs
+from mani_skill.utils.wrappers.gymnasium import CPUGymWrapper
+
+for env_id in ("ClutterShelfExtract-v1", "ClutterShelfBimanual-v1"):
+    arm = gym.make_vec(env_id, num_envs=2, vectorization_mode="async",
+                       wrappers=[CPUGymWrapper])
+    obs, info = arm.reset(seed=[2, 3])
+    assert list(info["scene_source"]) == ["benchmark"] * 2, info["scene_source"]
+    obs, reward, terminated, truncated, info = arm.step(arm.action_space.sample())
+    assert obs.shape == (2, *arm.single_observation_space.shape), obs.shape
+    arm.close()
+    print("ok", env_id)
+"""
+
+
+def test_the_docs_make_vec_snippet_runs_for_the_arm_ids_drawing_scenes():
+    """docs/environments.md's make_vec of the arm ids as written (no spec: the env draws its
+    scenes from the stream; gymnasium makes one env in the parent before forking the
+    workers): making an env renders nothing, so the forked workers may render."""
+    import subprocess
+    import sys
+
+    run = subprocess.run(
+        [sys.executable, "-c", DOCS_VEC_SCRIPT], capture_output=True, text=True, timeout=400
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.split() == ["ok", "ClutterShelfExtract-v1", "ok", "ClutterShelfBimanual-v1"]
 
 
 def test_a_worker_forked_after_rendering_is_refused_in_one_line():

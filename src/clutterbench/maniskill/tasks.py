@@ -246,8 +246,11 @@ class ClutterShelfEnv(BaseEnv):
         if spec is None:
             stream_source = resolve_scene_source(scene_source)
             self.stream_source = stream_source(stream, family, n_objects, catalogue, scale)
-            spec, target = self.stream_source.episode(0)
-            self.episode_index = 0
+            # Episode 0's settled start only: its target is drawn from a rendered view, and
+            # a process that renders cannot fork (gym.make_vec makes one env in the parent
+            # before forking its workers); reset draws the episode, target and all.
+            spec, target = self.stream_source.spec(0), 0
+            self.episode_index = None
             physics = physics or self.stream_source.physics
             arm = arm or self.stream_source.trials.arm
             if moved_threshold_m is None:
@@ -336,7 +339,12 @@ class ClutterShelfEnv(BaseEnv):
             self.episode_index, self._next_episode = index, index + 1
             if spec is not self.scene_spec or target != self.target:
                 options |= {"spec": spec, "target": target, "reconfigure": True}
-        return super().reset(seed=seed, options=options)
+        obs, info = super().reset(seed=seed, options=options)
+        if self.stream_source is not None and self._streams_live:
+            from clutterbench.sim import benchmark
+
+            info |= benchmark.scene_fields(self.scene_spec)
+        return obs, info
 
     def step(self, action: Any):
         if _has_nan(action):
@@ -462,7 +470,10 @@ class ClutterShelfEnv(BaseEnv):
         self.removed = set(self.start_removed)
         self.reference = self.start_poses[:, :3].copy()
         self.target_back0_m = self._back_face_m(self.target)
-        for agent, qpos in zip(self.agents, self.ready_qpos(), strict=True):
+        # The arms' bases too: PhysX moves a fixed base by float rounding as it simulates, so
+        # a reset that reuses the scene would otherwise start off a rebuilt scene's bits.
+        for agent, qpos, base in zip(self.agents, self.ready_qpos(), self.arm_bases(), strict=True):
+            agent.robot.set_pose(sapien.Pose(base[:3], base[3:]))
             agent.reset(qpos)
 
     @property
