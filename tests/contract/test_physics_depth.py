@@ -11,18 +11,18 @@ import pytest
 
 from clutterbench.perception.box_fit import fit_boxes
 from clutterbench.planning.ch6.physics_depth import PhysicsFromDepthPlanner
-from clutterbench.planning.ch6.support import SupportParams
 from clutterbench.sim.catalog import box_extents_m
-from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
+from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.estimated import estimated_scene, resolve_overlaps
 from clutterbench.sim.geometry import quat_from_axis_angle
 from clutterbench.sim.pull import SceneState, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.shelf import Shelf
 from clutterbench.sim.spec import SceneSpec, deepest_overlap
-from clutterbench.trials.ch6.episodes import PLANNERS, ch6_jobs, run_extraction
+from clutterbench.trials.ch6.episodes import PLANNERS, run_extraction
 from clutterbench.trials.ch6.physics_model import box_errors
-from clutterbench.trials.config import ConditionConfig, SceneStreamConfig, TrialsConfig
+from clutterbench.trials.config import SceneStreamConfig, TrialsConfig
+from tests.toy_jobs import toy_ch6_jobs
 
 CAM = CameraConfig(image_size=128)
 VARIOUS = box_extents_m("various")  # (D, W, H) of the five types
@@ -90,24 +90,11 @@ def test_an_estimated_scene_is_valid_and_records_rest(physics):
     assert scene.at_rest and scene.settle_move_m < 0.005
 
 
-def _job(planner: str) -> dict:
+def _job(planner: str):
     stream = SceneStreamConfig(families={"stacked": 1}, n_objects=(3, 3), catalogue="same")
-    cfg = TrialsConfig(streams={"s": stream})
-    ch6 = dataclasses.replace(cfg.ch6, physics_depth_node_budget=6)
-    cfg = dataclasses.replace(cfg, ch6=ch6)
-    cond = ConditionConfig(planner=planner, stream="s", episodes=1)
-    support = SupportParams("coverage", 0.5, 0.3, 2, 0.0)
-    job = ch6_jobs(
-        "c",
-        cond,
-        trials=cfg,
-        sim=SimConfig(camera=CAM),
-        seed=0,
-        support=support,
-        cp_max=0.3,
-        model_path=Path("x"),
-    )[0]
-    return job
+    cfg = TrialsConfig()
+    cfg = dataclasses.replace(cfg, ch6=dataclasses.replace(cfg.ch6, physics_depth_node_budget=6))
+    return toy_ch6_jobs(planner, stream, CAM, model_path=Path("x"), trials=cfg)[0]
 
 
 @pytest.fixture(scope="module")

@@ -11,15 +11,13 @@ import pytest
 from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.logs.mcap_episode import read_episode
 from clutterbench.planning.ch6.extraction import Decision
-from clutterbench.planning.ch6.support import SupportParams
-from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
+from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.pull import SceneState, execute_pull, world_at
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch6.episodes import (
     PLANNERS,
     Ch6Job,
     SearchOracle,
-    ch6_jobs,
     register_planner,
     run_ch6_episode,
     run_extraction,
@@ -27,7 +25,6 @@ from clutterbench.trials.ch6.episodes import (
 from clutterbench.trials.config import PLANNERS as PLANNER_NAMES
 from clutterbench.trials.config import (
     PULL_HEAD_PLANNERS,
-    ConditionConfig,
     SceneStreamConfig,
     TrialsConfig,
 )
@@ -35,6 +32,7 @@ from clutterbench.trials.core.harness import run_episodes, write_mcap
 from clutterbench.trials.core.protocol import judge_pull
 from clutterbench.trials.core.records import read_records, write_records
 from clutterbench.trials.core.scenes import truth_moved_contact
+from tests.toy_jobs import toy_ch6_jobs
 
 STACK3 = Path(__file__).resolve().parents[1] / "data" / "stack3.json"
 TOWER6 = Path(__file__).resolve().parents[1] / "data" / "tower6.json"
@@ -122,21 +120,9 @@ class _PullFirstThenTarget:
 register_planner("toy_bottom_first")(lambda job, spec: _PullFirstThenTarget())
 
 
-def _job(planner: str, episodes: int = 1, cp: Path | None = None) -> dict:
+def _job(planner: str, episodes: int = 1, cp: Path | None = None) -> list:
     stream = SceneStreamConfig(families={"stacked": 1, "random": 1}, n_objects=(3, 5))
-    cfg = TrialsConfig(streams={"s": stream})
-    cond = ConditionConfig(planner="random", stream="s", episodes=episodes)
-    support = SupportParams("coverage", 0.5, 0.3, 2, 0.0)
-    jobs = ch6_jobs(
-        "c",
-        cond,
-        trials=cfg,
-        sim=SimConfig(camera=CAM),
-        seed=0,
-        support=support,
-        cp_max=0.3,
-        model_path=cp,
-    )
+    jobs = toy_ch6_jobs("random", stream, CAM, episodes=episodes, model_path=cp)
     return [dataclasses.replace(j, planner=planner, ch4_model_path=cp) for j in jobs]
 
 

@@ -132,9 +132,8 @@ def episodes(tmp_path_factory):
     from clutterbench.models.checkpoint import save_checkpoint
     from clutterbench.models.collapse_map import CollapseMapConfig
     from clutterbench.models.vgg import VGGConfig
-    from clutterbench.planning.ch6.support import SupportParams
-    from clutterbench.trials.ch6.episodes import ch6_jobs
-    from clutterbench.trials.config import ConditionConfig, SceneStreamConfig, TrialsConfig
+    from clutterbench.trials.config import SceneStreamConfig
+    from tests.toy_jobs import toy_ch6_jobs
 
     torch.manual_seed(0)
     net = CollapseMapConfig(
@@ -143,19 +142,8 @@ def episodes(tmp_path_factory):
     cp = tmp_path_factory.mktemp("cp") / "best.pt"
     save_checkpoint(cp, "collapse_map", build_model("collapse_map", net), {"epoch": 0})
     stream = SceneStreamConfig(families={"stacked": 1, "random": 1}, n_objects=(3, 5))
-    cfg = TrialsConfig(streams={"s": stream})
-    cond = ConditionConfig(planner="pull_target", stream="s", episodes=2)
-    support = SupportParams("coverage", 0.5, 0.3, 2, 0.0)
-    cam = CameraConfig(image_size=64)
-    jobs = ch6_jobs(
-        "c",
-        cond,
-        trials=cfg,
-        sim=SimConfig(camera=cam),
-        seed=0,
-        support=support,
-        cp_max=0.3,
-        model_path=cp,
+    jobs = toy_ch6_jobs(
+        "pull_target", stream, CameraConfig(image_size=64), episodes=2, model_path=cp
     )
     jobs = [dataclasses.replace(j, ch4_model_path=cp) for j in jobs]
     return jobs, _written(tmp_path_factory.mktemp("processes"), jobs, None)
