@@ -25,6 +25,8 @@ def support(params: dict, base: BaseConfig) -> None:
         raise ClutterbenchError(f"support.val_dataset: unknown dataset '{cfg.val_dataset}'")
     paths = SupportPaths(
         model=Path(f"models/{cfg.model}/best.pt"),
+        box_head=Path("models/box_head/best.pt"),
+        box_metrics=Path("reports/box_head/metrics.json"),
         gen_dir=Path("data/generate"),
         split_file=Path(f"data/split/{cfg.val_dataset}.json"),
         out=OUT,

@@ -12,6 +12,26 @@ from clutterbench.trials.config import SceneStreamConfig
 
 
 @dataclasses.dataclass(frozen=True)
+class BoxHeadConfig:
+    """The per-box head (support/box_head.py): trained on the support model's maps of the val
+    dataset's train split, its epoch and thresholds chosen on that dataset's val split, scored
+    on test_dataset."""
+
+    test_dataset: str = "ch6_test"
+    """Dataset whose every scene scores it (reports/box_head/metrics.json)."""
+    train_scenes: int = bounded(2000, ge=1)
+    """At most this many scenes of the train split (the first ones) give training pairs."""
+    val_scenes: int = bounded(300, ge=1)
+    """At most this many scenes of the val split choose the epoch and the thresholds."""
+    hidden: int = bounded(64, ge=1)
+    """Width of its two hidden layers."""
+    epochs: int = bounded(60, ge=1)
+    """Passes over the training pairs; the epoch of least val loss is kept."""
+    batch_size: int = bounded(256, ge=1)
+    lr: float = bounded(0.001, gt=0.0)
+
+
+@dataclasses.dataclass(frozen=True)
 class SupportEvalConfig:
     """Table 6.2: support relations inferred from one depth image against physics."""
 
@@ -48,3 +68,5 @@ class SupportEvalConfig:
     """Worker processes simulating the test scenes' truth; auto: base.cores."""
     max_attempts: int = bounded(30, ge=1)
     """A test scene is redrawn at most this often."""
+    box_head: BoxHeadConfig = dataclasses.field(default_factory=BoxHeadConfig)
+    """The per-box head over the support model's maps (stage box_head)."""

@@ -16,13 +16,15 @@ from clutterbench.criteria import label_thresholds
 from clutterbench.data.config import DatasetConfig, GenerateConfig
 from clutterbench.data.generate import generate_dataset
 from clutterbench.errors import ClutterbenchError
-from clutterbench.io import write_json, write_text
+from clutterbench.io import read_json, write_json, write_text
 from clutterbench.models.checkpoint import checkpoint_heads, load_checkpoint
 from clutterbench.parallel import ParallelConfig
 from clutterbench.planning.ch6.support import oracle_heatmaps
 from clutterbench.precision import Precision, inference_from_params
 from clutterbench.progress import progress_bar
 from clutterbench.sim.config import SimConfig
+from clutterbench.support.box_predict import BoxMaps
+from clutterbench.support.box_run import box_rows, choose_edge_thresholds
 from clutterbench.support.config import SupportEvalConfig
 from clutterbench.support.evaluate import (
     PULL_HEADS,
@@ -50,6 +52,8 @@ class SupportPaths:
     """Where the stage reads (model, val scenes) and writes (reports, test scenes)."""
 
     model: Path  # the CP checkpoint
+    box_head: Path  # the box head's checkpoint (stage box_head)
+    box_metrics: Path  # its metrics.json: the outcome thresholds it chose on val pairs
     gen_dir: Path  # generated datasets
     split_file: Path  # the val dataset's split
     out: Path  # val_sweep.csv, scenes.csv, thresholds.json, figure.png
@@ -95,6 +99,9 @@ def run_support(
     write_text(paths.out / "val_sweep.csv", sweep.to_csv(index=False))
     chosen = choose_all(sweep)
     p_edge = contact_edge_rate(val, chosen["coverage"])
+    box_maps = BoxMaps.from_paths(paths.model, paths.box_head, sim.camera, "pull", 0.5)
+    outcome = read_json(paths.box_metrics)["thresholds"]["box_head"]
+    box_chosen = choose_edge_thresholds(val, box_maps, outcome)
 
     # 2. test scenes from their own stream, with every removal simulated
     generate_test_scenes(cfg, sim, parallel, seed, ch6, models.heads, paths.scenes)
@@ -104,7 +111,7 @@ def run_support(
         paths.scenes, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera, **read
     )
     rows, panels, truth = score_test_scenes(
-        scenes_in, cfg, models, chosen, p_edge, rng, physics_depth, seed
+        scenes_in, cfg, models, chosen, p_edge, rng, physics_depth, seed, (box_maps, box_chosen)
     )
     # edges: removing X moves Y, X and Y touch; <head>_edges: the trials' pull of X marks Y
     # under that head's label kind, X and Y touch
@@ -112,7 +119,7 @@ def run_support(
     write_json(paths.scenes / "truth.json", truths | {"moved_threshold_m": cfg.moved_threshold_m})
     scenes = pd.DataFrame(rows)
     write_text(paths.out / "scenes.csv", scenes.to_csv(index=False))
-    write_thresholds(paths.out, chosen, p_edge, sweep, len(val), precision)
+    write_thresholds(paths.out, chosen, p_edge, sweep, len(val), precision, box_chosen)
     support_figure(
         panels, paths.out / "figure.png", "Inferred (white, dashed) and true (pink) support"
     )
@@ -192,8 +199,10 @@ def score_test_scenes(
     rng: np.random.Generator,
     physics_depth: PhysicsDepthSupport,
     seed: int,
+    box: tuple[BoxMaps, dict[str, dict[str, float]]],
 ) -> tuple[list[dict], list[SupportPanel], dict[str, dict[str, list]]]:
-    """Every method's rows on every test scene, the figure's panels and each head's true edges."""
+    """Every method's rows on every test scene, the figure's panels and each head's true edges;
+    `box`: the box head and its chosen thresholds."""
     heads = models.heads
     chosen_of = {h: {m: p for m, p in chosen.items() if method_head(m)[0] == h} for h in heads}
     deletion = {m: p for m, p in chosen.items() if method_head(m)[0] == "deletion"}
@@ -210,6 +219,7 @@ def score_test_scenes(
                 head_heat = predicted_heatmaps(view, models.of_head[head])
                 rows += evaluate_scene(view, head_heat, chosen_of[head], None, rng)[0]
                 truth[head][str(sc.index)] = sorted(map(list, view.true_edges))
+            rows += box_rows(sc, *box)
             if len(panels) < cfg.figure_scenes:
                 panels.append(
                     SupportPanel(
@@ -226,10 +236,17 @@ def score_test_scenes(
 
 
 def write_thresholds(
-    out: Path, chosen: dict, p_edge: float, sweep: pd.DataFrame, n_val: int, precision: Precision
+    out: Path,
+    chosen: dict,
+    p_edge: float,
+    sweep: pd.DataFrame,
+    n_val: int,
+    precision: Precision,
+    box_chosen: dict[str, dict[str, float]],
 ) -> None:
-    """thresholds.json: each method's chosen thresholds, its val metrics at them, the val
-    scene count and the network precision the heatmaps were inferred at."""
+    """thresholds.json: each method's chosen thresholds, its val metrics at them, the box
+    head's thresholds per pull head (`box_head`: edge, outcome), the val scene count and the
+    network precision the heatmaps were inferred at."""
     thresholds = {m: as_dict(p) for m, p in chosen.items()} | {"random": {"p_edge": p_edge}}
     thresholds[SUPPORT_METHOD] = as_dict(chosen[SUPPORT_RULE])
     val_at = {m: val_metrics_at(sweep, m, p) for m, p in chosen.items()}
@@ -238,6 +255,7 @@ def write_thresholds(
         {
             "chosen": thresholds,
             "val": val_at,
+            "box_head": box_chosen,
             "val_scenes": n_val,
             "network_precision": precision,
         },

@@ -30,6 +30,10 @@ PLANNERS = (
     "random",
     "physics_from_depth",
     "physics_from_depth_hold",
+    "multi_step_box",
+    "bimanual_box",
+    "multi_step_box_physics",
+    "bimanual_box_physics",
 )
 """The built-in ch. 6 trial policies (registered in trials.ch6.PLANNERS): pull the
 target at once, nothing held; the thesis' single-step method (its previous work, ch. 4: pull
@@ -40,13 +44,18 @@ meaning) and of the trials' own pull; the same two on the collapse predictor's p
 (`*_pull`: maps of the trials' pull, learnt from pull labels); the search oracles with one
 arm and with a holding arm; a uniformly random visible box each step; the search on boxes
 fitted to each observation instead of the true scene, one arm and holding
-(planning/ch6/physics_depth.py)."""
+(planning/ch6/physics_depth.py); Algorithm 1 on the box head's per-box predictions
+(`*_box`: no pixel rule, support/box_predict.py) and on those predictions with the pulls the
+network is unsure of simulated on the fitted boxes (`*_box_physics`: learned plus physics)."""
 
 
 PULL_HEAD_PLANNERS = ("multi_step_pull", "bimanual_pull")
 """The CP planners that read a pull head of the collapse predictor (train.models.<m>.labels;
 which one: PULL_MAP_HEADS), with the support thresholds the support stage chose for that
 head (`<head>_<rule>`)."""
+BOX_PLANNERS = ("multi_step_box", "bimanual_box", "multi_step_box_physics", "bimanual_box_physics")
+"""The CP planners that read the box head (stage box_head) on the head of pull_map_meaning,
+with the thresholds the support stage chose for it on validation scenes (`box_head`)."""
 PULL_MAP_HEADS = {"moved": "pull", "collapse": "pull_collapse"}
 """trials.ch6.pull_map_meaning -> the collapse predictor's head (data.labels.LABEL_KINDS)
 whose maps mean the same: every box the pull moves, or only what it collapses."""
@@ -57,7 +66,7 @@ def support_method(planner: str, rule: str, meaning: str = "moved") -> str:
     a CP planner runs with: its rule, chosen on the deletion maps, or for the pull-head
     planners on the maps of the head of pull_map_meaning `meaning` (`pull_<rule>`,
     `pull_collapse_<rule>`)."""
-    if planner not in PULL_HEAD_PLANNERS:
+    if planner not in PULL_HEAD_PLANNERS + BOX_PLANNERS:
         return rule
     return f"{PULL_MAP_HEADS[meaning]}_{rule}"
 
@@ -143,6 +152,18 @@ class Ch6TrialParams:
     physics_depth_settle_s: float = bounded(0.5, gt=0.0)
     """The estimated scene settles this long before the search; not at rest by then is
     recorded (estimate_not_at_rest)."""
+    box_physics_band: tuple[float, float] = (0.15, 0.85)
+    """The learned-plus-physics planners (`*_box_physics`) simulate a pull on the fitted boxes
+    when the box head gives some other box a probability inside [low, high] for it (the
+    network unsure); outside it the network answers alone."""
+
+    def __post_init__(self) -> None:
+        low, high = self.box_physics_band
+        if not 0.0 <= low <= high <= 1.0:
+            raise ValueError(
+                f"box_physics_band: {list(self.box_physics_band)} is not 0 <= low <= high <= 1"
+            )
+
     ch4_model: str = "ch4_various"
     """The chapter 4 network (a key of train.models) of the single-step rows: the thesis'
     previous method, extract while supporting (Table 6.3's single-step rows)."""

@@ -177,6 +177,9 @@ class CollapseGraphPlanner:
         ids, masks = visible_objects(obs, self.min_pixels)
         if len(ids) < 2:
             return []
+        box_edges = getattr(self.predict, "box_edges", None)
+        if box_edges is not None:  # a per-box predictor gives the graph itself (no pixel rule)
+            return box_edges(obs, ids, masks)
         heatmaps = self.predict(obs.depth_m, masks.astype(np.uint8))
         self._maps = (obs, ids, heatmaps)
         return infer_support(heatmaps, masks, ids, self.params, self._gaps(obs, masks))
@@ -413,6 +416,15 @@ class CollapseGraphPlanner:
         if box not in ids or len(ids) < 2:
             return {}
         k = ids.index(box)
+        box_row = getattr(self.predict, "box_row", None)
+        if box_row is not None:  # a per-box predictor: each box's probability is its share
+            near = self._near(obs, masks, k, contact)
+            p = box_row(obs, ids, masks, k)
+            return {
+                ids[j]: float(p[j])
+                for j in range(len(ids))
+                if j != k and near[j] and ids[j] != hold
+            }
         if hold is not None and self.predict_held is not None and hold in ids:
             held = masks[ids.index(hold)].astype(np.uint8)
             heat = self.predict_held(obs.depth_m, masks[k].astype(np.uint8), held)
@@ -422,15 +434,19 @@ class CollapseGraphPlanner:
         else:
             heat = self.predict(obs.depth_m, masks[k : k + 1].astype(np.uint8))[0]
         area_c = heat > (self.params.prob_threshold if prob is None else prob)
-        if contact:
-            near = support_contact(masks, self.params, self._gaps(obs, masks))[k]
-        else:
-            near = np.ones(len(ids), bool)
+        near = self._near(obs, masks, k, contact)
         return {
             ids[j]: float(np.logical_and(area_c, masks[j]).sum() / masks[j].sum())
             for j in range(len(ids))
             if j != k and near[j] and ids[j] != hold
         }
+
+    def _near(self, obs: Observation, masks: np.ndarray, k: int, contact: bool) -> np.ndarray:
+        """(K,) bool: the objects a share is taken of for object k (its pseudo-direct
+        contacts, or with `contact` False every visible one)."""
+        if contact:
+            return support_contact(masks, self.params, self._gaps(obs, masks))[k]
+        return np.ones(len(masks), bool)
 
 
 def depth_changes(start: Observation, now: Observation, min_pixels: int) -> dict[int, float]:

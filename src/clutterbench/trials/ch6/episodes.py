@@ -34,8 +34,10 @@ from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch6.jobs import Ch6Job
 from clutterbench.trials.ch6.oracle import SearchOracle
 from clutterbench.trials.ch6.planners import (  # noqa: F401  (register_planner, PLANNERS: the documented entry points)
+    BOX_HEAD,
     CP_PLANNERS,
     PLANNERS,
+    box_thresholds,
     chosen_support,
     load_planners,
     make_planner,
@@ -44,6 +46,7 @@ from clutterbench.trials.ch6.planners import (  # noqa: F401  (register_planner,
     truth_maps_of,
 )
 from clutterbench.trials.config import (
+    BOX_PLANNERS,
     PULL_HEAD_PLANNERS,
     PULL_MAP_HEADS,
     Ch6TrialParams,
@@ -349,7 +352,9 @@ class Extraction:
             else (
                 (
                     f"predicted by the {PULL_MAP_HEADS[job.params.pull_map_meaning]} head"
-                    if job.planner in PULL_HEAD_PLANNERS
+                    + (" per box (box head)" if job.planner in BOX_PLANNERS else "")
+                    + (", simulated where unsure" if job.planner.endswith("_physics") else "")
+                    if job.planner in PULL_HEAD_PLANNERS + BOX_PLANNERS
                     else "predicted"
                 )
                 if truth is None
@@ -378,6 +383,9 @@ class Extraction:
                 "search_found_strict": bool(planner.found.get("strict_success", False)),
                 "search_found": bool(planner.found.get("success", False)),
             }
+        simulated = getattr(getattr(planner, "predict", None), "simulated", None)
+        if job.planner in BOX_PLANNERS and simulated is not None:
+            record["box_pulls_simulated"] = int(simulated)  # the fused planners' physics calls
         if hasattr(planner, "first") and hasattr(planner, "steps"):  # physics from depth
             from clutterbench.trials.ch6.physics_model import estimate_record
 
@@ -428,6 +436,12 @@ def condition_jobs(
             "run on the kinematic executor only (executor: kinematic)"
         )
     support, cp_max = planner_support(thresholds, cond.planner, cond.rule, trials.ch6)
+    box: dict[str, Any] = {}
+    if cond.planner in BOX_PLANNERS:
+        edge, cp_max = box_thresholds(thresholds, trials.ch6.pull_map_meaning)
+        box = {"box_head_path": BOX_HEAD, "box_edge_threshold": edge}
+        if not BOX_HEAD.exists():
+            raise ClutterbenchError(f"{BOX_HEAD} missing; run the box_head stage")
     jobs = ch6_jobs(
         name,
         cond,
@@ -437,6 +451,7 @@ def condition_jobs(
         support=support,
         cp_max=cp_max,
         model_path=Path(f"models/{trials.ch6.model}/best.pt"),
+        **box,
     )
     return jobs, support, cp_max
 

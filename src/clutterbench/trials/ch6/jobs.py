@@ -39,3 +39,8 @@ class Ch6Job(ShelfJob):
     """Who executes the pulls: 'kinematic' or 'arm' (the Pandas)."""
     arm: ArmConfig
     """The Pandas' configuration (trials.arm), read by the arm executor."""
+    box_head_path: Path | None = None
+    """The box head's checkpoint, for the box planners (None: none)."""
+    box_edge_threshold: float | None = None
+    """The box planners' support edge where its probability exceeds this (the support
+    stage's choice on validation scenes; None: not a box planner)."""

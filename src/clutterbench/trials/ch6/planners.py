@@ -81,6 +81,27 @@ def chosen_support(thresholds: Path, rule: str) -> SupportParams:
         ) from None
 
 
+BOX_HEAD = Path("models/box_head/best.pt")
+"""The box planners' per-box head (stage box_head)."""
+
+
+def box_thresholds(thresholds: Path, meaning: str) -> tuple[float, float]:
+    """(edge, outcome) thresholds of the box head on the head of pull_map_meaning `meaning`:
+    an edge above the first, a pull rejected or aborted when some box's probability is above
+    the second; both chosen on validation scenes by the support stage."""
+    from clutterbench.io import read_json
+
+    head = PULL_MAP_HEADS[meaning]
+    try:
+        chosen = read_json(thresholds)["box_head"][head]
+        return float(chosen["edge"]), float(chosen["outcome"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ClutterbenchError(
+            f"{thresholds}: no box-head thresholds for the {head} head ({exc}); rerun the support "
+            "stage after box_head"
+        ) from None
+
+
 def register_planner(name: str):
     """Register a ch. 6 planner factory under `name` (usable as a condition's planner)."""
 
@@ -201,6 +222,109 @@ def _multi_step_pull(job: Ch6Job, spec: SceneSpec):
 @register_planner("bimanual_pull")
 def _bimanual_pull(job: Ch6Job, spec: SceneSpec):
     return _cpg_planner(job, bimanual=True, pull=True)
+
+
+def _box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = False):
+    """Algorithm 1 on the box head's per-box predictions of the head of pull_map_meaning:
+    its support graph (no pixel rule), each box's probability as its collapse score against
+    cp_max (the head's own threshold, chosen on validation pairs); the pull planners' other
+    choices. `physics`: the pulls the network is unsure of simulated on the fitted boxes
+    (support/box_predict.py FusedBoxMaps)."""
+    from clutterbench.support.box_predict import BoxMaps, FusedBoxMaps
+
+    params: Ch6TrialParams = job.params
+    assert job.box_head_path is not None and job.box_edge_threshold is not None, job.planner
+    head = PULL_MAP_HEADS[params.pull_map_meaning]
+    args = (job.model_path, job.box_head_path, job.camera, head, job.box_edge_threshold)
+    if physics:
+        simulate = fitted_pull(job, spec, head)
+        maps = FusedBoxMaps.from_paths(*args, simulate=simulate, band=params.box_physics_band)
+    else:
+        maps = BoxMaps.from_paths(*args)
+    return CollapseGraphPlanner(
+        maps,
+        job.support,
+        job.cp_max,
+        params.min_pixels,
+        bimanual=bimanual,
+        clear_hold_load=True,
+        learn_from_aborts=params.abort_response == "learn",
+        watch_m=params.pull_watch_m,
+        when_no_plan=params.when_no_plan,
+        idle_hold_share=params.idle_hold_share,
+        idle_hold_prob=params.idle_hold_prob,
+        score_over=params.score_over,
+        hold_feared=params.hold_feared,
+    )
+
+
+def fitted_pull(job: Ch6Job, spec: SceneSpec, head: str):
+    """SimulateFn of FusedBoxMaps: the trials' pull of one box in the scene fitted to the
+    observation (physics from depth's estimate, settled), the boxes it marks by `head`. Of
+    the episode's spec it reads the shelf only; of its stream the catalogue."""
+    from clutterbench.errors import PerceptionError
+    from clutterbench.sim.pull import SceneState
+    from clutterbench.trials.ch6.physics_model import make_estimator, scene_of
+
+    params: Ch6TrialParams = job.params
+    estimate = make_estimator(job.stream_cfg.catalogue, params.min_pixels)
+    action = (params.pull_increment_m, params.grasp_lift_m)
+    falls = job.collapse_free if head == "pull_collapse" else None
+    cache: dict[int, tuple[Any, Any]] = {}  # the last observation's estimate and its maps
+
+    def simulate(obs, ids: list[int], box: int) -> np.ndarray | None:
+        key = hash(obs.depth_m.tobytes())  # one estimate per observation
+        if key not in cache:
+            cache.clear()
+            try:
+                scene = scene_of(
+                    estimate(obs),
+                    spec.shelf,
+                    job.camera,
+                    job.physics,
+                    params.physics_depth_settle_s,
+                )
+            except PerceptionError:
+                scene = None
+            maps = None
+            if scene is not None:
+                maps = TruthCollapseMaps(
+                    scene.spec, job.physics, params.moved_threshold_m, action, falls
+                )
+                maps.at(SceneState.start(scene.spec), np.zeros(obs.depth_m.shape, np.uint8))
+            cache[key] = (scene, maps)
+        scene, maps = cache[key]
+        fitted = [] if scene is None else [int(b) for b in scene.spec.meta["ids"]]
+        if box not in fitted:
+            return None
+        marked = maps.moved_by_removing(fitted.index(box))
+        out = np.zeros(len(ids), bool)
+        for j, other in enumerate(fitted):
+            if other in ids and marked[j]:
+                out[ids.index(other)] = True
+        return out
+
+    return simulate
+
+
+@register_planner("multi_step_box")
+def _multi_step_box(job: Ch6Job, spec: SceneSpec):
+    return _box_planner(job, bimanual=False, spec=spec)
+
+
+@register_planner("bimanual_box")
+def _bimanual_box(job: Ch6Job, spec: SceneSpec):
+    return _box_planner(job, bimanual=True, spec=spec)
+
+
+@register_planner("multi_step_box_physics")
+def _multi_step_box_physics(job: Ch6Job, spec: SceneSpec):
+    return _box_planner(job, bimanual=False, spec=spec, physics=True)
+
+
+@register_planner("bimanual_box_physics")
+def _bimanual_box_physics(job: Ch6Job, spec: SceneSpec):
+    return _box_planner(job, bimanual=True, spec=spec, physics=True)
 
 
 def _physics_from_depth(job: Ch6Job, spec: SceneSpec, holding: bool):

@@ -1,0 +1,160 @@
+"""The box head at inference: one depth image and the visible boxes' masks -> per-box pull
+probabilities, support edges and maps, behind the ch. 6 planner's predictor interface
+(planning/ch6/extraction.py: a predictor with `box_row` is asked per box, one with
+`box_edges` gives the support graph itself, with no pixel rule).
+
+`BoxMaps` answers from the network alone. `FusedBoxMaps` is the learned-plus-physics
+predictor: where the network is unsure of a pull (some box's probability inside a band
+around its threshold, chosen on validation pairs), that pull is simulated on the boxes fitted
+to the same depth image (physics from depth) and the simulated outcome replaces the
+network's row; elsewhere the network answers and nothing is simulated.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from clutterbench.collapse.predict import CollapsePredictor
+from clutterbench.observation import Observation
+from clutterbench.planning.ch6.support import SupportEdge, surface_gaps
+from clutterbench.sim.config import CameraConfig
+from clutterbench.support.box_head import (
+    OUTPUTS,
+    BoxHead,
+    BoxHeadMeta,
+    edge_probability,
+    load_box_head,
+    pair_features,
+    predict_pairs,
+)
+from clutterbench.support.box_train import cp_probs_of
+from clutterbench.support.evaluate import camera_points
+
+SimulateFn = Callable[[Observation, list[int], int], np.ndarray | None]
+"""(observation, visible ids, pulled box id) -> (K,) bool over the visible ids: the boxes the
+pull collapses (or moves, by the head) in the scene fitted to the observation; None where
+the estimate cannot answer (the network's row stays)."""
+
+
+class BoxMaps:
+    """Per-box probabilities of one observation from the box head over the collapse
+    predictor's maps; `head` (pull or pull_collapse) is the outcome the planner reads, an
+    edge (x, y) where the pull of x marks y and they touch with probability > edge_threshold."""
+
+    needs_all_masks = True
+    """The answer for one box depends on every visible box: always pass them all."""
+
+    def __init__(
+        self,
+        cp: CollapsePredictor,
+        model: BoxHead,
+        meta: BoxHeadMeta,
+        camera: CameraConfig,
+        head: str,
+        edge_threshold: float,
+    ):
+        if head not in OUTPUTS or head == "contact":
+            raise ValueError(f"head {head!r}: not a pull outcome of the box head {OUTPUTS}")
+        self.cp, self.model, self.meta, self.camera = cp, model, meta, camera
+        self.head, self.edge_threshold = head, edge_threshold
+        self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.simulated = 0
+        """Pulls simulated so far (FusedBoxMaps)."""
+
+    @classmethod
+    def from_paths(
+        cls,
+        cp_path: Path,
+        box_path: Path,
+        camera: CameraConfig,
+        head: str,
+        edge_threshold: float,
+        **kwargs: object,
+    ) -> BoxMaps:
+        """From the two checkpoints (the box head refused where it read another network's
+        maps); `kwargs` go to the class (FusedBoxMaps: simulate, band)."""
+        model, meta = load_box_head(box_path, cp_model=Path(cp_path).parent.name)
+        cp = CollapsePredictor.from_checkpoint(cp_path, image_size=camera.image_size)
+        return cls(cp, model, meta, camera, head, edge_threshold, **kwargs)
+
+    def probs(self, depth_m: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        """(K, K, len(OUTPUTS)) probabilities, x pulled and y marked (diagonal 0); the last
+        observation's answer is kept (the decision and its checks ask again)."""
+        masks = np.asarray(masks).astype(bool)
+        last = self._last
+        if last is not None and np.array_equal(last[0], depth_m) and np.array_equal(last[1], masks):
+            return last[2]
+        k = len(masks)
+        if k < 2:
+            out = np.zeros((k, k, len(OUTPUTS)), np.float32)
+        else:
+            probs = cp_probs_of(self.cp, depth_m, masks)
+            gaps = surface_gaps(camera_points(depth_m, self.camera), masks)
+            out = predict_pairs(self.model, pair_features(probs, masks, depth_m, gaps))
+            out[np.eye(k, dtype=bool)] = 0.0
+        self._last = (depth_m.copy(), masks.copy(), out)
+        return out
+
+    def box_row(self, obs: Observation, ids: list[int], masks: np.ndarray, k: int) -> np.ndarray:
+        """(K,) probability that pulling ids[k] marks each visible box (the planner's head)."""
+        return self.probs(obs.depth_m, masks)[k, :, OUTPUTS.index(self.head)]
+
+    def box_edges(self, obs: Observation, ids: list[int], masks: np.ndarray) -> list[SupportEdge]:
+        """The support graph: (x, y) where the edge's probability exceeds edge_threshold."""
+        edge = edge_probability(self.probs(obs.depth_m, masks), self.head)
+        return _edges(ids, edge, self.edge_threshold)
+
+    def __call__(self, depth_m: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        """(K, H, W) maps: map x is each other box's probability on its pixels."""
+        masks = np.asarray(masks).astype(bool)
+        p = self.probs(depth_m, masks)[..., OUTPUTS.index(self.head)]
+        return np.einsum("xy,yhw->xhw", p, masks.astype(np.float32)).astype(np.float32)
+
+
+class FusedBoxMaps(BoxMaps):
+    """BoxMaps, with the pulls the network is unsure of simulated on the fitted boxes: a row
+    (one pulled box) is simulated when it is asked for, once per observation."""
+
+    def __init__(self, *args, simulate: SimulateFn, band: tuple[float, float], **kwargs):
+        super().__init__(*args, **kwargs)
+        self.simulate, self.band = simulate, band
+        """The band [low, high] of the head's probability in which the network is unsure."""
+        self._rows: dict[tuple[int, int], np.ndarray] = {}
+        """(observation key, pulled box) -> its fused row, for the last observation."""
+        self._key: int | None = None
+
+    def box_row(self, obs: Observation, ids: list[int], masks: np.ndarray, k: int) -> np.ndarray:
+        """(K,) the network's row for pulling ids[k], or where it is unsure (some box inside
+        the band) the simulated outcome on the fitted boxes (the network's where the
+        estimate cannot answer)."""
+        key = hash(obs.depth_m.tobytes())
+        if key != self._key:
+            self._key, self._rows = key, {}
+        if (key, k) not in self._rows:
+            row = super().box_row(obs, ids, masks, k).copy()
+            low, high = self.band
+            if ((row >= low) & (row <= high)).any():
+                outcome = self.simulate(obs, ids, ids[k])
+                self.simulated += 1
+                if outcome is not None:
+                    row = outcome.astype(np.float32)
+                    row[k] = 0.0
+            self._rows[(key, k)] = row
+        return self._rows[(key, k)]
+
+    def box_edges(self, obs: Observation, ids: list[int], masks: np.ndarray) -> list[SupportEdge]:
+        """Edges of the fused outcome and the network's contact."""
+        p = np.stack([self.box_row(obs, ids, masks, k) for k in range(len(ids))])
+        contact = self.probs(obs.depth_m, masks)[..., OUTPUTS.index("contact")]
+        return _edges(ids, p * contact, self.edge_threshold)
+
+
+def _edges(ids: list[int], edge: np.ndarray, threshold: float) -> list[SupportEdge]:
+    return [
+        SupportEdge(ids[x], ids[y], round(float(edge[x, y]), 4))
+        for x, y in zip(*np.nonzero(edge > threshold))
+        if x != y
+    ]
