@@ -29,6 +29,7 @@ from clutterbench.report.summary import summary_table
 from clutterbench.report.table_4_1 import table_4_1, table_4_1_target
 from clutterbench.report.table_4_2 import table_4_2
 from clutterbench.report.table_5_2 import table_5_2
+from clutterbench.report.table_6_1_boxes import box_table
 from clutterbench.report.table_6_2 import support_table
 from clutterbench.report.table_6_3 import (
     extraction_families_table,
@@ -158,13 +159,27 @@ def table_4_2_pixels(r: Report) -> None:
     )
 
 
+def support_thresholds(path: Path) -> dict[str, Any]:
+    """Each Table 6.2 method's thresholds: the rules' (`chosen`) and the box head's per pull
+    head (`box_head`, as method `<head>_box`)."""
+    box = json_key(path, "box_head") if "box_head" in read_json(path) else {}
+    return dict(json_key(path, "chosen")) | {f"{head}_box": t for head, t in box.items()}
+
+
+def table_6_1_per_box(r: Report) -> None:
+    scores = Path("reports/box_head/scores.csv")
+    if not scores.exists():
+        raise ClutterbenchError(f"{scores} missing; run the box_head stage")
+    box_table(pd.read_csv(scores), TABLES, r.base.scale)
+
+
 def table_6_2_support(r: Report) -> None:
     if not (SUPPORT / "scenes.csv").exists():
         raise ClutterbenchError(f"{SUPPORT / 'scenes.csv'} missing; run the support stage")
     support_table(
         pd.read_csv(SUPPORT / "scenes.csv"),
         r.cfg.table_6_2_methods,
-        json_key(SUPPORT / "thresholds.json", "chosen"),
+        support_thresholds(SUPPORT / "thresholds.json"),
         r.figures,
         TABLES,
         r.base.scale,
@@ -238,6 +253,7 @@ def summary(r: Report) -> None:
 BUILDERS: list[tuple[str, Callable[[Report], None]]] = [
     ("datasets", datasets),
     ("Tables 5.1 and 6.1", tables_5_1_6_1),
+    ("Table 6.1 per box", table_6_1_per_box),
     ("Table 4.2", table_4_2_pixels),
     ("Table 6.2", table_6_2_support),
     (

@@ -45,12 +45,24 @@ TRUTH_OF = {
     "bimanual": "bimanual_truth",
     "multi_step_pull": "multi_step_pull_truth",
     "bimanual_pull": "bimanual_pull_truth",
+    "multi_step_box": "multi_step_pull_truth",
+    "bimanual_box": "bimanual_pull_truth",
+    "multi_step_box_physics": "multi_step_pull_truth",
+    "bimanual_box_physics": "bimanual_pull_truth",
 }
 """CP planner -> the same planner on physics-truth maps of what its maps mean (deletion for
-the deletion head, the trials' pull for the pull head: PULL_CHAIN)."""
+the deletion head, the trials' pull for the pull head and the box head: PULL_CHAIN)."""
 
-PULL_CHAIN = ("multi_step_pull", "bimanual_pull")
-"""CP planners on the pull head: their truth row is of the pull (shown in its column)."""
+PULL_CHAIN = (
+    "multi_step_pull",
+    "bimanual_pull",
+    "multi_step_box",
+    "bimanual_box",
+    "multi_step_box_physics",
+    "bimanual_box_physics",
+)
+"""CP planners on the pull head (per pixel, or per box through the box head): their truth row
+is of the pull (shown in its column)."""
 
 PULL_TRUTH_OF = {"multi_step": "multi_step_pull_truth", "bimanual": "bimanual_pull_truth"}
 """CP planner -> the same planner on physics-truth maps of the trials' pull."""
@@ -60,6 +72,10 @@ ORACLE_OF = {
     "bimanual": "oracle_hold",
     "multi_step_pull": "oracle",
     "bimanual_pull": "oracle_hold",
+    "multi_step_box": "oracle",
+    "bimanual_box": "oracle_hold",
+    "multi_step_box_physics": "oracle",
+    "bimanual_box_physics": "oracle_hold",
 }
 """CP planner -> its matching search oracle (the one its Table 6.3 row is measured against)."""
 

@@ -35,6 +35,10 @@ BASELINE_OF = {
     "multi_step_pull": "physics_from_depth",
     "bimanual": "physics_from_depth_hold",
     "bimanual_pull": "physics_from_depth_hold",
+    "multi_step_box": "physics_from_depth",
+    "bimanual_box": "physics_from_depth_hold",
+    "multi_step_box_physics": "physics_from_depth",
+    "bimanual_box_physics": "physics_from_depth_hold",
 }
 """CP planner -> the physics-from-depth planner it is compared with (one arm, or may hold)."""
 
