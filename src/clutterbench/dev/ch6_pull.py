@@ -9,6 +9,7 @@
     python -m clutterbench.dev.ch6_pull ch6_clear             # make dev-ch6-clear
     python -m clutterbench.dev.ch6_pull ch6_hold              # make dev-ch6-hold
     python -m clutterbench.dev.ch6_pull ch6_vs_pfd            # make dev-ch6-vs-pfd
+    python -m clutterbench.dev.ch6_pull ch6_box               # make dev-ch6-box
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
 rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull
@@ -36,7 +37,8 @@ arm, trials.ch6.idle_hold_share), ch6_clear (whose shares their collapse score t
 trials.ch6.score_over, and when_no_plan clear), ch6_hold (how the bimanual pull
 planners score and choose a held pull, trials.ch6.truth_hold and hold_feared), ch6_vs_pfd
 (the pull-head CP planners against physics from depth, the params' own settings, on more
-episodes than a table has).
+episodes than a table has), ch6_box (the box-head planners, per box and learned plus physics,
+against physics from depth and the pixel pull planners; trials.ch6.box_physics_band).
 """
 
 from __future__ import annotations
@@ -88,6 +90,7 @@ def trial_jobs(
     from clutterbench.sim.config import SimConfig
     from clutterbench.trials.ch6.episodes import (
         CP_PLANNERS,
+        box_fields,
         ch6_jobs,
         load_planners,
         planner_support,
@@ -115,6 +118,8 @@ def trial_jobs(
             over = cfg.variants.get(variant, {})
             ch6 = dataclasses.replace(trials.ch6, **over)
             support, cp_max = planner_support(THRESHOLDS, planner, rule, ch6)
+            box, box_cp_max = box_fields(THRESHOLDS, planner, ch6)
+            cp_max = box_cp_max if box_cp_max is not None else cp_max
             jobs += ch6_jobs(
                 f"{condition_label(variant, planner)}/{stream}",
                 ConditionConfig(planner, stream, cfg.episodes, rule),
@@ -125,6 +130,7 @@ def trial_jobs(
                 cp_max=cp_max,
                 model_path=Path(f"models/{trials.ch6.model}/best.pt"),
                 stream_cfg=dev.streams[stream],
+                **box,
             )
     return jobs
 
@@ -221,6 +227,8 @@ TITLES = {
     "around a rejected plan",
     "ch6_hold": "how the ch. 6 bimanual pull planners score and choose a held pull",
     "ch6_vs_pfd": "the ch. 6 pull-head CP planners against physics from depth",
+    "ch6_box": "the ch. 6 box-head planners (per box, and learned plus physics) against "
+    "physics from depth",
 }
 
 

@@ -233,6 +233,16 @@ class DevConfig:
     )
     """The pull-head CP planners against physics from depth, episode by episode (`against`;
     python -m clutterbench.dev.ch6_pull ch6_vs_pfd)."""
+    ch6_box: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(
+            variants={"current": {}},
+            planners=("multi_step_box", "physics_from_depth"),
+            against={"multi_step_box": "physics_from_depth"},
+        )
+    )
+    """The box-head planners against physics from depth and the pixel pull planners, and
+    the learned-plus-physics band (trials.ch6.box_physics_band; python -m
+    clutterbench.dev.ch6_pull ch6_box)."""
 
     def __post_init__(self) -> None:
         for name in self.streams:
@@ -251,6 +261,7 @@ class DevConfig:
             ("ch6_clear", self.ch6_clear.streams),
             ("ch6_hold", self.ch6_hold.streams),
             ("ch6_vs_pfd", self.ch6_vs_pfd.streams),
+            ("ch6_box", self.ch6_box.streams),
         ):
             for name in names:
                 if name not in self.streams:

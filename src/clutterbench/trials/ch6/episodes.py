@@ -415,6 +415,18 @@ def planner_support(
     return support, ch6.cp_max if ch6.cp_max is not None else support.score_threshold
 
 
+def box_fields(thresholds: Path, planner: str, ch6: Any) -> tuple[dict[str, Any], float | None]:
+    """A box planner's job fields (its head's checkpoint and edge threshold) and its cp_max
+    (the box head's outcome threshold), both chosen on validation scenes by the support stage;
+    ({}, None) for any other planner. One line when the box head is missing."""
+    if planner not in BOX_PLANNERS:
+        return {}, None
+    if not BOX_HEAD.exists():
+        raise ClutterbenchError(f"{BOX_HEAD} missing (planner {planner} reads it); run box_head")
+    edge, outcome = box_thresholds(thresholds, ch6.pull_map_meaning)
+    return {"box_head_path": BOX_HEAD, "box_edge_threshold": edge}, outcome
+
+
 def condition_jobs(
     name: str,
     cond: ConditionConfig,
@@ -436,12 +448,8 @@ def condition_jobs(
             "run on the kinematic executor only (executor: kinematic)"
         )
     support, cp_max = planner_support(thresholds, cond.planner, cond.rule, trials.ch6)
-    box: dict[str, Any] = {}
-    if cond.planner in BOX_PLANNERS:
-        edge, cp_max = box_thresholds(thresholds, trials.ch6.pull_map_meaning)
-        box = {"box_head_path": BOX_HEAD, "box_edge_threshold": edge}
-        if not BOX_HEAD.exists():
-            raise ClutterbenchError(f"{BOX_HEAD} missing; run the box_head stage")
+    box, box_cp_max = box_fields(thresholds, cond.planner, trials.ch6)
+    cp_max = box_cp_max if box_cp_max is not None else cp_max
     jobs = ch6_jobs(
         name,
         cond,
