@@ -27,7 +27,7 @@ OUTPUT_TEXT = {
 }
 COLUMNS = [
     Column("output", "predicts", "{}"),
-    Column("group", "pairs", "{}"),
+    Column("group", "subset of pairs", "{}"),
     Column("precision", "precision"),
     Column("recall", "recall"),
     Column("f1", "F1"),

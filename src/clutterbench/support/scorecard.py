@@ -1,0 +1,225 @@
+"""Score a pull-consequence predictor on the test set (data/testset, stage testset): for every
+visible box x of every scene, the predictor is given the depth image, the visible boxes'
+masks, the camera and x, and answers for each visible box the probability that pulling x out
+collapses it, or a pixel map (read per box: its mean over each box). The scorecard: per label
+kind (what pulling x collapses, what it moves, what deleting it moves) precision, recall and
+F1 at 1/2, AUROC, calibration (ECE, Brier), pixel IoU where a map was given, overall with 95%
+bootstrap intervals over scenes, and per family and visible-box count. One JSON row per
+predictor; the leaderboard is every row as one table."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from clutterbench.data.testset_load import LABEL_KINDS, labels, visible
+from clutterbench.errors import ClutterbenchError
+from clutterbench.io import read_json, write_json, write_text
+from clutterbench.progress import progress_bar
+from clutterbench.support.box_train import auroc, binary_scores
+
+PredictFn = Callable[[np.ndarray, np.ndarray, np.ndarray, int], np.ndarray]
+"""(depth_m (H, W) float32, masks (K, H, W) bool of the visible boxes, camera K (3, 3), the
+pulled box's position among them) -> (K,) probabilities (the pulled box's own ignored) or an
+(H, W) probability map."""
+THRESHOLD = 0.5
+BOOTSTRAP = 1000
+BOOTSTRAP_SEED = 0
+HEADLINE = "pull_collapse"
+"""The label kind a predictor is ranked by (what a planner needs: what the pull collapses)."""
+
+
+def per_box(out: Any, masks: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """(K,) probabilities from a predictor's answer, and the map when it gave one; one line
+    when the answer is neither shape or not probabilities."""
+    k, h, w = masks.shape
+    try:
+        a = np.asarray(out, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ClutterbenchError(f"predictor returned {type(out).__name__}, not numbers") from None
+    if a.shape == (k,):
+        probs, heat = a, None
+    elif a.shape == (h, w):
+        heat = a
+        probs = np.array([a[m].mean() for m in masks])
+    else:
+        raise ClutterbenchError(
+            f"predictor returned shape {a.shape}; expected ({k},) per box or ({h}, {w}) a map"
+        )
+    if not np.isfinite(probs).all() or (probs < 0).any() or (probs > 1).any():
+        raise ClutterbenchError("predictor returned values outside [0, 1] (or NaN)")
+    return probs, heat
+
+
+def predict_all(ts: dict, predict: PredictFn, name: str) -> pd.DataFrame:
+    """One row per (scene, pulled x, other y): the prediction and every label kind's truth,
+    with the pixel IoU of the map (where given) against each kind's truth area."""
+    truth = {kind: labels(ts, kind) for kind in LABEL_KINDS}
+    cam = np.asarray(ts["manifest"]["camera"]["K"], dtype=np.float64)
+    rows: list[dict[str, Any]] = []
+    n = len(ts["n_objects"])
+    with progress_bar(f"score {name}", total=n) as advance:
+        for s in range(n):
+            ids = visible(ts, s)
+            if len(ids) >= 2:
+                masks = np.stack([ts["instance"][s] == k + 1 for k in ids])
+                for i, x in enumerate(ids):
+                    out = predict(ts["depth_m"][s].astype(np.float32), masks, cam, i)
+                    rows += _pair_rows(ts, s, ids, i, x, masks, per_box(out, masks), truth)
+            advance(1)
+    return pd.DataFrame(rows)
+
+
+def _pair_rows(ts, s, ids, i, x, masks, answer, truth) -> list[dict[str, Any]]:
+    probs, heat = answer
+    base = {"scene": s, "family": str(ts["family"][s]), "visible": len(ids), "pulled": x}
+    ious = {}
+    if heat is not None:
+        for kind, lab in truth.items():
+            area = masks[lab[s, x, ids]].any(axis=0)
+            pred = heat > THRESHOLD
+            union = (area | pred).sum()
+            ious[f"iou_{kind}"] = float((area & pred).sum() / union) if union else np.nan
+    out = []
+    for j, y in enumerate(ids):
+        if j == i:
+            continue
+        row = base | {"other": y, "p": float(probs[j])}
+        row |= {kind: bool(lab[s, x, y]) for kind, lab in truth.items()}
+        out.append(row | (ious if j == (1 if i == 0 else 0) else {}))  # one IoU per pull
+    return out
+
+
+def _scores(rows: pd.DataFrame, kind: str) -> dict[str, float]:
+    s = binary_scores(rows["p"].to_numpy(), rows[kind].to_numpy(), THRESHOLD)
+    return {
+        k: s[k] for k in ("precision", "recall", "f1", "auroc", "ece", "brier", "n", "positives")
+    }
+
+
+def _interval(rows: pd.DataFrame, kind: str, rng: np.random.Generator) -> dict[str, list]:
+    """95% bootstrap intervals over scenes of AUROC, precision and recall."""
+    groups = [g for _, g in rows.groupby("scene", sort=True)]
+    draws: dict[str, list[float]] = {"auroc": [], "precision": [], "recall": []}
+    for _ in range(BOOTSTRAP):
+        pick = pd.concat([groups[i] for i in rng.integers(0, len(groups), len(groups))])
+        p, y = pick["p"].to_numpy(), pick[kind].to_numpy()
+        s = binary_scores(p, y, THRESHOLD)
+        draws["auroc"].append(auroc(p, y))
+        draws["precision"].append(s["precision"])
+        draws["recall"].append(s["recall"])
+    return {k: _percentiles(np.asarray(v, dtype=np.float64)) for k, v in draws.items()}
+
+
+def _percentiles(v: np.ndarray) -> list[float | None]:
+    """[2.5th, 97.5th] percentile of the defined draws (None: no draw defined it)."""
+    v = v[np.isfinite(v)]
+    if not len(v):
+        return [None, None]
+    return [round(float(np.percentile(v, 2.5)), 4), round(float(np.percentile(v, 97.5)), 4)]
+
+
+def scorecard(rows: pd.DataFrame, name: str, about: str, manifest: dict) -> dict[str, Any]:
+    """The predictor's JSON row: every label kind overall (with intervals), per family and per
+    visible-box count, and the pixel IoU where it gave maps."""
+    if rows.empty:
+        raise ClutterbenchError("the test set holds no scene with two visible boxes")
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    card: dict[str, Any] = {
+        "name": name,
+        "about": about,
+        "testset_sha256": manifest["sha256"],
+        "scenes": int(rows["scene"].nunique()),
+        "pairs": len(rows),
+        "threshold": THRESHOLD,
+    }
+    groups = {
+        **{f"family={f}": rows["family"] == f for f in sorted(rows["family"].unique())},
+        "visible=2-5": rows["visible"] <= 5,
+        "visible=6-10": rows["visible"] >= 6,
+    }
+    for kind in LABEL_KINDS:
+        entry = _scores(rows, kind) | {"interval_95": _interval(rows, kind, rng)}
+        entry["groups"] = {g: _scores(rows[sel], kind) for g, sel in groups.items() if sel.any()}
+        if f"iou_{kind}" in rows:
+            entry["pixel_iou"] = float(rows[f"iou_{kind}"].mean())
+        card[kind] = _round(entry)
+    return card
+
+
+def _round(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _round(v) for k, v in obj.items()}
+    if isinstance(obj, float):
+        return None if not np.isfinite(obj) else round(obj, 4)
+    return obj
+
+
+def write_row(card: dict[str, Any], rows_dir: Path) -> Path:
+    path = rows_dir / f"{card['name']}.json"
+    write_json(path, card)
+    return path
+
+
+def leaderboard(rows_dir: Path, out: Path, testset_sha256: str) -> pd.DataFrame:
+    """out/leaderboard.{md,csv}: every row under rows_dir's folders (baselines/, the stage's;
+    submitted/, evaluate-predictor's) scored on this test set (its hash), ranked by AUROC of
+    what the pull collapses."""
+    cards = [read_json(p) for p in sorted(rows_dir.glob("*/*.json"))]
+    cards = [c for c in cards if c.get("testset_sha256") == testset_sha256]
+    if not cards:
+        raise ClutterbenchError(f"{rows_dir}: no scorecard of this test set")
+    table = pd.DataFrame([_board_row(c) for c in cards])
+    table = table.sort_values(["pull_collapse AUROC", "predictor"], ascending=[False, True])
+    lines = [
+        "# Pull-consequence leaderboard",
+        "",
+        f"Test set sha256 {testset_sha256[:12]}: {cards[0]['scenes']} scenes, "
+        f"{cards[0]['pairs']} (pulled, other) pairs. Ranked by AUROC of what the pull collapses; "
+        f"precision and recall at {THRESHOLD}; [95% bootstrap over scenes]. "
+        "`clutterbench evaluate-predictor` adds a row.",
+        "",
+        "| " + " | ".join(table.columns) + " |",
+        "|" + "|".join("---" for _ in table.columns) + "|",
+    ]
+    for _, r in table.iterrows():
+        lines.append("| " + " | ".join(_cell(v) for v in r) + " |")
+    write_text(out / "leaderboard.md", "\n".join(lines) + "\n")
+    write_text(out / "leaderboard.csv", table.to_csv(index=False))
+    return table
+
+
+def _board_row(card: dict[str, Any]) -> dict[str, Any]:
+    pc = card[HEADLINE]
+    lo, hi = pc["interval_95"]["auroc"]
+    return {
+        "predictor": card["name"],
+        "pull_collapse AUROC": pc["auroc"],
+        "[95%]": f"[{lo:.3f}, {hi:.3f}]" if lo is not None and hi is not None else "—",
+        "precision": pc["precision"],
+        "recall": pc["recall"],
+        "ECE": pc["ece"],
+        "pull_moved AUROC": card["pull_moved"]["auroc"],
+        "deletion_moved AUROC": card["deletion_moved"]["auroc"],
+        "about": card["about"],
+    }
+
+
+def _cell(v: Any) -> str:
+    if v is None or (isinstance(v, float) and not np.isfinite(v)):
+        return "—"
+    return f"{v:.3f}" if isinstance(v, float) else str(v)
+
+
+def score(ts: dict, predict: PredictFn, name: str, about: str) -> dict[str, Any]:
+    return scorecard(predict_all(ts, predict, name), name, about, ts["manifest"])
+
+
+def check_name(name: str, taken: Sequence[str] = ()) -> str:
+    if not name or not all(c.isalnum() or c in "-_." for c in name) or name.startswith("."):
+        raise ClutterbenchError(f"predictor name {name!r}: letters, digits, '-', '_', '.' only")
+    return name

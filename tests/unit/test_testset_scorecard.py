@@ -1,0 +1,132 @@
+"""The pull-consequence test set's numpy-only loader, the scorer and evaluate-predictor."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clutterbench.data.testset_load import SCHEMA_VERSION, labels, load, pairs
+from clutterbench.errors import ClutterbenchError
+from clutterbench.io import save_npz
+from clutterbench.support.scorecard import leaderboard, per_box, score, write_row
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _write_testset(root: Path, scenes: int = 4) -> Path:
+    """Scenes of three boxes in a row: pulling box 0 collapses box 1, nothing else."""
+    n, h = 3, 12
+    inst = np.zeros((scenes, h, h), np.uint8)
+    inst[:, 2:10, 0:4], inst[:, 2:10, 4:8], inst[:, 2:10, 8:12] = 1, 2, 3
+    nan = np.full((scenes, n, n), np.nan)
+    drop = np.zeros((scenes, n, n))
+    drop[:, 0, 1] = 0.05
+    arrays = {
+        "depth_m": np.ones((scenes, h, h), np.float32) + np.arange(scenes)[:, None, None],
+        "instance": inst,
+        "n_objects": np.full(scenes, n),
+        "family": np.array(["random"] * scenes),
+        "scene_index": np.arange(scenes),
+        "contact": np.zeros((scenes, n, n), bool),
+        "pull_displacement_m": np.where(drop > 0, 0.05, 0.0),
+        "pull_drop_m": drop,
+        "pull_tilt_deg": np.zeros((scenes, n, n)),
+        "pull_left_shelf": np.zeros((scenes, n, n), bool),
+        "deletion_displacement_m": nan,
+    }
+    root.mkdir(parents=True)
+    save_npz(root / "scenes.npz", arrays)
+    manifest = {
+        "schema_version": SCHEMA_VERSION,
+        "sha256": hashlib.sha256((root / "scenes.npz").read_bytes()).hexdigest(),
+        "camera": {"K": np.eye(3).tolist(), "image_size": h},
+        "thresholds": {"moved_m": 0.005, "drop_m": 0.01, "tilt_deg": 15.0},
+        "min_pixels": 5,
+    }
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    (root / "load_testset.py").write_text(
+        (ROOT / "src/clutterbench/data/testset_load.py").read_text()
+    )
+    return root
+
+
+def test_the_loader_needs_numpy_alone_and_refuses_a_changed_file(tmp_path):
+    root = _write_testset(tmp_path / "ts")
+    code = (
+        "import sys; sys.path.insert(0, sys.argv[1]); import load_testset as t; "
+        "ts = t.load(sys.argv[1]); "
+        "assert not any(m.startswith('clutterbench') or m == 'torch' for m in sys.modules); "
+        "print(sum(1 for _ in t.pairs(ts, 'pull_collapse')))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-I", "-c", code, str(root)], capture_output=True, text=True
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "12"  # 4 scenes x 3 pulled boxes
+    ts = load(root)
+    lab = labels(ts, "pull_collapse")
+    assert lab[:, 0, 1].all() and lab.sum() == 4
+    assert [t.tolist() for _, i, _, t in pairs(ts, "pull_collapse")][:3] == [
+        [False, True, False],
+        [False, False, False],
+        [False, False, False],
+    ]
+    (root / "scenes.npz").write_bytes((root / "scenes.npz").read_bytes() + b"x")
+    with pytest.raises(ValueError, match="sha256"):
+        load(root)
+
+
+def test_a_perfect_predictor_scores_one_and_a_constant_one_half(tmp_path):
+    ts = load(_write_testset(tmp_path / "ts"))
+
+    def perfect(depth, masks, cam, i):
+        return np.array([0.0, 1.0, 0.0]) if i == 0 else np.zeros(3)
+
+    card = score(ts, perfect, "perfect", "knows")
+    assert card["pull_collapse"]["auroc"] == 1.0 and card["pull_collapse"]["recall"] == 1.0
+    assert card["pairs"] == 24 and card["pull_collapse"]["positives"] == 4
+    flat = score(ts, lambda d, m, c, i: np.full(len(m), 0.5), "flat", "")
+    assert flat["pull_collapse"]["auroc"] == 0.5
+    write_row(card, tmp_path / "board" / "baselines")
+    write_row(flat, tmp_path / "board" / "submitted")
+    table = leaderboard(tmp_path / "board", tmp_path / "board", ts["manifest"]["sha256"])
+    assert list(table["predictor"]) == ["perfect", "flat"]
+    assert "perfect" in (tmp_path / "board" / "leaderboard.md").read_text()
+
+
+def test_a_pixel_map_is_read_per_box_and_a_bad_answer_is_one_line():
+    masks = np.zeros((2, 4, 4), bool)
+    masks[0, :, :2], masks[1, :, 2:] = True, True
+    heat = np.zeros((4, 4))
+    heat[:, 2:] = 0.8
+    probs, got = per_box(heat, masks)
+    assert probs.tolist() == pytest.approx([0.0, 0.8]) and got is heat
+    for bad, match in (
+        (np.zeros(3), "shape"),
+        (np.array([0.2, 1.5]), "outside"),
+        ("yes", "not numbers"),
+    ):
+        with pytest.raises(ClutterbenchError, match=match):
+            per_box(bad, masks)
+
+
+def test_evaluate_predictor_scores_the_example_and_refuses_a_broken_module(tmp_path):
+    root = _write_testset(tmp_path / "ts")
+    cli = [sys.executable, "-m", "clutterbench.cli.__main__", "evaluate-predictor"]
+    example = str(ROOT / "docs/examples/example_predictor.py")
+    args = ["--testset", str(root), "--out", str(tmp_path / "board")]
+    out = subprocess.run([*cli, example, *args], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "board/submitted/example_predictor.json").exists()
+    assert "example_predictor" in (tmp_path / "board/leaderboard.md").read_text()
+    broken = tmp_path / "broken.py"
+    broken.write_text("def predict(depth_m, masks, camera_K, pulled):\n    return 'no'\n")
+    out = subprocess.run([*cli, str(broken), *args], capture_output=True, text=True)
+    assert out.returncode == 2 and out.stderr.strip().count("\n") == 0, out.stderr
+    assert "not numbers" in out.stderr
