@@ -68,6 +68,8 @@ def test_pair_features_read_each_head_on_the_other_box():
         0.2
     )
     assert f[0, 1, at["dx"]] > 0 > f[1, 0, at["dx"]]  # box 1 is right of box 0
+    assert f[0, 1, at["h_overlap"]] == 0.0 and f[0, 2, at["h_gap"]] == pytest.approx(8 / 16)
+    assert f[0, 1, at["above"]] < 0 and f[0, 1, at["below"]] < 0  # side by side, same rows
     assert off_diagonal(f).shape == (6, len(names))
 
 

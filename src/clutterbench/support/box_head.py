@@ -12,7 +12,8 @@ the per-box pull outcomes the ch. 6 dataset holds (pullout_*, contact):
   box: mean, max and the share above 1/2 of each head's map;
 - where the two boxes are from the depth image alone: their closest visible surfaces
   (back-projected depth), the IoU of their grown image boxes, their areas, the offset of
-  their centroids, their depth difference, and how many boxes are visible.
+  their centroids, their depth difference, how far one's image box lies above or below the
+  other's, their horizontal overlap or gap, and how many boxes are visible.
 
 The collapse predictor is frozen: the box head is trained after it, so the pixel heads (and
 every row that reads them) stay as they were. This module is torch and numpy only; the
@@ -43,6 +44,10 @@ GEOMETRY = (
     "dx",
     "abs_dx",
     "depth_diff_m",
+    "above",
+    "below",
+    "h_overlap",
+    "h_gap",
     "visible",
 )
 """The pair's geometry from the depth image and the masks (`pair_features`)."""
@@ -82,6 +87,15 @@ def _grown_iou(masks: np.ndarray, margin: int) -> np.ndarray:
     return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
 
 
+def _extents(masks: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(K,) top, bottom, left, right image rows / columns of each mask (half-open, float)."""
+    _, h, w = masks.shape
+    rows, cols = masks.any(axis=2), masks.any(axis=1)
+    top, bottom = rows.argmax(1), h - rows[:, ::-1].argmax(1)
+    left, right = cols.argmax(1), w - cols[:, ::-1].argmax(1)
+    return tuple(a.astype(np.float32) for a in (top, bottom, left, right))
+
+
 def pair_features(
     probs: np.ndarray, masks: np.ndarray, depth_m: np.ndarray, gaps_m: np.ndarray
 ) -> np.ndarray:
@@ -106,6 +120,9 @@ def pair_features(
     cy = (flat @ yy.ravel().astype(np.float32)) / area / h
     cx = (flat @ xx.ravel().astype(np.float32)) / area / w
     depth = np.array([np.median(depth_m[m]) if m.any() else 0.0 for m in masks], np.float32)
+    top, bottom, left, right = _extents(masks)
+    width = (right - left).clip(1.0)
+    overlap = np.minimum(right[:, None], right[None, :]) - np.maximum(left[:, None], left[None, :])
     geo = np.stack(
         [
             np.minimum(np.nan_to_num(gaps_m, nan=MAX_GAP_M, posinf=MAX_GAP_M), MAX_GAP_M),
@@ -116,6 +133,10 @@ def pair_features(
             cx[None, :] - cx[:, None],
             np.abs(cx[None, :] - cx[:, None]),
             depth[None, :] - depth[:, None],
+            (top[:, None] - bottom[None, :]) / h,  # > 0: y's bottom edge above x's top
+            (top[None, :] - bottom[:, None]) / h,  # > 0: y's top edge below x's bottom
+            overlap.clip(0.0) / np.minimum(width[:, None], width[None, :]),
+            (-overlap).clip(0.0) / w,
             np.full((k, k), k / 10.0),
         ],
         axis=-1,
