@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from clutterbench.bench.arm import bench_arm
+from clutterbench.bench.box_planners import bench_box_planners
 from clutterbench.bench.envs import bench_envs
 from clutterbench.bench.grouped import bench_grouped
 from clutterbench.bench.models import bench_models
@@ -39,6 +40,7 @@ PARTS: list[tuple[str, Callable[[], object]]] = [
     ("ch5", bench_ch5),  # ch5.json, ch5.md (needs the detector and the ch. 5 network)
     ("arm", bench_arm),  # arm.json, arm.md (ManiSkill Pandas vs the kinematic pull)
     ("physics_depth", bench_physics_depth),  # physics_depth.json, .md (no network needed)
+    ("box_planners", bench_box_planners),  # box_planners.json, .md (needs the box head)
     ("envs", bench_envs),  # envs.json, envs.md (every registered env: make, reset, 5 steps)
     ("ray", bench_ray),  # ray.json, ray.md (both parallel backends, 1 and 2 workers; needs ray)
     ("train_rate", bench_train_rate),  # train_rate.json, .md (training FLOP/s vs matmul; no data)
