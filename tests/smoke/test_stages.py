@@ -111,6 +111,12 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
         assert ours["IoU at val-chosen threshold"].between(0, 1).all()
         assert ours["val-chosen threshold"].between(0, 0.99).all()
         assert ours["differs from thesis"].str.contains(r"64 px \(thesis").all()
+    # the box head's per-box table, and the test set with its leaderboard of baselines
+    assert "box head (per box)" in (a / "reports/tables/table_6_1_boxes.md").read_text()
+    manifest = json.loads((a / "data/testset/manifest.json").read_text())
+    assert {"ch6_test", "benchmark:ch6_3_10"} <= set(manifest["sources"])
+    board = (a / "reports/leaderboard/leaderboard.md").read_text()
+    assert all(f"| {name} |" in board for name in ("box_head", "pull_truth", "constant"))
     # Table 6.1's row of the CP's pull head, on pull labels (issue 50)
     t61 = pd.read_csv(a / "reports/tables/table_6_1.csv")
     pull_row = t61[t61["network"].astype(str).str.contains("pull head")]

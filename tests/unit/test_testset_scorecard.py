@@ -130,3 +130,25 @@ def test_evaluate_predictor_scores_the_example_and_refuses_a_broken_module(tmp_p
     out = subprocess.run([*cli, str(broken), *args], capture_output=True, text=True)
     assert out.returncode == 2 and out.stderr.strip().count("\n") == 0, out.stderr
     assert "not numbers" in out.stderr
+
+
+def test_parts_of_different_box_counts_are_padded_as_a_shard_is():
+    from clutterbench.data.testset import concat_padded
+
+    def part(n: int, source: str) -> dict:
+        return {
+            "n_objects": np.array([n]),
+            "source": np.array([source]),
+            "sizes_m": np.ones((1, n, 3), np.float32),
+            "contact": np.ones((1, n, n), bool),
+            "pull_drop_m": np.zeros((1, n, n)),
+            "pull_displacement_m": np.zeros((1, n, n)),
+        }
+
+    out = concat_padded([part(5, "a"), part(3, "b")])
+    assert out["pull_drop_m"].shape == (2, 5, 5) and out["source"].tolist() == ["a", "b"]
+    assert (
+        np.isnan(out["pull_drop_m"][1, 3:, :]).all()
+        and not np.isnan(out["pull_drop_m"][1, :3, :3]).any()
+    )
+    assert (out["sizes_m"][1, 3:] == 0).all() and not out["contact"][1, 3:].any()

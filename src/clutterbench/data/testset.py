@@ -54,6 +54,10 @@ ARRAYS = {
     "pull_left_shelf": "(S, N, N) bool: ... box y left the shelf",
     "deletion_displacement_m": "(S, N, N) float64: [s, x, y] how far box y's centre moved when "
     "box x was deleted (lifted out) and the rest settled: the thesis' labels",
+    "source": "(S,) str: where the scene comes from: the ch6_test dataset, or a ch. 6 table "
+    "stream's benchmark start (benchmark:<stream>, data/benchmark)",
+    "target": "(S,) int: a benchmark start's episode target (the box the trial must extract); "
+    "-1 for a dataset scene",
 }
 LABELS = {
     "pull_collapse": "pulling x collapses y: y left the shelf, dropped more than drop_m or "
@@ -71,17 +75,9 @@ def camera_matrix(camera: CameraConfig) -> list[list[float]]:
     return [[f, 0.0, w / 2], [0.0, f, h / 2], [0.0, 0.0, 1.0]]
 
 
-def export_testset(
-    gen_dir: Path,
-    dataset: str,
-    camera: CameraConfig,
-    thresholds: dict[str, float],
-    min_pixels: int,
-    out: Path,
-) -> dict[str, Any]:
-    """Write out/{scenes.npz, manifest.json, load_testset.py} from every scene of `dataset`;
-    thresholds: moved_m, drop_m, tilt_deg. Returns the manifest."""
-    parts: dict[str, list[np.ndarray]] = {k: [] for k in SOURCE}
+def dataset_arrays(gen_dir: Path, dataset: str) -> dict[str, np.ndarray]:
+    """Every scene of a generated dataset (with pull outcomes) in the test set's arrays;
+    `source` the dataset's name, `target` -1 (every box is pulled)."""
     keys = tuple(SOURCE.values())
     missing = [k for k in keys if k not in ShardStore(gen_dir, dataset).array_names()]
     if missing:
@@ -89,19 +85,104 @@ def export_testset(
             f"dataset '{dataset}' lacks {missing[0]} for the test set; generate it with "
             f"generate.datasets.{dataset}.pull_outcomes: true"
         )
+    parts: dict[str, list[np.ndarray]] = {k: [] for k in SOURCE}
     for arrays in iter_shards(gen_dir, dataset, keys):
         for name, src in SOURCE.items():
             parts[name].append(arrays[src])
     if not parts["depth_m"]:
         raise ClutterbenchError(f"dataset '{dataset}': no scenes for the test set")
-    arrays = {k: np.concatenate(v) for k, v in parts.items()}
+    out = {k: np.concatenate(v) for k, v in parts.items()}
+    out["source"] = np.array([dataset] * len(out["n_objects"]))
+    out["target"] = np.full(len(out["n_objects"]), -1, np.int16)
+    return out
+
+
+def labelled_arrays(scenes: list[tuple[Any, str, int, int]]) -> dict[str, np.ndarray]:
+    """(LabelledScene with pull outcomes, source, index, target) of given starts (the
+    benchmark scenes) in the test set's arrays."""
+    n_max = max(sc.spec.n for sc, *_ in scenes)
+    s = len(scenes)
+    out: dict[str, np.ndarray] = {
+        "depth_m": np.stack([sc.depth_m for sc, *_ in scenes]).astype(np.float32),
+        "instance": np.stack([sc.instance for sc, *_ in scenes]).astype(np.uint8),
+        "n_objects": np.array([sc.spec.n for sc, *_ in scenes], np.int16),
+        "family": np.array([sc.spec.family for sc, *_ in scenes]),
+        "scene_index": np.array([i for _, _, i, _ in scenes], np.int64),
+        "sizes_m": np.zeros((s, n_max, 3), np.float32),
+        "poses": np.zeros((s, n_max, 7), np.float64),
+        "contact": np.zeros((s, n_max, n_max), bool),
+        "source": np.array([src for _, src, _, _ in scenes]),
+        "target": np.array([t for *_, t in scenes], np.int16),
+    }
+    for key in ("pull_displacement_m", "pull_drop_m", "pull_tilt_deg", "deletion_displacement_m"):
+        out[key] = np.full((s, n_max, n_max), np.nan)
+    out["pull_left_shelf"] = np.zeros((s, n_max, n_max), bool)
+    for k, (sc, *_) in enumerate(scenes):
+        n, po = sc.spec.n, sc.pull_outcome
+        out["sizes_m"][k, :n] = sc.spec.sizes_m
+        out["poses"][k, :n] = sc.spec.poses
+        for a, b in sc.contacts:
+            out["contact"][k, a, b] = out["contact"][k, b, a] = True
+        out["deletion_displacement_m"][k, :n, :n] = sc.removal_m
+        out["pull_displacement_m"][k, :n, :n] = po.displacement_m
+        out["pull_drop_m"][k, :n, :n] = po.drop_m
+        out["pull_tilt_deg"][k, :n, :n] = po.tilt_deg
+        out["pull_left_shelf"][k, :n, :n] = po.left_shelf
+    return out
+
+
+def concat_padded(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """The parts' scenes in one set of arrays, the per-box axes padded to the largest box
+    count (NaN, False, 0: as past n_objects in a shard)."""
+    n_max = max(p["pull_displacement_m"].shape[1] for p in parts)
+    out = {}
+    for key in parts[0]:
+        padded = []
+        for p in parts:
+            a = p[key]
+            if key in PER_BOX_AXES:
+                pad = [(0, 0)] * a.ndim
+                for ax in PER_BOX_AXES[key]:
+                    pad[ax] = (0, n_max - a.shape[ax])
+                a = np.pad(a, pad, constant_values=np.nan if key in NAN_PADDED else 0)
+            padded.append(a)
+        out[key] = np.concatenate(padded)
+    return out
+
+
+NAN_PADDED = {"pull_displacement_m", "pull_drop_m", "pull_tilt_deg", "deletion_displacement_m"}
+"""Outcome arrays: NaN past a scene's boxes, as in a shard (the others: 0 or False)."""
+PER_BOX_AXES = {
+    "sizes_m": (1,),
+    "poses": (1,),
+    "contact": (1, 2),
+    "pull_displacement_m": (1, 2),
+    "pull_drop_m": (1, 2),
+    "pull_tilt_deg": (1, 2),
+    "pull_left_shelf": (1, 2),
+    "deletion_displacement_m": (1, 2),
+}
+
+
+def export_testset(
+    parts: list[dict[str, np.ndarray]],
+    camera: CameraConfig,
+    thresholds: dict[str, float],
+    min_pixels: int,
+    out: Path,
+) -> dict[str, Any]:
+    """Write out/{scenes.npz, manifest.json, load_testset.py} from the parts' scenes
+    (dataset_arrays, labelled_arrays); thresholds: moved_m, drop_m, tilt_deg. Returns the
+    manifest."""
+    arrays = concat_padded(parts)
     out.mkdir(parents=True, exist_ok=True)
     save_npz(out / "scenes.npz", arrays)  # byte-identical for identical arrays
     digest = hashlib.sha256((out / "scenes.npz").read_bytes()).hexdigest()
+    sources = {str(k): int(v) for k, v in zip(*np.unique(arrays["source"], return_counts=True))}
     manifest = {
         "schema_version": SCHEMA_VERSION,
         "name": "clutterbench pull-consequence test set",
-        "dataset": dataset,
+        "sources": sources,
         "scenes": int(len(arrays["n_objects"])),
         "max_boxes": int(arrays["pull_displacement_m"].shape[1]),
         "sha256": digest,

@@ -553,6 +553,18 @@ def _dataset_start(
     )
 
 
+def label_spec(
+    spec: SceneSpec, physics: PhysicsConfig, camera: CameraConfig, pull: tuple[float, float]
+) -> LabelledScene:
+    """A given settled start (a benchmark scene's) rendered and labelled as a dataset scene
+    with pull outcomes (the trials' (increment_m, lift_m)): what deleting and what pulling
+    each box does."""
+    tally = _Tally()
+    scene = _label_start(spec, [], {}, False, physics, camera, tally)
+    outcomes = pull_outcomes(spec, physics, pull, tally)
+    return dataclasses.replace(scene, pull_outcome=outcomes, steps=tally.steps)
+
+
 def _label_start(
     spec: SceneSpec,
     groups: list,
