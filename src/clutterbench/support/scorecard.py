@@ -102,16 +102,23 @@ def _scores(rows: pd.DataFrame, kind: str) -> dict[str, float]:
 
 
 def _interval(rows: pd.DataFrame, kind: str, rng: np.random.Generator) -> dict[str, list]:
-    """95% bootstrap intervals over scenes of AUROC, precision and recall."""
-    groups = [g for _, g in rows.groupby("scene", sort=True)]
+    """95% bootstrap intervals over scenes of AUROC, precision and recall (scenes drawn with
+    replacement, each with all its pairs)."""
+    order = np.argsort(rows["scene"].to_numpy(), kind="stable")
+    p = rows["p"].to_numpy()[order]
+    y = rows[kind].to_numpy().astype(bool)[order]
+    _, starts = np.unique(rows["scene"].to_numpy()[order], return_index=True)
+    bounds = np.append(starts, len(p))
     draws: dict[str, list[float]] = {"auroc": [], "precision": [], "recall": []}
     for _ in range(BOOTSTRAP):
-        pick = pd.concat([groups[i] for i in rng.integers(0, len(groups), len(groups))])
-        p, y = pick["p"].to_numpy(), pick[kind].to_numpy()
-        s = binary_scores(p, y, THRESHOLD)
-        draws["auroc"].append(auroc(p, y))
-        draws["precision"].append(s["precision"])
-        draws["recall"].append(s["recall"])
+        pick = rng.integers(0, len(starts), len(starts))
+        idx = np.concatenate([np.arange(bounds[i], bounds[i + 1]) for i in pick])
+        pp, yy = p[idx], y[idx]
+        pred = pp > THRESHOLD
+        tp = int((pred & yy).sum())
+        draws["auroc"].append(auroc(pp, yy))
+        draws["precision"].append(tp / int(pred.sum()) if pred.any() else np.nan)
+        draws["recall"].append(tp / int(yy.sum()) if yy.any() else np.nan)
     return {k: _percentiles(np.asarray(v, dtype=np.float64)) for k, v in draws.items()}
 
 
