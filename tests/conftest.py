@@ -69,3 +69,19 @@ def tiny_cp_three_heads(tmp_path_factory) -> Path:
     """An untrained collapse predictor with a deletion, a pull and a pull_collapse head."""
     meta = {"epoch": 0, "heads": ["deletion", "pull", "pull_collapse"]}
     return _untrained(tmp_path_factory, "cp_three_heads", meta, n_classes=3)
+
+
+@pytest.fixture(scope="session")
+def tiny_box_head(tmp_path_factory, tiny_cp_three_heads) -> Path:
+    """An untrained box head over tiny_cp_three_heads' maps (its checkpoint names that CP)."""
+    import torch
+
+    from clutterbench.models.checkpoint import checkpoint_heads, load_checkpoint
+    from clutterbench.support.box_head import BoxHead, BoxHeadMeta, feature_names, save_box_head
+
+    torch.manual_seed(0)
+    heads = tuple(checkpoint_heads(load_checkpoint(tiny_cp_three_heads)))
+    meta = BoxHeadMeta(tiny_cp_three_heads.parent.name, heads, feature_names(heads), 8, 64)
+    path = tmp_path_factory.mktemp("box_head") / "best.pt"
+    save_box_head(BoxHead(len(meta.features), meta.hidden), meta, path)
+    return path

@@ -22,12 +22,13 @@ from clutterbench.trials.ch6.episodes import (
     run_ch6_episode,
     run_extraction,
 )
-from clutterbench.trials.config import PLANNERS as PLANNER_NAMES
 from clutterbench.trials.config import (
+    BOX_PLANNERS,
     PULL_HEAD_PLANNERS,
     SceneStreamConfig,
     TrialsConfig,
 )
+from clutterbench.trials.config import PLANNERS as PLANNER_NAMES
 from clutterbench.trials.core.harness import run_episodes, write_mcap
 from clutterbench.trials.core.protocol import judge_pull
 from clutterbench.trials.core.records import read_records, write_records
@@ -443,14 +444,27 @@ def _jobs(planner: str, cp: Path, episodes: int = 2) -> list[Ch6Job]:
 
 
 @pytest.mark.parametrize("planner", PLANNER_NAMES)
-def test_every_planner_gives_a_judged_record(planner, tiny_cp, tiny_cp_heads, tiny_ch4):
+def test_every_planner_gives_a_judged_record(
+    planner, tiny_cp, tiny_cp_heads, tiny_cp_three_heads, tiny_box_head, tiny_ch4
+):
     cp = tiny_cp_heads if planner in PULL_HEAD_PLANNERS else tiny_cp
-    job = dataclasses.replace(_jobs(planner, cp, 1)[0], ch4_model_path=tiny_ch4)
+    box = {}
+    if planner in BOX_PLANNERS:  # the box head over a three-head CP's maps
+        cp = tiny_cp_three_heads
+        box = {"box_head_path": tiny_box_head, "box_edge_threshold": 0.5, "cp_max": 0.5}
+    job = dataclasses.replace(_jobs(planner, cp, 1)[0], ch4_model_path=tiny_ch4, **box)
     rec = run_ch6_episode(job).record
     assert rec["planner"] == planner and rec["steps"]
     if planner in PULL_HEAD_PLANNERS:  # the record says which head its maps came from
         assert rec["collapse_maps"] == "predicted by the pull head"
         assert rec["support_method"] == f"pull_{rec['rule']}"
+    if planner in BOX_PLANNERS:  # ... and that they were per box, simulated where unsure
+        assert rec["collapse_maps"].startswith("predicted by the pull head per box (box head)")
+        assert rec["collapse_maps"].endswith("simulated where unsure") == planner.endswith(
+            "_physics"
+        )
+        # an untrained head is unsure of every pull: the fused planner simulates them
+        assert (rec["box_pulls_simulated"] > 0) == planner.endswith("_physics")
     assert rec["success"] == (rec["end"] == "target_out")
     for s in rec["steps"]:
         expected = (s["extracted"] and s["collapse_free"]) if s["counted"] else None
