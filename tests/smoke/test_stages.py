@@ -31,6 +31,7 @@ from clutterbench.models.collapse_map import CollapseMapConfig, CollapseMapNet
 from clutterbench.models.vgg import VGGConfig
 from clutterbench.precision import resolve_precision
 from clutterbench.report.config import ReportConfig
+from clutterbench.report.decomposition import PULL_CHAIN
 from clutterbench.sim.config import SimConfig
 from clutterbench.trials.ch3.config import Ch3Config
 from clutterbench.trials.config import TrialsConfig
@@ -185,11 +186,12 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     # under both criteria; planning (+ what the map predicts, where a pull-truth row ran) +
     # perception = the gap
     dec = pd.read_csv(a / "reports/tables/table_6_3_decomposition.csv")
-    assert len(dec) == 2 * 8 and set(dec["key"]) == {"success", "strict_success"}
+    assert len(dec) == 2 * 12 and set(dec["key"]) == {"success", "strict_success"}
     parts = dec["planning"] + dec["meaning"].fillna(0.0) + dec["perception"]
     assert ((parts - dec["gap"]).abs() < 1e-9).all()
-    pull_chain = dec["planner"].isin(["multi_step_pull", "bimanual_pull"])
-    assert pull_chain.sum() == 2 * 4  # the pull head's chain: oracle -> pull truth -> pull CP
+    pull_chain = dec["planner"].isin(PULL_CHAIN)
+    # the pull head's and the box head's chains: oracle -> pull truth -> CP (4 + 4 rows)
+    assert pull_chain.sum() == 2 * 8
     assert dec[~pull_chain]["meaning"].notna().all()  # every CP row has its pull-truth row
     assert dec[pull_chain]["meaning"].isna().all()
     head = {"moved": "pull", "collapse": "pull_collapse"}[trials.ch6.pull_map_meaning]
