@@ -76,8 +76,8 @@ def tiny_box_head(tmp_path_factory, tiny_cp_three_heads) -> Path:
     """An untrained box head over tiny_cp_three_heads' maps (its checkpoint names that CP)."""
     import torch
 
+    from clutterbench.collapse.box_head import BoxHead, BoxHeadMeta, feature_names, save_box_head
     from clutterbench.models.checkpoint import checkpoint_heads, load_checkpoint
-    from clutterbench.support.box_head import BoxHead, BoxHeadMeta, feature_names, save_box_head
 
     torch.manual_seed(0)
     heads = tuple(checkpoint_heads(load_checkpoint(tiny_cp_three_heads)))

@@ -8,12 +8,7 @@ import pandas as pd
 import pytest
 import torch
 
-from clutterbench.errors import ClutterbenchError
-from clutterbench.observation import CameraModel, Observation
-from clutterbench.planning.ch6.extraction import CollapseGraphPlanner
-from clutterbench.planning.ch6.support import SupportParams
-from clutterbench.report.table_6_1_boxes import box_table
-from clutterbench.support.box_head import (
+from clutterbench.collapse.box_head import (
     OUTPUTS,
     BoxHead,
     BoxHeadMeta,
@@ -24,7 +19,12 @@ from clutterbench.support.box_head import (
     pair_features,
     save_box_head,
 )
-from clutterbench.support.box_predict import BoxMaps, FusedBoxMaps
+from clutterbench.collapse.box_predict import BoxMaps, FusedBoxMaps
+from clutterbench.errors import ClutterbenchError
+from clutterbench.observation import CameraModel, Observation
+from clutterbench.planning.ch6.extraction import CollapseGraphPlanner
+from clutterbench.planning.ch6.support import SupportParams
+from clutterbench.report.table_6_1_boxes import box_table
 from clutterbench.support.box_train import (
     Pairs,
     auroc,
@@ -166,7 +166,7 @@ def test_box_edges_are_outcome_times_contact_above_the_threshold():
     contact = np.array([[0, 0.9, 0.1], [0.9, 0, 0], [0.1, 0, 0]], np.float32)
     maps = _FixedMaps(_probs(collapse, contact))
     edges = maps.box_edges(_obs(), [0, 1, 2], _masks())
-    assert [(e.supporter, e.supported) for e in edges] == [(0, 1)]  # 0.81; (0, 2): 0.09
+    assert [(a, b) for a, b, _ in edges] == [(0, 1)]  # 0.81; (0, 2): 0.09
     assert edge_probability(maps.given, "pull_collapse")[0, 1] == pytest.approx(0.81)
 
 

@@ -10,12 +10,12 @@ from pathlib import Path
 
 import numpy as np
 
+from clutterbench.collapse.box_head import OUTPUTS
+from clutterbench.collapse.box_predict import BoxMaps
 from clutterbench.collapse.predict import CollapsePredictor
 from clutterbench.data.testset_load import labels, visible
 from clutterbench.models.checkpoint import checkpoint_heads, load_checkpoint
 from clutterbench.sim.config import CameraConfig
-from clutterbench.support.box_head import OUTPUTS
-from clutterbench.support.box_predict import BoxMaps
 from clutterbench.support.scorecard import PredictFn
 
 

@@ -10,6 +10,14 @@ from typing import Any
 
 import numpy as np
 
+from clutterbench.collapse.box_head import (
+    EDGE_HEADS,
+    OUTPUTS,
+    BoxHeadMeta,
+    edge_probability,
+    feature_names,
+    save_box_head,
+)
 from clutterbench.collapse.predict import CollapsePredictor
 from clutterbench.criteria import label_thresholds
 from clutterbench.errors import ClutterbenchError
@@ -18,14 +26,6 @@ from clutterbench.models.checkpoint import checkpoint_heads, load_checkpoint
 from clutterbench.planning.ch6.support import edge_precision_recall
 from clutterbench.precision import inference_from_params
 from clutterbench.sim.config import SimConfig
-from clutterbench.support.box_head import (
-    EDGE_HEADS,
-    OUTPUTS,
-    BoxHeadMeta,
-    edge_probability,
-    feature_names,
-    save_box_head,
-)
 from clutterbench.support.box_train import (
     THRESHOLDS,
     Pairs,

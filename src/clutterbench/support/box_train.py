@@ -14,9 +14,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from clutterbench.collapse.predict import CollapsePredictor, scene_logits
-from clutterbench.progress import progress_bar
-from clutterbench.support.box_head import (
+from clutterbench.collapse.box_head import (
     OUTPUTS,
     BoxHead,
     feature_names,
@@ -25,6 +23,9 @@ from clutterbench.support.box_head import (
     pair_labels,
     predict_pairs,
 )
+from clutterbench.collapse.box_predict import cp_probs_of
+from clutterbench.collapse.predict import CollapsePredictor
+from clutterbench.progress import progress_bar
 from clutterbench.support.config import BoxHeadConfig
 from clutterbench.support.evaluate import Scene
 
@@ -43,13 +44,6 @@ class Pairs:
 
     def __len__(self) -> int:
         return len(self.x)
-
-
-def cp_probs_of(predictor: CollapsePredictor, depth_m: np.ndarray, masks: np.ndarray) -> np.ndarray:
-    """(K, C, H, W) float32: every head of the collapse predictor with each of the K (H, W)
-    masks the box pulled."""
-    logits = scene_logits(predictor, depth_m.astype(np.float32), masks.astype(np.uint8)[:, None])
-    return torch.sigmoid(logits.float()).numpy()
 
 
 def cp_probs(predictor: CollapsePredictor, scene: Scene) -> np.ndarray:

@@ -13,7 +13,7 @@ from clutterbench.trials.config import SceneStreamConfig
 
 @dataclasses.dataclass(frozen=True)
 class BoxHeadConfig:
-    """The per-box head (support/box_head.py): trained on the support model's maps of the val
+    """The per-box head (collapse/box_head.py): trained on the support model's maps of the val
     dataset's train split, its epoch and thresholds chosen on that dataset's val split, scored
     on test_dataset."""
 

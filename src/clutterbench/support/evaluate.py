@@ -31,6 +31,7 @@ import pandas as pd
 from clutterbench.data.labels import LABEL_ARRAYS, label_matrix
 from clutterbench.data.shards import ShardStore, iter_shards, load_split
 from clutterbench.errors import ClutterbenchError
+from clutterbench.perception.gaps import camera_points  # noqa: F401  (re-exported)
 from clutterbench.planning.ch6.support import (
     RULES,
     SceneEvidence,
@@ -104,19 +105,6 @@ class Scene:
     def true_edges(self) -> set[tuple[int, int]]:
         a, b = np.nonzero(self.moved & self.contact)
         return {(self.ids[i], self.ids[j]) for i, j in zip(a, b) if i != j}
-
-
-def camera_points(depth_m: np.ndarray, camera: CameraConfig) -> np.ndarray:
-    """(H, W, 3) camera-frame points of a depth image rendered with `camera` (the pinhole
-    SAPIEN renders with: f = (H / 2) / tan(fovy / 2), principal point at the centre); NaN
-    where nothing was seen."""
-    h, w = depth_m.shape
-    f = (h / 2) / np.tan(np.deg2rad(camera.fovy_deg) / 2)
-    v, u = np.mgrid[0:h, 0:w].astype(np.float64) + 0.5
-    z = depth_m.astype(np.float64)
-    pts = np.stack([(u - w / 2) * z / f, (v - h / 2) * z / f, z], axis=-1)
-    pts[depth_m <= 0] = np.nan
-    return pts
 
 
 def scene_from_arrays(

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from clutterbench.collapse.box_predict import BoxMaps
 from clutterbench.collapse.predict import CollapsePredictor
 from clutterbench.config import as_dict, load_section
 from clutterbench.criteria import label_thresholds
@@ -23,7 +24,6 @@ from clutterbench.planning.ch6.support import oracle_heatmaps
 from clutterbench.precision import Precision, inference_from_params
 from clutterbench.progress import progress_bar
 from clutterbench.sim.config import SimConfig
-from clutterbench.support.box_predict import BoxMaps
 from clutterbench.support.box_run import box_rows, choose_edge_thresholds
 from clutterbench.support.config import SupportEvalConfig
 from clutterbench.support.evaluate import (

@@ -45,7 +45,7 @@ meaning) and of the trials' own pull; the same two on the collapse predictor's p
 arm and with a holding arm; a uniformly random visible box each step; the search on boxes
 fitted to each observation instead of the true scene, one arm and holding
 (planning/ch6/physics_depth.py); Algorithm 1 on the box head's per-box predictions
-(`*_box`: no pixel rule, support/box_predict.py) and on those predictions with the pulls the
+(`*_box`: no pixel rule, collapse/box_predict.py) and on those predictions with the pulls the
 network is unsure of simulated on the fitted boxes (`*_box_physics`: learned plus physics)."""
 
 

@@ -179,7 +179,7 @@ class CollapseGraphPlanner:
             return []
         box_edges = getattr(self.predict, "box_edges", None)
         if box_edges is not None:  # a per-box predictor gives the graph itself (no pixel rule)
-            return box_edges(obs, ids, masks)
+            return [SupportEdge(*e) for e in box_edges(obs, ids, masks)]
         heatmaps = self.predict(obs.depth_m, masks.astype(np.uint8))
         self._maps = (obs, ids, heatmaps)
         return infer_support(heatmaps, masks, ids, self.params, self._gaps(obs, masks))

@@ -12,9 +12,10 @@ import dataclasses
 import itertools
 from collections.abc import Sequence
 
-import cv2
 import numpy as np
 import pandas as pd
+
+from clutterbench.perception.gaps import surface_gaps  # noqa: F401  (re-exported)
 
 RULES = ("iou", "coverage")
 """iou: |R_O ∩ R_C| / |R_O ∪ R_C| (thesis 6.2.2); coverage: |R_O ∩ R_C| / |R_O| (eq. 6.2)."""
@@ -132,27 +133,6 @@ def grown_bbox_iou(bboxes: np.ndarray, margin_px: int, shape_hw: tuple[int, int]
     iou = np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
     np.fill_diagonal(iou, 1.0)
     return iou
-
-
-def surface_gaps(points: np.ndarray, masks: np.ndarray, band_px: int = 2) -> np.ndarray:
-    """(K, K) float64 distance (m) between the closest visible surface points of each pair of
-    objects near where their masks meet in the image: `points` (H, W, 3) back-projected depth
-    (any metric frame; NaN where nothing was seen), only pixels of one mask within `band_px`
-    of the other compared; inf where the masks do not come that close, diagonal 0."""
-    _check_masks(masks)
-    assert points.shape == (*masks.shape[1:], 3), "points must be (H, W, 3) for the masks"
-    k = masks.shape[0]
-    kernel = np.ones((2 * band_px + 1, 2 * band_px + 1), np.uint8)
-    grown = [cv2.dilate(m.astype(np.uint8), kernel) > 0 for m in masks]
-    gaps = np.full((k, k), np.inf)
-    np.fill_diagonal(gaps, 0.0)
-    for a, b in itertools.combinations(range(k), 2):
-        pa, pb = points[masks[a] & grown[b]], points[masks[b] & grown[a]]
-        pa, pb = pa[~np.isnan(pa).any(axis=1)], pb[~np.isnan(pb).any(axis=1)]
-        if len(pa) and len(pb):
-            d2 = ((pa[:, None, :] - pb[None, :, :]) ** 2).sum(axis=-1)
-            gaps[a, b] = gaps[b, a] = float(np.sqrt(d2.min()))
-    return gaps
 
 
 def _gap_contact(

@@ -229,8 +229,8 @@ def _box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = F
     its support graph (no pixel rule), each box's probability as its collapse score against
     cp_max (the head's own threshold, chosen on validation pairs); the pull planners' other
     choices. `physics`: the pulls the network is unsure of simulated on the fitted boxes
-    (support/box_predict.py FusedBoxMaps)."""
-    from clutterbench.support.box_predict import BoxMaps, FusedBoxMaps
+    (collapse/box_predict.py FusedBoxMaps)."""
+    from clutterbench.collapse.box_predict import BoxMaps, FusedBoxMaps
 
     params: Ch6TrialParams = job.params
     assert job.box_head_path is not None and job.box_edge_threshold is not None, job.planner

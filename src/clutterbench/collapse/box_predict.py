@@ -1,7 +1,8 @@
 """The box head at inference: one depth image and the visible boxes' masks -> per-box pull
 probabilities, support edges and maps, behind the ch. 6 planner's predictor interface
 (planning/ch6/extraction.py: a predictor with `box_row` is asked per box, one with
-`box_edges` gives the support graph itself, with no pixel rule).
+`box_edges` gives the support graph itself, with no pixel rule). Lives in collapse/, below the
+planners and the trials that construct it.
 
 `BoxMaps` answers from the network alone. `FusedBoxMaps` is the learned-plus-physics
 predictor: where the network is unsure of a pull (some box's probability inside a band
@@ -16,12 +17,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import torch
 
-from clutterbench.collapse.predict import CollapsePredictor
-from clutterbench.observation import Observation
-from clutterbench.planning.ch6.support import SupportEdge, surface_gaps
-from clutterbench.sim.config import CameraConfig
-from clutterbench.support.box_head import (
+from clutterbench.collapse.box_head import (
     OUTPUTS,
     BoxHead,
     BoxHeadMeta,
@@ -30,8 +28,14 @@ from clutterbench.support.box_head import (
     pair_features,
     predict_pairs,
 )
-from clutterbench.support.box_train import cp_probs_of
-from clutterbench.support.evaluate import camera_points
+from clutterbench.collapse.predict import CollapsePredictor, scene_logits
+from clutterbench.observation import Observation
+from clutterbench.perception.gaps import camera_points, surface_gaps
+from clutterbench.sim.config import CameraConfig
+
+Edge = tuple[int, int, float]
+"""(supporter box id, supported box id, probability): one support edge of the box head's graph
+(the planner reads it as planning/ch6/support.py's SupportEdge)."""
 
 SimulateFn = Callable[[Observation, list[int], int], np.ndarray | None]
 """(observation, visible ids, pulled box id) -> (K,) bool over the visible ids: the boxes the
@@ -102,7 +106,7 @@ class BoxMaps:
         """(K,) probability that pulling ids[k] marks each visible box (the planner's head)."""
         return self.probs(obs.depth_m, masks)[k, :, OUTPUTS.index(self.head)]
 
-    def box_edges(self, obs: Observation, ids: list[int], masks: np.ndarray) -> list[SupportEdge]:
+    def box_edges(self, obs: Observation, ids: list[int], masks: np.ndarray) -> list[Edge]:
         """The support graph: (x, y) where the edge's probability exceeds edge_threshold."""
         edge = edge_probability(self.probs(obs.depth_m, masks), self.head)
         return _edges(ids, edge, self.edge_threshold)
@@ -145,16 +149,23 @@ class FusedBoxMaps(BoxMaps):
             self._rows[(key, k)] = row
         return self._rows[(key, k)]
 
-    def box_edges(self, obs: Observation, ids: list[int], masks: np.ndarray) -> list[SupportEdge]:
+    def box_edges(self, obs: Observation, ids: list[int], masks: np.ndarray) -> list[Edge]:
         """Edges of the fused outcome and the network's contact."""
         p = np.stack([self.box_row(obs, ids, masks, k) for k in range(len(ids))])
         contact = self.probs(obs.depth_m, masks)[..., OUTPUTS.index("contact")]
         return _edges(ids, p * contact, self.edge_threshold)
 
 
-def _edges(ids: list[int], edge: np.ndarray, threshold: float) -> list[SupportEdge]:
+def cp_probs_of(predictor: CollapsePredictor, depth_m: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    """(K, C, H, W) float32: every head of the collapse predictor with each of the K (H, W)
+    masks the box pulled."""
+    logits = scene_logits(predictor, depth_m.astype(np.float32), masks.astype(np.uint8)[:, None])
+    return torch.sigmoid(logits.float()).numpy()
+
+
+def _edges(ids: list[int], edge: np.ndarray, threshold: float) -> list[Edge]:
     return [
-        SupportEdge(ids[x], ids[y], round(float(edge[x, y]), 4))
+        (ids[x], ids[y], round(float(edge[x, y]), 4))
         for x, y in zip(*np.nonzero(edge > threshold))
         if x != y
     ]
