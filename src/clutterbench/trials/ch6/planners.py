@@ -166,22 +166,35 @@ def _cpg_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec | None = None, pul
         falls = job.collapse_free if pull and params.pull_map_meaning == "collapse" else None
         predictor = TruthCollapseMaps(spec, job.physics, params.moved_threshold_m, action, falls)
     simulate_hold = spec is not None and pull and bimanual and params.truth_hold == "simulate"
+    levers = pull_levers(params) if pull else {}
+    if pull and spec is not None:
+        levers["watch_m"] = None  # truth maps already know the pull in progress
     return CollapseGraphPlanner(
         predictor,
         job.support,
         job.cp_max,
         params.min_pixels,
         bimanual=bimanual,
-        clear_hold_load=pull,  # the pull planners clear the held box's load first
-        learn_from_aborts=pull and params.abort_response == "learn",
-        watch_m=params.pull_watch_m if pull and spec is None else None,
-        when_no_plan=params.when_no_plan if pull else "give_up",
-        idle_hold_share=params.idle_hold_share if pull else None,
-        idle_hold_prob=params.idle_hold_prob if pull else None,
-        score_over=params.score_over if pull else "contact",
-        hold_feared=params.hold_feared if pull else "never",
         predict_held=predictor.held if simulate_hold else None,
+        **levers,
     )
+
+
+def pull_levers(params: Ch6TrialParams) -> dict[str, Any]:
+    """The pull planners' choices beyond Algorithm 1 (trials.ch6; the thesis-faithful
+    planners take CollapseGraphPlanner's defaults): clear the held box's load first, learn
+    from aborts, watch the pull, the no-plan response, the idle hold, whose shares the score
+    takes, and holding a feared box."""
+    return {
+        "clear_hold_load": True,
+        "learn_from_aborts": params.abort_response == "learn",
+        "watch_m": params.pull_watch_m,
+        "when_no_plan": params.when_no_plan,
+        "idle_hold_share": params.idle_hold_share,
+        "idle_hold_prob": params.idle_hold_prob,
+        "score_over": params.score_over,
+        "hold_feared": params.hold_feared,
+    }
 
 
 @register_planner("multi_step")
@@ -242,19 +255,7 @@ def _box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = F
     else:
         maps = BoxMaps.from_paths(*args)
     return CollapseGraphPlanner(
-        maps,
-        job.support,
-        job.cp_max,
-        params.min_pixels,
-        bimanual=bimanual,
-        clear_hold_load=True,
-        learn_from_aborts=params.abort_response == "learn",
-        watch_m=params.pull_watch_m,
-        when_no_plan=params.when_no_plan,
-        idle_hold_share=params.idle_hold_share,
-        idle_hold_prob=params.idle_hold_prob,
-        score_over=params.score_over,
-        hold_feared=params.hold_feared,
+        maps, job.support, job.cp_max, params.min_pixels, bimanual=bimanual, **pull_levers(params)
     )
 
 
