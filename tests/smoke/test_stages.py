@@ -118,7 +118,12 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     assert {"ch6_test", "benchmark:ch6_3_10"} <= set(manifest["sources"])
     board = (a / "reports/leaderboard/leaderboard.md").read_text()
     assert all(f"| {name} |" in board for name in ("box_head", "pull_truth", "constant"))
-    # Table 6.1's row of the CP's pull head, on pull labels (issue 50)
+    # task noise: every Table 6.3 condition replayed, the robust oracles beside them
+    noise = json.loads((a / "reports/noise/summary.json").read_text())["conditions"]
+    assert {"oracle_robust", "oracle_hold_robust", "multi_step_pull"} <= set(noise)
+    assert "perturbed worlds" in (a / "reports/tables/table_6_3.md").read_text()
+    assert "oracle_hold_robust" in (a / "reports/tables/table_6_3_noise.md").read_text()
+    # Table 6.1's row of the CP's pull head, on pull labels
     t61 = pd.read_csv(a / "reports/tables/table_6_1.csv")
     pull_row = t61[t61["network"].astype(str).str.contains("pull head")]
     assert len(pull_row) == 1 and pull_row["IoU"].between(0, 1).all()
@@ -262,7 +267,7 @@ def test_same_params_give_byte_identical_data_and_tables(repro_twice):
     a, b = repro_twice
     trees = ("data", "models", "reports/train", "reports/evaluate", "reports/tables")
     more = ("reports/support", "reports/trials", "reports/trials_ch4", "reports/trials_ch3")
-    more += ("reports/trials_arm",)
+    more += ("reports/trials_arm", "reports/noise")
     for tree in (*trees, *more, "reports/train_slide", "reports/slides"):
         assert digest_tree(a / tree) == digest_tree(b / tree), tree
 

@@ -82,3 +82,24 @@ def test_the_table_is_written_with_its_figure(tmp_path):
     assert "planning part" in text and "30.0 [" in text
     assert (tmp_path / "table_6_3_decomposition.png").stat().st_size > 0
     assert decomposition_table({"oracle": by_condition["oracle"]}, tmp_path / "x", "tiny") is None
+
+
+def test_the_robust_oracles_gap_is_beside_the_decomposition(tmp_path):
+    """The noise stage's robust oracle on the stream: its rate and the CP row's points below
+    it, paired over the episodes both ran; no such columns without it."""
+    by_condition = {
+        "multi_step": _records("multi_step", "s", 3),
+        "multi_step_truth": _records("multi_step_truth", "s", 6),
+        "oracle": _records("oracle", "s", 8),
+    }
+    decomposition_table(by_condition, tmp_path, "tiny")
+    assert "robust oracle" not in (tmp_path / "table_6_3_decomposition.md").read_text()
+    robust = {"oracle_robust": _records("oracle_robust", "s", 7, n=8)}
+    free = next(r for r in decompose(by_condition | robust) if r["key"] == "success")
+    assert free["robust_condition"] == "oracle_robust" and free["robust_episodes"] == 8
+    assert free["robust_pct"] == pytest.approx(7 / 8 * 100)
+    assert free["robust_gap"] == pytest.approx(50.0)  # 7 of 8 against 3 of 8
+    assert free["robust_gap_lo"] <= free["robust_gap"] <= free["robust_gap_hi"]
+    decomposition_table(by_condition | robust, tmp_path, "tiny")
+    text = (tmp_path / "table_6_3_decomposition.md").read_text()
+    assert "points below the robust oracle" in text and "50.0 [" in text

@@ -57,16 +57,18 @@ CHAPTER_STAGES = {
     "planning/ch3": {"trials_ch3"},
     "trials/ch4": {"trials_ch4", "trials_arm"},
     # the thesis' single-step row of Table 6.3 is ch. 4's planner
-    "planning/ch4": {"trials_ch4", "trials_arm", "trials"},
+    "planning/ch4": {"trials_ch4", "trials_arm", "trials", "noise"},
     "trials/ch5": {"trials_ch5"},
     "planning/ch5": {"trials_ch5"},
-    "trials/ch6": {"trials", "trials_arm"},
-    "planning/ch6": {"trials", "trials_arm"},
+    "trials/ch6": {"trials", "trials_arm", "noise"},
+    "planning/ch6": {"trials", "trials_arm", "noise"},
     "trials/arm": {"trials_arm"},
+    "trials/noise": {"noise"},
 }
 """A chapter's code -> the stages an edit of it reruns (the arm-level stage executes ch. 4's and
-ch. 6's steps). Table 6.2's support stage also reads two ch. 6 files, named below, and the box
-head (stages box_head and testset, which scores it) the support rule's geometry."""
+ch. 6's steps; the noise stage replays ch. 6's episodes and runs its search oracles). Table
+6.2's support stage also reads two ch. 6 files, named below, and the box head (stages box_head
+and testset, which scores it) the support rule's geometry."""
 SUPPORT_READS = {"trials/ch6/physics_model.py", "planning/ch6/support.py"}
 BOX_HEAD_READS = {"planning/ch6/support.py"}
 

@@ -37,6 +37,7 @@ from clutterbench.report.table_6_3 import (
     rule_note,
     trial_params_note,
 )
+from clutterbench.report.table_6_3_noise import noise_table
 from clutterbench.report.tables import load_thesis_figures
 from clutterbench.report.tables_5_1_6_1 import RunSources, collapse_table
 from clutterbench.trials.config import TrialsConfig
@@ -45,6 +46,7 @@ from clutterbench.trials.core.stats import aggregate_games
 
 TABLES = Path("reports/tables")
 SUPPORT = Path("reports/support")
+NOISE = Path("reports/noise")
 
 
 def json_key(path: Path, key: str) -> Any:
@@ -104,6 +106,23 @@ class Report:
         return {
             cond: read_records(Path(f"reports/trials/{cond}/records.jsonl"))
             for cond in self.cfg.table_6_3.values()
+        }
+
+    @functools.cached_property
+    def noise(self) -> dict[str, Any]:
+        """The noise stage's summary (reports/noise/summary.json)."""
+        return {
+            "noise": json_key(NOISE / "summary.json", "noise"),
+            "conditions": json_key(NOISE / "summary.json", "conditions"),
+        }
+
+    @functools.cached_property
+    def robust_records(self) -> dict[str, list[dict]]:
+        """The robust search oracles' records (noise stage)."""
+        return {
+            cond: read_records(NOISE / "robust" / cond / "records.jsonl")
+            for cond, row in self.noise["conditions"].items()
+            if row.get("robust_of")
         }
 
     @functools.cached_property
@@ -191,9 +210,13 @@ def table_6_3_extraction(r: Report) -> None:
     records, scale = r.ch6_records, r.base.scale
     trial_note = trial_params_note(r.trials.ch6)
     rules = rule_note(records, r.chosen, r.cfg.table_6_2_methods)
-    extraction_table(records, r.cfg.table_6_3, r.figures, TABLES, scale, [trial_note, *rules])
+    noise = r.noise["conditions"]
+    extraction_table(
+        records, r.cfg.table_6_3, r.figures, TABLES, scale, [trial_note, *rules], noise
+    )
     extraction_families_table(records, r.cfg.table_6_3, TABLES, scale, [trial_note])
-    decomposition_table(records, TABLES, scale, r.trials.ch6.pull_map_meaning)
+    decomposition_table(records | r.robust_records, TABLES, scale, r.trials.ch6.pull_map_meaning)
+    noise_table(r.noise, r.cfg.table_6_3, TABLES, scale)
     paired_table(records, TABLES, scale)
     estimation_table(records, TABLES, scale)
 
@@ -257,7 +280,8 @@ BUILDERS: list[tuple[str, Callable[[Report], None]]] = [
     ("Table 4.2", table_4_2_pixels),
     ("Table 6.2", table_6_2_support),
     (
-        "Table 6.3 (with its families, decomposition, paired and box estimation tables)",
+        "Table 6.3 (with its families, decomposition, task noise, paired and box estimation "
+        "tables)",
         table_6_3_extraction,
     ),
     ("Table 4.1", table_4_1_pull_with_support),

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import pandas as pd
 
 from clutterbench.errors import ClutterbenchError
+from clutterbench.report.table_6_3_noise import noise_text
 from clutterbench.report.tables import (
     Column,
     comparison_frame,
@@ -69,6 +70,7 @@ COLUMNS = [
     Column("objects", "objects", "{}"),
     Column("step_success", "collapse-free success per step", "{}"),
     Column("success", "collapse-free success per episode", "{}"),
+    Column("task_noise", "collapse-free in perturbed worlds: mean ± sd (successes kept)", "{}"),
     Column("step_strict_success", "strict success per step", "{}"),
     Column("strict_success", "strict success per episode", "{}"),
     Column("below_oracle", "points below its oracle (collapse-free)", "{}"),
@@ -294,11 +296,13 @@ def extraction_table(
     out_dir: Path,
     scale: str,
     notes_extra: Sequence[str] = (),
+    noise: Mapping[str, Any] | None = None,
 ) -> pd.DataFrame:
     """Table 6.3 as reports/tables/table_6_3.md (ours beside the thesis) and .csv (the raw
     aggregate, with the thesis counts beside it). Returns the raw frame.
 
-    rows: '<method>/<objects>' -> trials condition."""
+    rows: '<method>/<objects>' -> trials condition. noise: the noise stage's summary per
+    condition (its task-noise column; None: no such column)."""
     shown, raw, used = [], [], {}
     by_row = {c: _condition_records(records_by_condition, r, c) for r, c in rows.items()}
     gaps = oracle_gaps(by_row)
@@ -319,6 +323,9 @@ def extraction_table(
             "objects": _objects_text(records, row),
             "step_success": step_rate_text(a),
             "success": rate_text(a, "success"),
+            "task_noise": noise_text(noise[condition]["success"])
+            if noise and condition in noise
+            else None,
             "step_strict_success": step_rate_text(a, "strict_success"),
             "strict_success": rate_text(a, "strict_success"),
             "below_oracle": _gap_text(gap, condition),
@@ -334,20 +341,7 @@ def extraction_table(
         }
         thesis = thesis_figures_for(figures, method, objects)
         shown.append((f"{METHODS.get(method, method)} [{condition}]", ours, thesis))
-        extra = {}
-        if gaps.get(condition) is not None:
-            g = gaps[condition]
-            extra = {
-                "oracle": g["oracle"],
-                "points_below_oracle": g["points"],
-                "beat_oracle": len(g["beat"]),
-            }
-        if strict_gaps.get(condition) is not None:
-            g = strict_gaps[condition]
-            extra |= {
-                "points_below_oracle_strict": g["points"],
-                "beat_oracle_strict": len(g["beat"]),
-            }
+        extra = _raw_extra(gaps.get(condition), strict_gaps.get(condition), noise, condition)
         raw.append(
             {"row": row, "method": method, **a, **extra, **_thesis_counts(figures, method, objects)}
         )
@@ -365,6 +359,31 @@ def extraction_table(
     )
     write_table(frame, columns, out_dir, TABLE, title, notes)
     return write_raw_csv(raw, out_dir / f"{TABLE}.csv")
+
+
+def _raw_extra(
+    gap: Mapping[str, Any] | None,
+    strict_gap: Mapping[str, Any] | None,
+    noise: Mapping[str, Any] | None,
+    condition: str,
+) -> dict[str, Any]:
+    """A row's raw CSV columns beyond its aggregate: its oracle gaps and its task noise."""
+    extra: dict[str, Any] = {}
+    if gap is not None:
+        extra = {
+            "oracle": gap["oracle"],
+            "points_below_oracle": gap["points"],
+            "beat_oracle": len(gap["beat"]),
+        }
+    if strict_gap is not None:
+        extra |= {
+            "points_below_oracle_strict": strict_gap["points"],
+            "beat_oracle_strict": len(strict_gap["beat"]),
+        }
+    if noise and condition in noise:
+        n = noise[condition]["success"]
+        extra |= {f"noise_{k}": n[k] for k in ("draws", "mean_rate", "sd_rate", "survive")}
+    return extra
 
 
 def extraction_families_table(
