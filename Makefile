@@ -59,7 +59,7 @@ bench: setup
 	python -m clutterbench.bench
 
 # After a whole `make repro`: the wall time each stage recorded (reports/timing/stages/), as the
-# measured record reports/run_times/<scale>_<cpu>.{json,md} that docs/run-times.md quotes
+# measured record reports/run_times/<scale>_<cpu>.{json,md}, and the README's run-time table from them
 .PHONY: run-times
 run-times: setup
 	python -m clutterbench.bench.run_times

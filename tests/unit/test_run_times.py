@@ -50,3 +50,57 @@ def test_a_record_mixes_no_machines(tmp_path):
 def test_no_timings_is_one_line(tmp_path):
     with pytest.raises(ClutterbenchError, match="no stage timings"):
         collect(tmp_path)
+
+
+def _record(total, cpu="AMD EPYC", family=25, bf16=True):
+    return {
+        "cpu_model": cpu,
+        "cpu_family": family,
+        "cpu_model_number": 17,
+        "cpu_flags": {"avx2": True, "avx512f": True, "avx512_bf16": bf16, "amx_bf16": False},
+        "cores": 2,
+        "logical_cpus": 2,
+        "scale": "default",
+        "stages": {},
+        "groups": {"train": total / 2, "trials": total / 2},
+        "total_minutes": total,
+        "date": "2026-11-29",
+    }
+
+
+def test_the_readme_table_has_a_row_per_recorded_default_run_within_budget_or_not():
+    from clutterbench.bench.run_times import readme_block, record_name
+
+    block = readme_block(
+        [_record(180.0), _record(110.0, family=26), _record(5.0) | {"scale": "tiny"}]
+    )
+    rows = [line for line in block.splitlines() if line.startswith("| AMD")]
+    assert len(rows) == 2 and "family 26" in rows[0] and "family 25" in rows[1]
+    assert "| **110.0** | yes |" in rows[0] and "| **180.0** | no |" in rows[1]
+    assert "AVX-512 BF16, no AMX" in rows[0] and "| 55.0 | 55.0 |" in rows[0]
+    assert record_name(_record(1.0)) == "default_amd_epyc_f25m17"
+
+
+def test_the_readmes_run_time_table_is_the_committed_records():
+    """README.md quotes only measured records: its block is what `make run-times` writes
+    from reports/run_times/ (a hand edit of the block, or a record without its rewrite, fails)."""
+    from pathlib import Path
+
+    from clutterbench.bench.run_times import (
+        RUN_TIMES_BEGIN,
+        RUN_TIMES_END,
+        committed_records,
+        readme_block,
+    )
+
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "README.md").read_text()
+    block = text[text.index(RUN_TIMES_BEGIN) : text.index(RUN_TIMES_END) + len(RUN_TIMES_END)]
+    assert block == readme_block(committed_records(root / "reports/run_times"))
+
+
+def test_a_readme_without_the_block_is_one_line():
+    from clutterbench.bench.run_times import with_block
+
+    with pytest.raises(ClutterbenchError, match="no run-time block"):
+        with_block("# README\n", "x")
