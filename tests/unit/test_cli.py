@@ -529,3 +529,30 @@ def test_replenish_refuses_a_bad_box_in_one_line():
     assert result.output.strip().splitlines() == [
         "error: --box 60,x,80: expected W,D,H in mm, e.g. 100,120,30"
     ]
+
+
+def test_evaluate_agent_adds_a_leaderboard_row_paired_with_the_trials(tmp_path, monkeypatch):
+    """--leaderboard: the agent's rates and, against a trials condition on the same stream and
+    episodes, the episodes won only by each (here: a planner that succeeded where the agent
+    did not), in agents/NAME.json and the leaderboard's planner section."""
+    from clutterbench.trials.core.records import write_records
+
+    example = Path(__file__).resolve().parents[2] / "docs" / "examples" / "random_agent.py"
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "dvc.yaml").write_text("stages: {}\n")
+    args = ["evaluate-agent", f"{example}:make_agent", "--episodes", "1", "--scale", "tiny"]
+    first = runner.invoke(app, [*args, "--out", str(tmp_path / "a")])
+    assert first.exit_code == 0, first.output
+    rec = json.loads((tmp_path / "a/make_agent/records.jsonl").read_text().splitlines()[0])
+    other = {"episode": 0, "stream": rec["stream"], "condition": "oracle", "planner": "oracle"}
+    other |= {"success": not rec["success"], "strict_success": not rec["strict_success"]}
+    write_records(tmp_path / "reports/trials/oracle/records.jsonl", [other])
+    result = runner.invoke(app, [*args, "--leaderboard", "--out", str(tmp_path / "b")])
+    assert result.exit_code == 0, result.output
+    card = json.loads((tmp_path / "reports/leaderboard/agents/make_agent.json").read_text())
+    pair = card["success_paired"]["oracle"]
+    assert card["success"]["n"] == 1 and pair["episodes"] == 1
+    assert (pair["only_agent"], pair["only_baseline"]) == ((1, 0) if rec["success"] else (0, 1))
+    board = (tmp_path / "reports/leaderboard/leaderboard.md").read_text()
+    assert "## Planners on the benchmark streams" in board and "| make_agent |" in board
+    assert "make_agent against each planner" in board and "| oracle |" in board

@@ -39,6 +39,14 @@ def evaluate_agent(
     scale: Annotated[
         str | None, typer.Option("--scale", help="Scale profile (default: base.scale).")
     ] = None,
+    board: Annotated[
+        bool,
+        typer.Option(
+            "--leaderboard",
+            help="Also add the agent's row, paired with the trials' planners on the same "
+            "episodes, to reports/leaderboard/ (agents/NAME.json, leaderboard.md).",
+        ),
+    ] = False,
     show_traceback: Annotated[
         bool,
         typer.Option("--traceback", help="When the agent raises: its whole trace, then the line."),
@@ -55,7 +63,16 @@ def evaluate_agent(
         if out_dir.exists() and not out_dir.is_dir():
             raise ClutterbenchError(f"--out {out_dir}: is a file, not a directory")
         try:
-            summary = run(agent, stream, episodes, out_dir, name=name, first=first, scale=scale)
+            summary = run(
+                agent,
+                stream,
+                episodes,
+                out_dir,
+                name=name,
+                first=first,
+                scale=scale,
+                board=default_path(None, "reports/leaderboard") if board else None,
+            )
         except AgentError as exc:
             if show_traceback and exc.__cause__ is not None:
                 traceback.print_exception(exc.__cause__, file=sys.stderr)
@@ -66,4 +83,5 @@ def evaluate_agent(
             f"success (collapse-free) {summary['success_k']}/{summary['success_n']}, "
             f"strict {summary['strict_success_k']}/{summary['strict_success_n']}; "
             f"wrote {out_dir / cond}/records.jsonl, summary.json"
+            + (f", {summary['leaderboard_row']}" if "leaderboard_row" in summary else "")
         )

@@ -111,9 +111,12 @@ def evaluate_agent(
     first: int = 0,
     scale: str | None = None,
     record_images: bool = False,
+    board: Path | None = None,
 ) -> dict[str, Any]:
     """Agent `ref` (MODULE:FACTORY) on episodes first..first+episodes-1 of `stream` ->
-    out_dir/<name>/records.jsonl, summary.json and episodes.mcap; returns the summary."""
+    out_dir/<name>/records.jsonl, summary.json and episodes.mcap; returns the summary. With
+    `board`: also its leaderboard row, paired with the trials' conditions on the same episodes
+    (envs/board.py), written to board/agents/<name>.json and board/leaderboard.md."""
     import gymnasium as gym
 
     import clutterbench.envs  # noqa: F401  (registers the envs)
@@ -139,4 +142,15 @@ def evaluate_agent(
         "scale": source.scale,
     }
     env.close()
-    return write_condition(name, results, about, out_dir, out_dir)
+    summary = write_condition(name, results, about, out_dir, out_dir)
+    if board is not None:
+        from clutterbench.envs.board import agent_card, write_agent_row
+
+        card = agent_card(
+            [r.record for r in results],
+            {"kind": "agent", "name": name, "agent": ref, "first_episode": first}
+            | {"scale": source.scale},
+            board.parent / "trials",
+        )
+        summary["leaderboard_row"] = str(write_agent_row(card, board))
+    return summary

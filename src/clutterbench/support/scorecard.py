@@ -172,32 +172,107 @@ def write_row(card: dict[str, Any], rows_dir: Path) -> Path:
     return path
 
 
-def leaderboard(rows_dir: Path, out: Path, testset_sha256: str) -> pd.DataFrame:
-    """out/leaderboard.{md,csv}: every row under rows_dir's folders (baselines/, the stage's;
-    submitted/, evaluate-predictor's) scored on this test set (its hash), ranked by AUROC of
-    what the pull collapses."""
+def leaderboard(rows_dir: Path, out: Path, testset_sha256: str | None) -> pd.DataFrame:
+    """out/leaderboard.{md,csv}: every predictor row under rows_dir's folders (baselines/, the
+    stage's; submitted/, evaluate-predictor's) scored on this test set (its hash; None: no
+    test set, no predictor rows), ranked by AUROC of what the pull collapses; then the
+    planners' rows (agents/, evaluate-agent's)."""
     cards = [read_json(p) for p in sorted(rows_dir.glob("*/*.json"))]
-    cards = [c for c in cards if c.get("testset_sha256") == testset_sha256]
-    if not cards:
+    agents = [c for c in cards if c.get("kind") == "agent"]
+    cards = [c for c in cards if testset_sha256 and c.get("testset_sha256") == testset_sha256]
+    if not cards and not agents:
         raise ClutterbenchError(f"{rows_dir}: no scorecard of this test set")
+    lines = ["# Pull-consequence leaderboard", ""]
     table = pd.DataFrame([_board_row(c) for c in cards])
-    table = table.sort_values(["pull_collapse AUROC", "predictor"], ascending=[False, True])
+    if cards:
+        table = table.sort_values(["pull_collapse AUROC", "predictor"], ascending=[False, True])
+        lines += [
+            f"Test set sha256 {testset_sha256[:12]}: {cards[0]['scenes']} scenes, "
+            f"{cards[0]['pairs']} (pulled, other) pairs. Ranked by AUROC of what the pull "
+            f"collapses; precision and recall at {THRESHOLD}; [95% bootstrap over scenes]. "
+            "`clutterbench evaluate-predictor` adds a row.",
+            "",
+            *_markdown(table),
+        ]
+    lines += planner_section(agents)
+    write_text(out / "leaderboard.md", "\n".join(lines) + "\n")
+    write_text(out / "leaderboard.csv", table.to_csv(index=False))
+    return table
+
+
+def _markdown(table: pd.DataFrame) -> list[str]:
     lines = [
-        "# Pull-consequence leaderboard",
-        "",
-        f"Test set sha256 {testset_sha256[:12]}: {cards[0]['scenes']} scenes, "
-        f"{cards[0]['pairs']} (pulled, other) pairs. Ranked by AUROC of what the pull collapses; "
-        f"precision and recall at {THRESHOLD}; [95% bootstrap over scenes]. "
-        "`clutterbench evaluate-predictor` adds a row.",
-        "",
         "| " + " | ".join(table.columns) + " |",
         "|" + "|".join("---" for _ in table.columns) + "|",
     ]
     for _, r in table.iterrows():
         lines.append("| " + " | ".join(_cell(v) for v in r) + " |")
-    write_text(out / "leaderboard.md", "\n".join(lines) + "\n")
-    write_text(out / "leaderboard.csv", table.to_csv(index=False))
-    return table
+    return lines
+
+
+def _rate_cell(r: dict[str, Any]) -> str:
+    lo, hi = r["interval_95"]
+    return f"{r['k']}/{r['n']} = {100 * r['rate']:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}]"
+
+
+def planner_section(agents: Sequence[dict[str, Any]]) -> list[str]:
+    """The planners' part of the leaderboard: each agent's rates on its stream, then, per
+    agent, its pairing with every trials condition on the same episodes."""
+    lines = [
+        "",
+        "## Planners on the benchmark streams",
+        "",
+    ]
+    if not agents:
+        return [
+            *lines,
+            "No planner rows yet: `clutterbench evaluate-agent MODULE:FACTORY "
+            "--leaderboard` adds one.",
+        ]
+    lines += [
+        "Episodes of a trials stream (the same scenes and targets as Table 6.3), judged from "
+        "physics; success per episode with [Wilson 95%]. `clutterbench evaluate-agent "
+        "--leaderboard` adds a row.",
+        "",
+    ]
+    rows = [
+        {
+            "agent": a["name"],
+            "stream": a["stream"],
+            "episodes": f"{a['first_episode']}..{a['first_episode'] + a['episodes'] - 1}",
+            "collapse-free success": _rate_cell(a["success"]),
+            "strict success": _rate_cell(a["strict_success"]),
+            "about": a.get("agent", ""),
+        }
+        for a in sorted(agents, key=lambda a: (a["stream"], -a["success"]["rate"], a["name"]))
+    ]
+    lines += _markdown(pd.DataFrame(rows))
+    for a in sorted(agents, key=lambda a: a["name"]):
+        paired = a["success_paired"]
+        if not paired:
+            continue
+        lines += [
+            "",
+            f"### {a['name']} against each planner on the same episodes (collapse-free)",
+            "",
+        ]
+        table = pd.DataFrame(
+            [
+                {
+                    "planner [condition]": cond,
+                    "episodes": p["episodes"],
+                    "agent": p["agent_k"],
+                    "planner": p["baseline_k"],
+                    "won only by the agent": p["only_agent"],
+                    "won only by the planner": p["only_baseline"],
+                    "agent - planner (points)": f"{p['points']:+.1f}",
+                    "McNemar p": f"{p['p']:.2g}",
+                }
+                for cond, p in paired.items()
+            ]
+        )
+        lines += _markdown(table)
+    return lines
 
 
 def _board_row(card: dict[str, Any]) -> dict[str, Any]:
