@@ -39,8 +39,9 @@ def testset(params: dict, base: BaseConfig) -> None:
     export_testset(parts, sim.camera, thresholds, cfg.min_pixels, OUT)
     ts = load(OUT)
     model = Path(f"models/{cfg.model}/best.pt")
+    physics = (trials.ch6, cfg.test.catalogue, cfg.min_pixels)
     for name, (make, about) in baselines(
-        ts, model, Path("models/box_head/best.pt"), sim.camera
+        ts, model, Path("models/box_head/best.pt"), sim, physics
     ).items():
         card = score(ts, make(), name, about)
         write_row(card, BOARD / "baselines")

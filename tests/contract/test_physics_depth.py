@@ -196,3 +196,28 @@ def test_a_perception_failure_in_table_6_2_is_a_row_not_an_end(stack3, physics, 
     )(5, "stacked", 3, [0, 1, 2], obs.depth_m, masks, {(0, 1), (1, 2)}, None)
     row = support.row(scene)
     assert row["perception_failed"] == 1 and row["n_pred"] == 0 and row["n_true"] == 2
+
+
+def test_the_physics_from_depth_baseline_says_a_stacks_bottom_pull_collapses_the_rest():
+    """The leaderboard's physics-from-depth row on a rendered three-box stack: the boxes are
+    fitted from the depth image alone, and pulling the bottom one collapses those above it,
+    pulling the top one nothing."""
+    from clutterbench.sim.config import SimConfig
+    from clutterbench.sim.physics import BoxWorld
+    from clutterbench.sim.render import render_depth_instance
+    from clutterbench.support.baselines import physics_from_depth
+    from clutterbench.trials.config import TrialsConfig
+
+    spec = SceneSpec.load(Path(__file__).resolve().parents[1] / "data" / "stack3.json")
+    sim = SimConfig()
+    depth, instance = render_depth_instance(
+        BoxWorld.from_spec(spec, sim.physics, render=True), sim.camera
+    )
+    masks = np.stack([instance == k + 1 for k in range(spec.n)])
+    thresholds = {"drop_m": 0.01, "tilt_deg": 15.0}
+    predict = physics_from_depth(sim, TrialsConfig().ch6, "various", 20, thresholds)
+    bottom = int(np.argmin(np.asarray(spec.poses)[:, 2]))
+    top = int(np.argmax(np.asarray(spec.poses)[:, 2]))
+    k = np.eye(3, dtype=bool)
+    assert predict(depth.astype(np.float32), masks, None, bottom)[~k[bottom]].tolist() == [1.0, 1.0]
+    assert predict(depth.astype(np.float32), masks, None, top).tolist() == [0.0, 0.0, 0.0]

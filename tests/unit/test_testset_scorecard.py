@@ -152,3 +152,20 @@ def test_parts_of_different_box_counts_are_padded_as_a_shard_is():
         and not np.isnan(out["pull_drop_m"][1, :3, :3]).any()
     )
     assert (out["sizes_m"][1, 3:] == 0).all() and not out["contact"][1, 3:].any()
+
+
+def test_a_per_scene_baseline_answers_a_scenes_boxes_from_one_call():
+    from clutterbench.support.baselines import per_scene
+
+    calls = []
+
+    def answer_all(depth, masks, _cam):
+        calls.append(float(depth[0, 0]))
+        return np.arange(len(masks))[:, None] * np.ones(len(masks)) / 10
+
+    predict = per_scene(answer_all)
+    masks = np.zeros((3, 4, 4), bool)
+    for scene in (1.0, 2.0):
+        depth = np.full((4, 4), scene, np.float32)
+        assert [predict(depth, masks, None, i)[0] for i in range(3)] == [0.0, 0.1, 0.2]
+    assert calls == [1.0, 2.0]
