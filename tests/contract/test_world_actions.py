@@ -181,3 +181,50 @@ def test_a_spec_not_at_rest_is_named_with_its_creeping_box(physics):
     box, dist = start_creep(spec, physics)
     assert box == 1 and dist > 0.04
     assert creep_warning(spec, physics, "s.json").startswith("warning: s.json: box 1 moves 5")
+
+
+def test_a_held_box_is_set_down_onto_what_is_below_it(stack3, physics):
+    """lower_onto_support: the top box, held while the middle one is taken out, comes down
+    until it is 1 mm above the bottom box; held in the air over nothing, onto the floor."""
+    world = BoxWorld.from_spec(stack3, physics)
+    world.hold([2])
+    world.park(1)
+    world.lower_onto_support(2)
+    lo, _ = world.aabbs()
+    assert lo[2, 2] == pytest.approx(0.02 + 0.001, abs=2e-4)
+    world = BoxWorld.from_spec(stack3, physics)
+    world.hold([2])
+    world.park(0)
+    world.park(1)
+    world.lower_onto_support(2)
+    assert world.aabbs()[0][2, 2] == pytest.approx(0.001, abs=2e-4)
+
+
+def test_an_aborted_pull_can_put_its_box_back(stack3, physics):
+    """return_pull: two increments out, then back along the pull and down by the lift: the
+    box is where it started."""
+    world = BoxWorld.from_spec(stack3, physics)
+    start = world.poses()[2].copy()
+    world.pull_step(2, 0.02, lift_m=0.003)
+    world.pull_step(2, 0.02)
+    assert world.poses()[2][0] < start[0] - 0.03
+    world.return_pull(2, 0.003)
+    assert np.allclose(world.poses()[2][:3], start[:3], atol=1e-5)
+
+
+def test_the_executors_release_options(stack3, physics):
+    """execute_pull: an aborted pull of the middle box, the top one held, leaves the middle
+    box where the abort left it, or (return_aborted) back where it was; the held top box is
+    let go where it is, or (lower_held) set down first: both end judged on the shelf."""
+    from clutterbench.sim.pull import SceneState, execute_pull, world_at
+
+    def pull(**options):
+        world = world_at(stack3, SceneState.start(stack3), physics)
+        return execute_pull(world, 1, 2, 0.02, 0.003, lambda done: done < 1, **options)
+
+    left, back = pull(), pull(return_aborted=True)
+    assert left.aborted and left.increments == 1 and back.increments == 1
+    assert left.displacement_m[1] > 0.015 and back.displacement_m[1] < 0.003
+    world = world_at(stack3, SceneState.start(stack3), physics)
+    held = execute_pull(world, 1, 2, 0.02, 0.003, lower_held=True)
+    assert held.extracted and held.on_shelf[[0, 2]].all()

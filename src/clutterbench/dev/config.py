@@ -101,6 +101,8 @@ CH6_VARIED = (
     "pull_watch_m",
     "hold_feared",
     "truth_hold",
+    "abort_release",
+    "held_release",
 )
 """The trials.ch6 fields a ch. 6 pull-planner variant may set."""
 
@@ -243,6 +245,16 @@ class DevConfig:
     """The box-head planners against physics from depth and the pixel pull planners, and
     the learned-plus-physics band (trials.ch6.box_physics_band; python -m
     clutterbench.dev.ch6_pull ch6_box)."""
+    ch6_release: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(
+            variants={"drop": {}, "lower": {"held_release": "lower"}},
+            planners=("oracle_hold", "bimanual_pull"),
+            oracle=False,
+        )
+    )
+    """How a pulled box aborted mid-pull and a held box are let go (trials.ch6.abort_release,
+    held_release), every planner and the search oracles under each variant alike (python -m
+    clutterbench.dev.ch6_pull ch6_release)."""
 
     def __post_init__(self) -> None:
         for name in self.streams:
@@ -262,6 +274,7 @@ class DevConfig:
             ("ch6_hold", self.ch6_hold.streams),
             ("ch6_vs_pfd", self.ch6_vs_pfd.streams),
             ("ch6_box", self.ch6_box.streams),
+            ("ch6_release", self.ch6_release.streams),
         ):
             for name in names:
                 if name not in self.streams:

@@ -334,6 +334,47 @@ class BoxWorld:
         # at_rest here: nothing but the gripped box moved during the last step.
         return self._result(before, self._still(prev, self.poses(), 1))
 
+    def return_pull(self, target: int, lift_m: float = 0.0) -> None:
+        """Move a box gripped mid-pull (pull_step) back along its pull to where the pull
+        started, then down by the pull's `lift_m`, at the pull's speed: a gripper putting back
+        what it took instead of letting go of it half out. The box stays gripped; the others
+        react; nothing is settled."""
+        self._check(target)
+        start, done = self._pulls[target]
+        dx = self.cfg.pull_speed_m_s * self.cfg.timestep_s
+        for k in range(done - 1, -1, -1):
+            p = np.array(start.p) - np.array([k * dx, 0.0, 0.0])
+            self.bodies[target].set_kinematic_target(sapien.Pose(p, start.q))
+            self.step()
+        self._lower_by(target, lift_m)
+
+    def lower_onto_support(self, target: int, clearance_m: float = 0.001) -> None:
+        """Lower a held box straight down at the pull's speed until its bottom is `clearance_m`
+        above the highest top below it (a box in the scene whose footprint overlaps its own,
+        else the shelf floor): a second arm setting down what it held instead of opening in
+        mid-air. It stays held; nothing is settled."""
+        self._check(target)
+        lo, hi = self.aabbs()
+        tops = [0.0]
+        for k in range(self.n):
+            if k == target or k in self.removed:
+                continue
+            apart = np.any(hi[k, :2] <= lo[target, :2]) or np.any(lo[k, :2] >= hi[target, :2])
+            if not apart and hi[k, 2] <= lo[target, 2] + 1e-6:
+                tops.append(float(hi[k, 2]))
+        self._lower_by(target, float(lo[target, 2]) - max(tops) - clearance_m)
+
+    def _lower_by(self, target: int, distance_m: float) -> None:
+        if distance_m <= 0.0:
+            return
+        dx = self.cfg.pull_speed_m_s * self.cfg.timestep_s
+        start = self.entities[target].pose
+        n = int(np.ceil(distance_m / dx - 1e-9))
+        for k in range(1, n + 1):
+            p = np.array(start.p) - np.array([0.0, 0.0, distance_m * k / n])
+            self.bodies[target].set_kinematic_target(sapien.Pose(p, start.q))
+            self.step()
+
     def carry(self, target: int, pose: np.ndarray, speed_m_s: float | None = None) -> ActionResult:
         """Carry `target` in a straight line to `pose` [x, y, z, qw, qx, qy, qz] (orientation
         interpolated), release it there and let the scene settle (ch. 5 moves/placements)."""

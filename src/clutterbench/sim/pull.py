@@ -71,12 +71,17 @@ def execute_pull(
     increment_m: float,
     lift_m: float,
     go_on: Callable[[int], bool] | None = None,
+    *,
+    return_aborted: bool = False,
+    lower_held: bool = False,
 ) -> PullResult:
     """Pull `box` out toward the camera in increments of `increment_m` (raised by `lift_m`
     first) while `hold` is held, from a freshly built world; before each increment `go_on(k)`
     (k increments done) may stop it. Out -> the box leaves the scene; stopped -> it is let go
-    where it is. The scene settles (held judgement), every held box is released, the scene
-    settles again. The one code path of executed steps and of the oracles' simulations."""
+    where it is (`return_aborted`: first put back where the pull started). The scene settles
+    (held judgement), every held box is released (`lower_held`: first set down onto what is
+    below it), the scene settles again. The one code path of executed steps and of the
+    oracles' simulations (trials.ch6.abort_release and held_release choose the two options)."""
     assert world.steps_taken == 0, "a step starts from a freshly built world (world_at)"
     poses_start = world.poses()
     if hold is not None:
@@ -93,12 +98,16 @@ def execute_pull(
         increments += 1
     if aborted:
         if increments:
+            if return_aborted:
+                world.return_pull(box, lift_m)
             world.release([box])
             world.settle_action()
     else:
         world.lift_out(box)
     held = world.displacements()
     if hold is not None:
+        if lower_held:
+            world.lower_onto_support(hold)
         world.release([hold])
         world.settle_action()
     released = world.displacements() if hold is not None else held

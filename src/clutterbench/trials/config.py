@@ -152,10 +152,25 @@ class Ch6TrialParams:
     physics_depth_settle_s: float = bounded(0.5, gt=0.0)
     """The estimated scene settles this long before the search; not at rest by then is
     recorded (estimate_not_at_rest)."""
+    abort_release: Literal["in_place", "back"] = "in_place"
+    """A pull aborted after it moved lets go of its box where it is (in_place: half out, it
+    may tip off the shelf), or first puts it back where the pull started (back). Executed
+    steps, the search oracles and the truth maps of the pull alike (kinematic executor)."""
+    held_release: Literal["drop", "lower"] = "drop"
+    """The second arm lets go of the box it held where it holds it (drop: in mid-air when the
+    pull took what it rested on), or first sets it down onto what is below it (lower).
+    Executed steps, the search oracles and the truth maps of the pull alike."""
     box_physics_band: tuple[float, float] = (0.15, 0.85)
     """The learned-plus-physics planners (`*_box_physics`) simulate a pull on the fitted boxes
     when the box head gives some other box a probability inside [low, high] for it (the
     network unsure); outside it the network answers alone."""
+
+    def release(self) -> dict[str, bool]:
+        """execute_pull's options for releasing a pulled or held box (sim/pull.py)."""
+        return {
+            "return_aborted": self.abort_release == "back",
+            "lower_held": self.held_release == "lower",
+        }
 
     def __post_init__(self) -> None:
         low, high = self.box_physics_band

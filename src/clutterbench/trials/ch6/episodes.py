@@ -21,9 +21,7 @@ from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
-from clutterbench.planning.ch6.extraction import (
-    Decision,
-)
+from clutterbench.planning.ch6.extraction import Decision
 from clutterbench.planning.ch6.support import SupportParams
 from clutterbench.sim import benchmark
 from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
@@ -114,6 +112,7 @@ def execute_decision(
                 observe(world, camera) if done and monitor else None,
                 t0 + world.steps_taken * dt,
             ),
+            **params.release(),
         )
         state, elapsed = SceneState.of(world), world.steps_taken * dt
     else:

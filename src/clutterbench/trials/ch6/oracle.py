@@ -86,7 +86,13 @@ class SearchOracle:
 
         try:
             result = execute_pull(
-                world, box, hold, p.pull_increment_m, p.grasp_lift_m, go_on if cut_short else None
+                world,
+                box,
+                hold,
+                p.pull_increment_m,
+                p.grasp_lift_m,
+                go_on if cut_short else None,
+                **p.release(),
             )
         except _CutShort:
             return {"success": False, "strict_success": False, "cut_short": True}, None, None

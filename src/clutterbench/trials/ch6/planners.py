@@ -164,7 +164,9 @@ def _cpg_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec | None = None, pul
     else:
         action = (params.pull_increment_m, params.grasp_lift_m) if pull else None
         falls = job.collapse_free if pull and params.pull_map_meaning == "collapse" else None
-        predictor = TruthCollapseMaps(spec, job.physics, params.moved_threshold_m, action, falls)
+        predictor = TruthCollapseMaps(
+            spec, job.physics, params.moved_threshold_m, action, falls, params.release()
+        )
     simulate_hold = spec is not None and pull and bimanual and params.truth_hold == "simulate"
     levers = pull_levers(params) if pull else {}
     if pull and spec is not None:
@@ -290,7 +292,12 @@ def fitted_pull(job: Ch6Job, spec: SceneSpec, head: str):
             maps = None
             if scene is not None:
                 maps = TruthCollapseMaps(
-                    scene.spec, job.physics, params.moved_threshold_m, action, falls
+                    scene.spec,
+                    job.physics,
+                    params.moved_threshold_m,
+                    action,
+                    falls,
+                    params.release(),
                 )
                 maps.at(SceneState.start(scene.spec), np.zeros(obs.depth_m.shape, np.uint8))
             cache[key] = (scene, maps)

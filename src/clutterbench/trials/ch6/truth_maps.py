@@ -28,7 +28,7 @@ collapses, h let go and settled at the end and judged as the trials judge a rele
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 
@@ -49,10 +49,13 @@ class TruthCollapseMaps:
         moved_threshold_m: float,
         pull: tuple[float, float] | None = None,
         collapse: CollapseFreeConfig | None = None,
+        release: Mapping[str, bool] | None = None,
     ):
         self.spec, self.physics, self.threshold = spec, physics, moved_threshold_m
         self.pull = pull
         """(increment_m, lift_m) of the trials' pull: maps of pulling; None: of deleting."""
+        self.release = dict(release or {})
+        """execute_pull's release options (trials.ch6.release()): as the trials execute."""
         self.collapse = collapse
         """With `pull`: mark only the boxes the pull collapses by this collapse-free
         criterion (criteria.py), not every box it moves (None)."""
@@ -88,7 +91,9 @@ class TruthCollapseMaps:
                 disp = np.nan_to_num(world.lift_out(box).displacement_m, nan=0.0)
                 marked = disp > self.threshold
             else:
-                result = pull_outcome(self.spec, state, self.physics, box, held, self.pull)
+                result = pull_outcome(
+                    self.spec, state, self.physics, box, held, self.pull, self.release
+                )
                 marked = self._marked(result)
             self.simulations += 1
             marked[[box, *held, *sorted(state.removed)]] = False
@@ -118,7 +123,9 @@ class TruthCollapseMaps:
         if key not in self._held_cache:
             state = self._state
             assert state is not None, "the harness sets the present state first (at)"
-            result = pull_outcome(self.spec, state, self.physics, box, [hold], self.pull)
+            result = pull_outcome(
+                self.spec, state, self.physics, box, [hold], self.pull, self.release
+            )
             marked = self._marked(result, hold)
             self.simulations += 1
             marked[[box, *sorted(state.removed)]] = False
@@ -160,9 +167,12 @@ def pull_outcome(
     box: int,
     held: Iterable[int],
     pull: tuple[float, float],
+    release: Mapping[str, bool] | None = None,
 ) -> PullResult:
     """The trials' whole pull of `box` from `state` (a fresh world there, the first of
     `held` held): what an executed step that the monitor lets run does, bit for bit."""
     hold = next(iter(held), None)
     increment_m, lift_m = pull
-    return execute_pull(world_at(spec, state, physics), box, hold, increment_m, lift_m)
+    return execute_pull(
+        world_at(spec, state, physics), box, hold, increment_m, lift_m, **(release or {})
+    )

@@ -82,6 +82,7 @@ def replay_step(
         params.pull_increment_m,
         params.grasp_lift_m,
         (lambda done: done < k) if aborted else None,
+        **params.release(),
     )
     step = judge_pull(result, box, hold, gone, params.moved_threshold_m, cf)
     return {"box": box, "hold": hold} | step
