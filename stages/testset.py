@@ -36,7 +36,7 @@ def testset(params: dict, base: BaseConfig) -> None:
     streams = ch6_streams(trials)
     starts = benchmark_starts(trials, sim, base.seed, streams)
     parts = [dataset_arrays(Path("data/generate"), dataset), labelled_arrays(starts)]
-    export_testset(parts, sim.camera, thresholds, cfg.min_pixels, OUT)
+    export_testset(parts, sim.camera, thresholds, cfg.min_pixels, OUT, sim.physics)
     ts = load(OUT)
     model = Path(f"models/{cfg.model}/best.pt")
     physics = (trials.ch6, cfg.test.catalogue, cfg.min_pixels)

@@ -4,6 +4,7 @@ or the CLI, reproduces its stored displacements bit for bit."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -130,3 +131,30 @@ def test_stored_pull_outcomes_replay_as_the_trials_pull(tmp_path, camera):
         assert np.array_equal(z["pullout_left_shelf"][0, x, :n], left)
     with pytest.raises(ClutterbenchError, match="pull_outcomes needs the trials' pull"):
         generate_dataset("po2", ds, gen, sim, 0, tmp_path / "po2")
+
+
+def test_the_test_sets_deletions_replay_to_the_labels_and_say_what_collapsed(physics):
+    """deletion_outcomes on a three-box stack: each replayed deletion moves the boxes exactly
+    as the labels say (removal_matrix), deleting the bottom box drops both others (a
+    deletion_collapse), deleting the top one collapses nothing."""
+    from clutterbench.data.testset import deletion_outcomes
+    from clutterbench.data.testset_load import labels
+    from clutterbench.sim.labelling import removal_matrix
+    from clutterbench.sim.spec import SceneSpec
+
+    spec = SceneSpec.load(Path(__file__).resolve().parents[1] / "data" / "stack3.json")
+    arrays = {
+        "n_objects": np.array([3]),
+        "sizes_m": spec.sizes_m[None].astype(np.float32),
+        "poses": np.asarray(spec.poses)[None],
+        "deletion_displacement_m": removal_matrix(
+            SceneSpec(sizes_m=spec.sizes_m.astype(np.float32).astype(float), poses=spec.poses),
+            physics,
+        )[None],
+    }
+    replay = deletion_outcomes(arrays, physics)
+    assert replay == {"displacements_equal": 6, "of": 6}
+    ts = arrays | {"manifest": {"thresholds": {"moved_m": 0.005, "drop_m": 0.01, "tilt_deg": 15}}}
+    collapse = labels(ts, "deletion_collapse")[0]
+    assert collapse[0, 1] and collapse[0, 2] and not collapse[2].any()
+    assert arrays["deletion_drop_m"][0, 0, 2] > 0.015

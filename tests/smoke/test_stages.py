@@ -116,6 +116,8 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     assert "box head (per box)" in (a / "reports/tables/table_6_1_boxes.md").read_text()
     manifest = json.loads((a / "data/testset/manifest.json").read_text())
     assert {"ch6_test", "benchmark:ch6_3_10"} <= set(manifest["sources"])
+    replay = manifest["deletion_replay"]  # the deletions replayed, on the CPU that labelled them
+    assert replay["of"] > 0 and replay["displacements_equal"] == replay["of"]
     board = (a / "reports/leaderboard/leaderboard.md").read_text()
     assert all(f"| {name} |" in board for name in ("box_head", "pull_truth", "constant"))
     # task noise: every Table 6.3 condition replayed, the robust oracles beside them

@@ -39,6 +39,9 @@ def _write_testset(root: Path, scenes: int = 4) -> Path:
         "pull_tilt_deg": np.zeros((scenes, n, n)),
         "pull_left_shelf": np.zeros((scenes, n, n), bool),
         "deletion_displacement_m": nan,
+        "deletion_drop_m": nan,
+        "deletion_tilt_deg": nan,
+        "deletion_left_shelf": np.zeros((scenes, n, n), bool),
     }
     root.mkdir(parents=True)
     save_npz(root / "scenes.npz", arrays)

@@ -18,7 +18,7 @@ from clutterbench.data.shards import ShardStore, iter_shards
 from clutterbench.data.testset_load import LABEL_KINDS, SCHEMA_VERSION
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import save_npz, write_json
-from clutterbench.sim.config import CameraConfig
+from clutterbench.sim.config import CameraConfig, PhysicsConfig
 
 SOURCE = {
     "depth_m": "depth_m",
@@ -54,6 +54,10 @@ ARRAYS = {
     "pull_left_shelf": "(S, N, N) bool: ... box y left the shelf",
     "deletion_displacement_m": "(S, N, N) float64: [s, x, y] how far box y's centre moved when "
     "box x was deleted (lifted out) and the rest settled: the thesis' labels",
+    "deletion_drop_m": "(S, N, N) float64: ... how far box y's centre dropped (the deletion "
+    "replayed from the settled start by the test set's stage)",
+    "deletion_tilt_deg": "(S, N, N) float64: ... how far box y tipped, degrees",
+    "deletion_left_shelf": "(S, N, N) bool: ... box y left the shelf",
     "source": "(S,) str: where the scene comes from: the ch6_test dataset, or a ch. 6 table "
     "stream's benchmark start (benchmark:<stream>, data/benchmark)",
     "target": "(S,) int: a benchmark start's episode target (the box the trial must extract); "
@@ -64,6 +68,8 @@ LABELS = {
     "tipped more than tilt_deg (the trials' collapse-free criterion)",
     "pull_moved": "pulling x moves y more than moved_m or off the shelf",
     "deletion_moved": "deleting x moves y more than moved_m (the thesis' collapse labels)",
+    "deletion_collapse": "deleting x collapses y: y left the shelf, dropped more than drop_m or "
+    "tipped more than tilt_deg",
 }
 
 
@@ -150,7 +156,14 @@ def concat_padded(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     return out
 
 
-NAN_PADDED = {"pull_displacement_m", "pull_drop_m", "pull_tilt_deg", "deletion_displacement_m"}
+NAN_PADDED = {
+    "pull_displacement_m",
+    "pull_drop_m",
+    "pull_tilt_deg",
+    "deletion_displacement_m",
+    "deletion_drop_m",
+    "deletion_tilt_deg",
+}
 """Outcome arrays: NaN past a scene's boxes, as in a shard (the others: 0 or False)."""
 PER_BOX_AXES = {
     "sizes_m": (1,),
@@ -161,7 +174,49 @@ PER_BOX_AXES = {
     "pull_tilt_deg": (1, 2),
     "pull_left_shelf": (1, 2),
     "deletion_displacement_m": (1, 2),
+    "deletion_drop_m": (1, 2),
+    "deletion_tilt_deg": (1, 2),
+    "deletion_left_shelf": (1, 2),
 }
+
+
+def deletion_outcomes(arrays: dict[str, np.ndarray], physics: PhysicsConfig) -> dict[str, Any]:
+    """Every scene's deletions replayed from its settled start (its sizes and poses, each box
+    lifted out of a fresh world and the rest settled, as the labels were made): per (x, y),
+    box y's drop, tilt and whether it left the shelf, added to `arrays`. Returns how many of
+    the replayed displacements equal the stored labels bit for bit (they do on the CPU that
+    generated them)."""
+    from clutterbench.progress import progress_bar
+    from clutterbench.sim.geometry import tilt_change_deg
+    from clutterbench.sim.physics import BoxWorld
+    from clutterbench.sim.spec import SceneSpec
+
+    s, n_max = arrays["deletion_displacement_m"].shape[:2]
+    drop, tilt = np.full((s, n_max, n_max), np.nan), np.full((s, n_max, n_max), np.nan)
+    left = np.zeros((s, n_max, n_max), bool)
+    equal = total = 0
+    with progress_bar("testset: deletions", total=s) as advance:
+        for k in range(s):
+            n = int(arrays["n_objects"][k])
+            spec = SceneSpec(
+                sizes_m=arrays["sizes_m"][k, :n].astype(np.float64), poses=arrays["poses"][k, :n]
+            )
+            for x in range(n):
+                world = BoxWorld.from_spec(spec, physics)
+                start = world.poses()
+                disp = world.lift_out(x).displacement_m
+                end, on = world.poses(), world.shelf.contains(world.positions())
+                for y in range(n):
+                    if y == x:
+                        continue
+                    drop[k, x, y] = float(start[y, 2] - end[y, 2])
+                    tilt[k, x, y] = tilt_change_deg(start[y, 3:], end[y, 3:])
+                    left[k, x, y] = not bool(on[y])
+                    total += 1
+                    equal += bool(disp[y] == arrays["deletion_displacement_m"][k, x, y])
+            advance(1)
+    arrays |= {"deletion_drop_m": drop, "deletion_tilt_deg": tilt, "deletion_left_shelf": left}
+    return {"displacements_equal": equal, "of": total}
 
 
 def export_testset(
@@ -170,11 +225,13 @@ def export_testset(
     thresholds: dict[str, float],
     min_pixels: int,
     out: Path,
+    physics: PhysicsConfig,
 ) -> dict[str, Any]:
     """Write out/{scenes.npz, manifest.json, load_testset.py} from the parts' scenes
-    (dataset_arrays, labelled_arrays); thresholds: moved_m, drop_m, tilt_deg. Returns the
-    manifest."""
+    (dataset_arrays, labelled_arrays) and their deletions' outcomes (deletion_outcomes,
+    `physics`); thresholds: moved_m, drop_m, tilt_deg. Returns the manifest."""
     arrays = concat_padded(parts)
+    replay = deletion_outcomes(arrays, physics)
     out.mkdir(parents=True, exist_ok=True)
     save_npz(out / "scenes.npz", arrays)  # byte-identical for identical arrays
     digest = hashlib.sha256((out / "scenes.npz").read_bytes()).hexdigest()
@@ -193,6 +250,7 @@ def export_testset(
         },
         "thresholds": dict(thresholds),
         "min_pixels": int(min_pixels),
+        "deletion_replay": replay,
         "arrays": ARRAYS,
         "labels": {k: LABELS[k] for k in LABEL_KINDS},
         "load": "load_testset.py (numpy alone): load(dir), labels(ts, kind), pairs(ts, kind)",

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-SCHEMA_VERSION = 1
-LABEL_KINDS = ("pull_collapse", "pull_moved", "deletion_moved")
+SCHEMA_VERSION = 2
+LABEL_KINDS = ("pull_collapse", "pull_moved", "deletion_moved", "deletion_collapse")
 
 
 def load(path: str | Path) -> dict:
@@ -56,6 +56,12 @@ def labels(ts: dict, kind: str) -> np.ndarray:
         out = (np.nan_to_num(ts["pull_displacement_m"]) > t["moved_m"]) | ts["pull_left_shelf"]
     elif kind == "deletion_moved":
         out = np.nan_to_num(ts["deletion_displacement_m"]) > t["moved_m"]
+    elif kind == "deletion_collapse":
+        out = (
+            (np.nan_to_num(ts["deletion_drop_m"]) > t["drop_m"])
+            | (np.nan_to_num(ts["deletion_tilt_deg"]) > t["tilt_deg"])
+            | ts["deletion_left_shelf"]
+        )
     else:
         raise ValueError(f"label kind {kind!r}: one of {LABEL_KINDS}")
     n = out.shape[1]
