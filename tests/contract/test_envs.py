@@ -101,6 +101,19 @@ def test_reset_info_names_the_scene_and_its_source(env):
     assert info["scene_source"] in ("benchmark", "drawn")
 
 
+@pytest.mark.parametrize("stream", ["ch5_stacked", "ch5_shelved", "ch5_random"])
+def test_a_ch5_streams_episode_starts_from_table_5_2s_start(env, stream):
+    """reset(seed=i, stream=<a ch. 5 stream>) starts from the start the ch. 5 trials drew
+    for episode i (read from the benchmark scenes, the committed Table 5.2 records' hash),
+    not from a live draw that skips the episode's new box."""
+    path = ROOT / "reports" / "trials_ch5" / "records.jsonl"
+    records = [json.loads(line) for line in path.read_text().splitlines()]
+    want = next(r for r in records if r["stream"] == stream and r["episode"] == 1)
+    _, info = env.reset(seed=1, options={"stream": stream})
+    env.reset(seed=0, options={"stream": "ch6_3_10"})  # the other tests' stream again
+    assert (info["scene"], info["scene_source"]) == (want["scene"], "benchmark")
+
+
 def test_a_seed_steps_alike_whether_its_scene_was_rebuilt_or_reused(env):
     """reset(seed=i) then the same actions give the same bits whether the reset rebuilt the
     scene (another episode before) or reused it (the same episode before)."""

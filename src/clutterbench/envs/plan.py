@@ -59,7 +59,8 @@ from clutterbench.planning.ch6.extraction import Decision
 from clutterbench.sim import benchmark
 from clutterbench.trials.core.harness import EpisodeResult
 from clutterbench.trials.core.protocol import STEP_FIELDS, STEP_NOTES, judge_episode
-from clutterbench.trials.core.streams import StreamSource, stream_source
+from clutterbench.trials.core.streams import StreamSource
+from clutterbench.trials.sources import stream_source
 
 if TYPE_CHECKING:
     from clutterbench.trials.ch6.episodes import Ch6Job

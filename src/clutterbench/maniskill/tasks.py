@@ -11,7 +11,8 @@ lengthened: rod_robot), standing in front of the shelf, on the CPU backend.
                    reward_mode="none", render_backend="none")   # one scene of your own
 
 With no `spec`, `reset(seed=i)` draws episode i of a named stream (DEFAULT_SCENE_SOURCE,
-trials/core/streams.py: the pipeline's scene i of that stream, its canonical settled start and its
+trials/sources.py: the pipeline's scene i of that stream, its canonical settled start as its
+chapter's trials draw it, and its
 target; `scene_source=` plugs in another); the stream is
 `stream=` (a key of trials.streams, default ch6_3_10) or `family=` / `n_objects=` /
 `catalogue=`, as make kwargs or reset options (`scale=`: the params' scale profile). Box
@@ -184,7 +185,7 @@ def _sapien_physx_defaults() -> SceneConfig:
     )
 
 
-DEFAULT_SCENE_SOURCE = "clutterbench.trials.core.streams:stream_source"
+DEFAULT_SCENE_SOURCE = "clutterbench.trials.sources:stream_source"
 """What draws a spec-less env's scenes: a factory `(stream, family, n_objects, catalogue,
 scale) -> source`, the source giving `.episode(i) -> (spec, target)`, `.physics` and `.trials`
 (its `arm` and `ch6.moved_threshold_m`). The default is the pipeline's named streams, named as
