@@ -10,6 +10,7 @@
     python -m clutterbench.dev.ch6_pull ch6_hold              # make dev-ch6-hold
     python -m clutterbench.dev.ch6_pull ch6_vs_pfd            # make dev-ch6-vs-pfd
     python -m clutterbench.dev.ch6_pull ch6_box               # make dev-ch6-box
+    python -m clutterbench.dev.ch6_pull ch6_box_physics       # make dev-ch6-box-physics
     python -m clutterbench.dev.ch6_pull ch6_release           # make dev-ch6-release
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
@@ -230,6 +231,8 @@ TITLES = {
     "ch6_vs_pfd": "the ch. 6 pull-head CP planners against physics from depth",
     "ch6_box": "the ch. 6 box-head planners (per box, and learned plus physics) against "
     "physics from depth",
+    "ch6_box_physics": "the ch. 6 learned-plus-physics planners (the box head, the pulls it is "
+    "unsure of simulated on the fitted boxes) against physics from depth",
     "ch6_release": "how the ch. 6 executor lets go of an aborted pull's box and of a held box "
     "(every planner and both search oracles under each variant)",
 }

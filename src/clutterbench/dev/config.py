@@ -245,6 +245,17 @@ class DevConfig:
     """The box-head planners against physics from depth and the pixel pull planners, and
     the learned-plus-physics band (trials.ch6.box_physics_band; python -m
     clutterbench.dev.ch6_pull ch6_box)."""
+    ch6_box_physics: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(
+            variants={"current": {}},
+            planners=("multi_step_box_physics", "physics_from_depth"),
+            against={"multi_step_box_physics": "physics_from_depth"},
+            oracle=False,
+        )
+    )
+    """The learned-plus-physics planners against physics from depth, episode by episode (a
+    section of its own: each decision simulates the pulls the box head is unsure of; python -m
+    clutterbench.dev.ch6_pull ch6_box_physics)."""
     ch6_release: Ch6PullConfig = dataclasses.field(
         default_factory=lambda: Ch6PullConfig(
             variants={"drop": {}, "lower": {"held_release": "lower"}},
@@ -274,6 +285,7 @@ class DevConfig:
             ("ch6_hold", self.ch6_hold.streams),
             ("ch6_vs_pfd", self.ch6_vs_pfd.streams),
             ("ch6_box", self.ch6_box.streams),
+            ("ch6_box_physics", self.ch6_box_physics.streams),
             ("ch6_release", self.ch6_release.streams),
         ):
             for name in names:
