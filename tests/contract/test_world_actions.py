@@ -228,3 +228,16 @@ def test_the_executors_release_options(stack3, physics):
     world = world_at(stack3, SceneState.start(stack3), physics)
     held = execute_pull(world, 1, 2, 0.02, 0.003, lower_held=True)
     assert held.extracted and held.on_shelf[[0, 2]].all()
+
+
+def test_a_held_box_still_resting_on_another_is_not_lowered_into_it(stack3, physics):
+    """The top box, held, sinks 0.5 mm into the one below (as resting contacts and tilted
+    bounds can): setting it down leaves it where it is."""
+    poses = np.asarray(stack3.poses).copy()
+    poses[2, 2] -= 0.0005
+    spec = SceneSpec(sizes_m=stack3.sizes_m, poses=poses)
+    world = BoxWorld.from_spec(spec, physics)
+    world.hold([2])
+    before = world.poses()[2].copy()
+    world.lower_onto_support(2)
+    assert np.allclose(world.poses()[2][:3], before[:3], atol=1e-6)

@@ -32,6 +32,9 @@ ROOM_FLOOR_BELOW_SHELF_M = 0.4
 # Where a removed box is parked: far below the floor, kinematic, so it touches nothing.
 _PARK_POSE = sapien.Pose([0.0, 0.0, -50.0])
 PULL_CLEARANCE_M = 0.01
+RESTING_OVERLAP_M = 0.003
+"""A box whose top is at most this far above another's bottom (within their common footprint)
+may be what that box rests on (resting contacts overlap a little, a tilted box's bounds more)."""
 """A pulled box counts as out once its back face is this far in front of the opening."""
 CONTACT_SEPARATION_M = 0.001
 """Two boxes touch when PhysX reports a contact point closer than this."""
@@ -360,7 +363,9 @@ class BoxWorld:
             if k == target or k in self.removed:
                 continue
             apart = np.any(hi[k, :2] <= lo[target, :2]) or np.any(lo[k, :2] >= hi[target, :2])
-            if not apart and hi[k, 2] <= lo[target, 2] + 1e-6:
+            # below it, or touching it from below (resting contacts overlap a little): a box
+            # it still rests on keeps it where it is
+            if not apart and hi[k, 2] <= lo[target, 2] + RESTING_OVERLAP_M:
                 tops.append(float(hi[k, 2]))
         self._lower_by(target, float(lo[target, 2]) - max(tops) - clearance_m)
 
