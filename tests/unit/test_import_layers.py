@@ -30,7 +30,7 @@ LAYERS: tuple[frozenset[str], ...] = tuple(
         "planning",  # planners: functions of what a robot sees
         "trials support",  # the world and the planner together; Table 6.2 offline
         "report",  # tables and figures from records
-        "envs cli bench dev crosscheck",  # entry points over everything
+        "envs cli bench dev crosscheck readme",  # entry points over everything
     )
 )
 """src/clutterbench's top-level modules and packages, lowest first: a module may import its own

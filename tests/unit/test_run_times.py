@@ -97,10 +97,3 @@ def test_the_readmes_run_time_table_is_the_committed_records():
     text = (root / "README.md").read_text()
     block = text[text.index(RUN_TIMES_BEGIN) : text.index(RUN_TIMES_END) + len(RUN_TIMES_END)]
     assert block == readme_block(committed_records(root / "reports/run_times"))
-
-
-def test_a_readme_without_the_block_is_one_line():
-    from clutterbench.bench.run_times import with_block
-
-    with pytest.raises(ClutterbenchError, match="no run-time block"):
-        with_block("# README\n", "x")
