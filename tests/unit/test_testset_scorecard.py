@@ -172,3 +172,39 @@ def test_a_per_scene_baseline_answers_a_scenes_boxes_from_one_call():
         depth = np.full((4, 4), scene, np.float32)
         assert [predict(depth, masks, None, i)[0] for i in range(3)] == [0.0, 0.1, 0.2]
     assert calls == [1.0, 2.0]
+
+
+def test_the_run_s_own_test_set_comes_first_then_the_published_copy(tmp_path, monkeypatch):
+    from clutterbench.cli.predictors import PUBLISHED, TESTSET, testset_dir
+
+    (tmp_path / "params.yaml").write_text("base: {}\n")
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ClutterbenchError, match="no test set: neither"):
+        testset_dir(None)
+    _write_testset(tmp_path / PUBLISHED)
+    assert testset_dir(None) == tmp_path / PUBLISHED
+    _write_testset(tmp_path / TESTSET)
+    assert testset_dir(None) == tmp_path / TESTSET
+    with pytest.raises(ClutterbenchError, match="no manifest"):
+        testset_dir(tmp_path / "elsewhere")
+
+
+def test_publish_testset_copies_a_set_that_loads_and_refuses_a_broken_one(tmp_path):
+    from clutterbench.data.testset_load import load
+
+    src = _write_testset(tmp_path / "ts")
+    dst = tmp_path / "published" / "testset"
+    cli = [sys.executable, "-m", "clutterbench.cli.__main__", "publish-testset"]
+    for _ in range(2):  # a second publication replaces the first whole
+        out = subprocess.run(
+            [*cli, "--testset", str(src), "--to", str(dst)], capture_output=True, text=True
+        )
+        assert out.returncode == 0, out.stderr
+    assert load(dst)["manifest"]["sha256"] == load(src)["manifest"]["sha256"]
+    assert sorted(p.name for p in dst.parent.iterdir()) == ["testset"]
+    (src / "scenes.npz").write_bytes(b"not the manifest's")
+    out = subprocess.run(
+        [*cli, "--testset", str(src), "--to", str(dst)], capture_output=True, text=True
+    )
+    assert out.returncode == 2 and "sha256" in out.stderr and out.stderr.strip().count("\n") == 0
+    assert load(dst)["manifest"]["sha256"]  # the published copy is untouched

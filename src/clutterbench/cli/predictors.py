@@ -1,10 +1,18 @@
 """`clutterbench evaluate-predictor`: score a pull-consequence predictor written anywhere on the
-test set (data/testset, stage testset) and add its row to the leaderboard."""
+test set and add its row to the leaderboard; `clutterbench publish-testset`: commit a default
+run's test set as the published one, so a fresh clone scores without running the pipeline.
+
+Which test set: --testset; else data/testset where stage testset has written one (this
+checkout's run, which the baselines in reports/leaderboard/baselines were scored on); else the
+published copy in git, data/published/testset (the run that published it scored the committed
+baselines on the same bytes)."""
 
 from __future__ import annotations
 
 import importlib
 import importlib.util
+import shutil
+import tempfile
 from pathlib import Path
 from typing import Annotated
 
@@ -12,6 +20,25 @@ import typer
 
 from clutterbench.cli.common import app, default_path, user_errors
 from clutterbench.errors import ClutterbenchError
+
+TESTSET = "data/testset"
+PUBLISHED = "data/published/testset"
+TESTSET_FILES = ("scenes.npz", "manifest.json", "load_testset.py")
+
+
+def testset_dir(given: Path | None) -> Path:
+    """The test set to score on (module docstring): given, the run's own, or the published."""
+    if given is not None:
+        if not (given / "manifest.json").is_file():
+            raise ClutterbenchError(f"{given}: no test set (no manifest.json)")
+        return given
+    for relative in (TESTSET, PUBLISHED):
+        path = default_path(None, relative)
+        if (path / "manifest.json").is_file():
+            return path
+    raise ClutterbenchError(
+        f"no test set: neither {TESTSET} (dvc repro testset) nor the published {PUBLISHED}"
+    )
 
 
 def load_predict(spec: str):
@@ -59,7 +86,11 @@ def evaluate_predictor(
         str | None, typer.Option("--name", help="Its row's name (default: the module's).")
     ] = None,
     testset: Annotated[
-        Path | None, typer.Option("--testset", help="Default: data/testset.")
+        Path | None,
+        typer.Option(
+            "--testset",
+            help=f"Default: {TESTSET} where stage testset wrote one, else {PUBLISHED}.",
+        ),
     ] = None,
     out: Annotated[Path | None, typer.Option("--out", help="Default: reports/leaderboard.")] = None,
 ) -> None:
@@ -69,9 +100,7 @@ def evaluate_predictor(
         from clutterbench.data.testset_load import load
         from clutterbench.support.scorecard import check_name, leaderboard, score, write_row
 
-        ts_dir = default_path(testset, "data/testset")
-        if not (ts_dir / "manifest.json").is_file():
-            raise ClutterbenchError(f"{ts_dir}: no test set (run: dvc repro testset)")
+        ts_dir = testset_dir(testset)
         try:
             ts = load(ts_dir)
         except (ValueError, OSError) as exc:
@@ -94,3 +123,34 @@ def evaluate_predictor(
             f"{label}: pull_collapse AUROC {pc['auroc']} precision {pc['precision']} recall "
             f"{pc['recall']} ({card['pairs']} pairs) -> {path}, {board / 'leaderboard.md'}"
         )
+
+
+@app.command("publish-testset")
+def publish_testset(
+    testset: Annotated[Path | None, typer.Option("--testset", help=f"Default: {TESTSET}.")] = None,
+    to: Annotated[Path | None, typer.Option("--to", help=f"Default: {PUBLISHED}.")] = None,
+) -> None:
+    """Copy a run's test set (stage testset, default scale) to the published copy that git
+    keeps, after checking it loads (hash and schema); the copy replaces the old one whole."""
+    with user_errors():
+        from clutterbench.data.testset_load import load
+
+        src = default_path(testset, TESTSET)
+        dst = default_path(to, PUBLISHED)
+        missing = [f for f in TESTSET_FILES if not (src / f).is_file()]
+        if missing:
+            raise ClutterbenchError(f"{src}: no test set ({', '.join(missing)} missing)")
+        try:
+            sha = load(src)["manifest"]["sha256"]
+        except (ValueError, OSError) as exc:
+            raise ClutterbenchError(f"{src}: {exc}") from None
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=".publish-", dir=dst.parent))
+        for name in TESTSET_FILES:
+            shutil.copy2(src / name, tmp / name)
+        old = dst.with_name(dst.name + ".old")
+        if dst.exists():
+            dst.rename(old)
+        tmp.rename(dst)
+        shutil.rmtree(old, ignore_errors=True)
+        typer.echo(f"{dst}: the published test set is now sha256 {sha[:12]} (from {src})")
