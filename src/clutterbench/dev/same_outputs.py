@@ -93,11 +93,14 @@ def compare_table(old: Path, new: Path) -> dict[str, Any]:
     }
 
 
-def compare(old: Path, new: Path) -> dict[str, Any]:
-    tables = sorted((old / "reports/tables").glob("*.csv"))
+def compare(
+    old: Path, new: Path, stages: tuple[str, ...] = STAGES, tables: bool = True
+) -> dict[str, Any]:
+    """`stages` and (tables) the report's tables: only what both checkouts ran again."""
+    csvs = sorted((old / "reports/tables").glob("*.csv")) if tables else []
     return {
-        "stages": [compare_stage(old, new, s) for s in STAGES if (old / "reports" / s).is_dir()],
-        "tables": [compare_table(t, new / "reports/tables" / t.name) for t in tables],
+        "stages": [compare_stage(old, new, s) for s in stages if (old / "reports" / s).is_dir()],
+        "tables": [compare_table(t, new / "reports/tables" / t.name) for t in csvs],
     }
 
 
@@ -118,7 +121,8 @@ def markdown(result: dict[str, Any], old_label: str, new_label: str) -> str:
             f"| `{s['stage']}` | {r['files']} | {len(r['differ'])} | {d['files']} | "
             f"{len(d['differ'])} |"
         )
-    lines += ["", "| table | rows | OLD cells | same | NEW adds |", "|---|---|---|---|---|"]
+    if result["tables"]:
+        lines += ["", "| table | rows | OLD cells | same | NEW adds |", "|---|---|---|---|---|"]
     for t in result["tables"]:
         same = (
             "byte-identical"
@@ -143,8 +147,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--old-label", default="OLD")
     ap.add_argument("--new-label", default="NEW")
     ap.add_argument("--out", type=Path, default=None, help="markdown here (and .json beside)")
+    ap.add_argument(
+        "--stages", nargs="+", default=list(STAGES), help="the trials stages both ran again"
+    )
+    ap.add_argument("--no-tables", action="store_true", help="the report was not run again in both")
     args = ap.parse_args(argv)
-    result = compare(args.old, args.new)
+    unknown = sorted(set(args.stages) - set(STAGES))
+    if unknown:
+        ap.error(f"--stages: {', '.join(unknown)} not among {', '.join(STAGES)}")
+    result = compare(args.old, args.new, tuple(args.stages), not args.no_tables)
     md = markdown(result, args.old_label, args.new_label)
     if args.out is not None:
         write_text(args.out, md)
