@@ -48,3 +48,17 @@ def test_a_changed_record_episode_or_cell_is_named(tmp_path):
         named += [d for t in result["tables"] for d in t["differ"]]
         assert len(named) == 1 and (broken.split("/")[-1] in named[0] or "b / rate" in named[0])
         assert main([str(old), str(new)]) == 1
+
+
+def test_rows_named_by_several_leading_cells(tmp_path):
+    """A table whose rows are (method, family) pairs, as the per-family tables are."""
+    old, new = _checkout(tmp_path / "old"), _checkout(tmp_path / "new")
+    body = "method,family,rate\ncp,random,0.5\ncp,shelved,0.25\nbox,random,0.75\n"
+    (old / "reports/tables/f.csv").write_text(body)
+    (new / "reports/tables/f.csv").write_text(
+        "method,family,rate\nbox,random,0.75\ncp,shelved,0.25\ncp,random,0.5\nnew,random,1\n"
+    )
+    assert main([str(old), str(new)]) == 0
+    (new / "reports/tables/f.csv").write_text(body.replace("shelved,0.25", "shelved,0.26"))
+    table = [t for t in compare(old, new)["tables"] if t["table"] == "f"][0]
+    assert table["differ"] == ["cp / shelved / rate: 0.25 -> 0.26"]

@@ -7,7 +7,8 @@ Every file the OLD checkout's trials stages wrote (reports/<stage>/, their episo
 data/<stage>/) must be in NEW with the same bytes; where NEW holds more (conditions added since),
 OLD's records must be NEW's records line for line (records.jsonl) and OLD's summary entries
 NEW's (a stage's summary.json). Every cell of OLD's tables (reports/tables/*.csv) must be the
-same string in NEW's table of that name, on the row of the same first cell; NEW may add rows
+same string in NEW's table of that name, on the row named by the same leading cells (the fewest
+leading columns that name each row once in both tables); NEW may add rows
 and columns. Exit 1 when anything differs."""
 
 from __future__ import annotations
@@ -58,6 +59,17 @@ def compare_stage(old: Path, new: Path, stage: str) -> dict[str, Any]:
     return out
 
 
+def _row_key(a: pd.DataFrame, b: pd.DataFrame) -> list[str]:
+    """The fewest leading columns that name every row once in both tables ([] if none do)."""
+    for k in range(1, len(a.columns) + 1):
+        key = list(a.columns[:k])
+        if all(c in b.columns for c in key) and not (
+            a.duplicated(key).any() or b.duplicated(key).any()
+        ):
+            return key
+    return []
+
+
 def compare_table(old: Path, new: Path) -> dict[str, Any]:
     """OLD's cells in NEW's table (module docstring)."""
     if not new.is_file():
@@ -67,22 +79,23 @@ def compare_table(old: Path, new: Path) -> dict[str, Any]:
         return {"table": old.stem, "bytes": True, "cells": None, "rows": rows, "differ": []}
     a = pd.read_csv(old, dtype=str, keep_default_na=False)
     b = pd.read_csv(new, dtype=str, keep_default_na=False)
-    key = a.columns[0]
+    key = _row_key(a, b)
     differ = [f"column {c} missing" for c in a.columns if c not in b.columns]
-    if key in b.columns and b[key].is_unique:
-        indexed = b.set_index(key, drop=False)
+    if key:
+        indexed = {tuple(r): i for i, r in enumerate(b[key].itertuples(index=False))}
         for _, row in a.iterrows():
-            if row[key] not in indexed.index:
-                differ.append(f"row {row[key]} missing")
+            name = " / ".join(row[key])
+            if tuple(row[key]) not in indexed:
+                differ.append(f"row {name} missing")
                 continue
-            got = indexed.loc[row[key]]
+            got = b.iloc[indexed[tuple(row[key])]]
             differ += [
-                f"{row[key]} / {c}: {row[c]} -> {got[c]}"
+                f"{name} / {c}: {row[c]} -> {got[c]}"
                 for c in a.columns
                 if c in b.columns and got[c] != row[c]
             ]
     else:
-        differ.append(f"NEW's first column {key!r} does not name its rows once each")
+        differ.append("no leading columns name the rows once each in both tables")
     return {
         "table": old.stem,
         "bytes": False,
