@@ -208,3 +208,17 @@ def test_publish_testset_copies_a_set_that_loads_and_refuses_a_broken_one(tmp_pa
     )
     assert out.returncode == 2 and "sha256" in out.stderr and out.stderr.strip().count("\n") == 0
     assert load(dst)["manifest"]["sha256"]  # the published copy is untouched
+
+
+def test_the_about_cell_is_the_docstrings_first_sentence_whole():
+    from clutterbench.cli.predictors import first_sentence
+
+    doc = """A box collapses when its lowest pixel is above the pulled
+    box's top. Nothing else is used.
+
+    More words."""
+    assert (
+        first_sentence(doc)
+        == "A box collapses when its lowest pixel is above the pulled box's top."
+    )
+    assert first_sentence("") == ""

@@ -67,8 +67,13 @@ def load_predict(spec: str):
         raise ClutterbenchError(
             f"{module_name} has no function {func}(depth_m, masks, camera_K, pulled)"
         )
-    lines = (module.__doc__ or "").strip().splitlines()
-    return predict, lines[0] if lines else ""
+    return predict, first_sentence(module.__doc__ or "")
+
+
+def first_sentence(doc: str) -> str:
+    """A module docstring's first sentence on one line: the leaderboard's "about" cell."""
+    paragraph = " ".join(doc.strip().split("\n\n")[0].split())
+    return paragraph.split(". ")[0].removesuffix(".") + "." if paragraph else ""
 
 
 @app.command("evaluate-predictor")
