@@ -222,3 +222,25 @@ def test_the_about_cell_is_the_docstrings_first_sentence_whole():
         == "A box collapses when its lowest pixel is above the pulled box's top."
     )
     assert first_sentence("") == ""
+
+
+def test_an_agent_row_keeps_the_predictor_rows_of_the_published_test_set(tmp_path):
+    """A clone with only the published copy: adding a planner's row rewrites the leaderboard
+    with the predictor table still in it."""
+    from clutterbench.envs.board import agent_card, write_agent_row
+
+    ts = load(_write_testset(tmp_path / "data/published/testset"))
+    board = tmp_path / "reports/leaderboard"
+    write_row(score(ts, lambda d, m, c, i: np.full(len(m), 0.5), "flat", ""), board / "baselines")
+    records = [{"stream": "s", "episode": 0, "success": True, "strict_success": False}]
+    about = {"kind": "agent", "name": "a", "first_episode": 0}
+    write_agent_row(agent_card(records, about, tmp_path / "reports/trials"), board)
+    text = (board / "leaderboard.md").read_text()
+    assert "| flat |" in text and "| a |" in text
+
+
+def test_the_agent_board_and_evaluate_predictor_look_for_the_same_test_sets():
+    from clutterbench.cli.predictors import PUBLISHED, TESTSET
+    from clutterbench.envs.board import TESTSET_DIRS
+
+    assert TESTSET_DIRS == (TESTSET, PUBLISHED)

@@ -19,6 +19,10 @@ from clutterbench.trials.core.stats import wilson_interval
 
 CRITERIA = ("success", "strict_success")
 BOARD = Path("reports/leaderboard")
+TESTSET_DIRS = ("data/testset", "data/published/testset")
+"""Where the leaderboard's test set lies, in the order it is looked for (as evaluate-predictor
+looks, cli/predictors.py): the run's own (stage testset), then the copy git keeps
+(`clutterbench publish-testset`)."""
 
 
 def rate(records: Sequence[Mapping[str, Any]], key: str) -> dict[str, Any]:
@@ -78,12 +82,13 @@ def agent_card(
 
 def write_agent_row(card: Mapping[str, Any], board: Path = BOARD) -> Path:
     """agents/<name>.json, then the leaderboard rewritten with it (and with the predictor
-    rows of the project's test set, data/testset beside reports/, where there is one)."""
+    rows of the project's test set, the first of TESTSET_DIRS beside reports/ that holds
+    one)."""
     from clutterbench.support.scorecard import leaderboard
 
     path = board / "agents" / f"{card['name']}.json"
     write_json(path, dict(card))
-    manifest = board.parent.parent / "data/testset/manifest.json"
-    sha = read_json(manifest).get("sha256") if manifest.exists() else None
-    leaderboard(board, board, sha)
+    manifests = [board.parent.parent / d / "manifest.json" for d in TESTSET_DIRS]
+    found = [m for m in manifests if m.is_file()]
+    leaderboard(board, board, read_json(found[0]).get("sha256") if found else None)
     return path
