@@ -65,6 +65,15 @@ run-times: setup
 	python -m clutterbench.bench.run_times
 	python -m clutterbench.readme
 
+# Score a pull-consequence predictor (a Python file with predict(depth_m, masks, camera_K,
+# pulled)) on the test set, the run's own or the published copy: set up, then
+# clutterbench evaluate-predictor. One command on a fresh clone:
+#   make score PREDICTOR=path/to/my_predictor.py
+.PHONY: score
+score: setup
+	@test -n "$(PREDICTOR)" || { echo "make score: name the predictor: make score PREDICTOR=path/to/file.py" >&2; exit 2; }
+	clutterbench evaluate-predictor "$(PREDICTOR)"
+
 # The README's generated blocks (results at a glance, the leaderboard, run times) rewritten from
 # the committed files they quote (clutterbench.readme; a unit test fails while one is stale)
 .PHONY: readme
