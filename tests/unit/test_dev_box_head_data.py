@@ -44,3 +44,39 @@ def test_a_variant_is_scored_on_the_val_pairs_and_reported():
         {"val_pairs": 60, "val_scenes": 10, "seconds": 6, "rows": {"stage": row}, "shows": "x"}
     )
     assert "| stage | 40 | 240 | 8 |" in text
+
+
+def test_decoder_features_average_each_box_then_the_pulled_one():
+    import torch
+
+    from clutterbench.dev.box_head_data import decoder_pair_features
+
+    masks = np.zeros((3, 8, 8), bool)
+    masks[0, :4, :4], masks[1, 4:, 4:], masks[2, :2, 4:] = True, True, True
+    feats = torch.zeros(3, 2, 4, 4)  # pooled 2x: boxes 0 and 1 cover a quadrant, box 2 half one
+    for x in range(3):
+        feats[x, 0, :2, :2] = 10 * x
+        feats[x, 0, 2:, 2:] = 10 * x + 1
+        feats[x, 0, :2, 2:] = 10 * x + 2
+        feats[x, 1] = -x
+    out = decoder_pair_features(feats, masks)
+    assert out.shape == (6, 4)
+    # rows (x, y) off the diagonal, row-major: (0,1) (0,2) (1,0) (1,2) (2,0) (2,1)
+    np.testing.assert_allclose(out[:, 0], [1, 2, 10, 12, 20, 21])  # channel 0 over box y
+    np.testing.assert_allclose(out[:, 1], [0, 0, -1, -1, -2, -2])
+    np.testing.assert_allclose(out[:, 2], [0, 0, 11, 11, 22, 22])  # over box x itself
+
+
+def test_decoder_variants_widen_the_stage_pairs():
+    from clutterbench.dev.box_head_data import with_decoder
+
+    cfg = BoxHeadConfig(train_scenes=3, val_scenes=2, hidden=8, epochs=2)
+    train, val = _pairs([7, 3, 9, 1, 5], 0), _pairs([4, 8, 6, 2], 1)
+    dec_train = np.ones((len(train), 6), np.float32)
+    dec_val = np.ones((len(val), 6), np.float32)
+    named = with_decoder(train, val, dec_train, dec_val, cfg)
+    n = train.x.shape[1]
+    for (tr, va, _), extra in zip(named.values(), (3, 6)):
+        assert set(tr.rows["scene"]) == {7, 3, 9} and set(va.rows["scene"]) == {4, 8}
+        assert tr.x.shape[1] == va.x.shape[1] == n + extra
+        np.testing.assert_array_equal(tr.x[:, :n], train.x[train.rows["scene"].isin([7, 3, 9])])

@@ -13,7 +13,11 @@ batch, lr, seed; the epoch of least val loss) on:
 - `unseen_val`: the val scenes after the first support.box_head.val_scenes (maps of scenes
   the collapse predictor never trained on; the stage never reads them);
 - `stage_and_unseen_val`: the two together;
-- `stage`, 2x and 4x support.box_head.hidden wide.
+- `stage`, 2x and 4x support.box_head.hidden wide;
+- `stage` with the collapse predictor's own last decoder features beside the map statistics:
+  the input of its 1x1 output conv (with box x pulled) averaged over box y's pixels, and over
+  box x's own (`stage + decoder (other box)`, `stage + decoder (both boxes)`): does the
+  network know more than its three maps say?
 Each is scored on the first support.box_head.val_scenes val scenes (the stage's val pairs):
 val loss, and per output the AUROC and the F1 at its best threshold on those pairs. Never on
 the test dataset. Writes reports/dev/box_head_data.{json,md}; not a dvc stage.
@@ -29,8 +33,9 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import torch
 
-from clutterbench.collapse.box_head import EDGE_HEADS, OUTPUTS, predict_pairs
+from clutterbench.collapse.box_head import EDGE_HEADS, OUTPUTS, off_diagonal, predict_pairs
 from clutterbench.dev.command import OUT, run_command, save
 from clutterbench.support.box_train import (
     Pairs,
@@ -82,6 +87,35 @@ def variants(
     return {k: v for k, v in named.items() if len(v[0])}, _subset(val, in_val)
 
 
+def decoder_pair_features(feats: torch.Tensor, masks: np.ndarray) -> np.ndarray:
+    """(K * (K - 1), 2C) float32, off-diagonal rows as the pairs hold them: the decoder features
+    (K, C, h, w) of each pulled box x averaged over box y's pixels, then over x's own; masks
+    (K, H, W) bool, pooled to (h, w) by area."""
+    k, c, h, w = feats.shape
+    m = torch.from_numpy(masks.astype(np.float32))[:, None]
+    m = torch.nn.functional.adaptive_avg_pool2d(m, (h, w))[:, 0]
+    area = m.flatten(1).sum(1).clamp_min(1e-3)
+    pooled = torch.einsum("xchw,yhw->xyc", feats.float(), m) / area[None, :, None]
+    own = pooled[torch.arange(k), torch.arange(k)][:, None].expand(k, k, c)
+    return off_diagonal(torch.cat([pooled, own], -1).numpy()).astype(np.float32)
+
+
+def with_decoder(
+    train: Pairs, val: Pairs, dec_train: np.ndarray, dec_val: np.ndarray, cfg: BoxHeadConfig
+) -> dict[str, tuple[Pairs, Pairs, BoxHeadConfig]]:
+    """name -> (training pairs, val pairs, head config) of the decoder variants: the stage's
+    train and val pairs, their features widened by the decoder's (other box; both boxes)."""
+    keep_tr = _first_scenes(train, cfg.train_scenes)
+    keep_va = _first_scenes(val, cfg.val_scenes)
+    c = dec_train.shape[1] // 2
+    out = {}
+    for name, cols in (("other box", slice(0, c)), ("both boxes", slice(0, 2 * c))):
+        tr = Pairs(np.concatenate([train.x, dec_train[:, cols]], 1), train.y, train.rows)
+        va = Pairs(np.concatenate([val.x, dec_val[:, cols]], 1), val.y, val.rows)
+        out[f"stage + decoder ({name})"] = (_subset(tr, keep_tr), _subset(va, keep_va), cfg)
+    return out
+
+
 def score(train: Pairs, val: Pairs, cfg: BoxHeadConfig, seed: int) -> dict[str, Any]:
     """Train as the stage does; val loss and, per output, AUROC and best-threshold F1."""
     model, log, best_epoch = train_box_head(train, val, cfg, seed)
@@ -99,14 +133,44 @@ def score(train: Pairs, val: Pairs, cfg: BoxHeadConfig, seed: int) -> dict[str, 
     return row
 
 
-def _collect(params: Mapping[str, Any]) -> tuple[Pairs, Pairs, BoxHeadConfig, int]:
+def _collect_with_decoder(
+    scenes: Any, predictor: Any, label: str, total: int
+) -> tuple[Pairs, np.ndarray]:
+    """support.box_train.collect, and each pair's decoder features (the input of the
+    predictor's output conv, caught by a forward hook)."""
+    from clutterbench.progress import progress_bar
+    from clutterbench.support.box_train import cp_probs, scene_pairs
+
+    caught: list[torch.Tensor] = []
+    hook = predictor.model.head.register_forward_hook(lambda m, i, o: caught.append(i[0]))
+    parts, dec = [], []
+    try:
+        with progress_bar(label, total=total) as advance:
+            for scene in scenes:
+                if len(scene.ids) > 1:
+                    caught.clear()
+                    parts.append(scene_pairs(scene, cp_probs(predictor, scene)))
+                    dec.append(decoder_pair_features(torch.cat(caught), scene.masks))
+                advance(1)
+    finally:
+        hook.remove()
+    pairs = Pairs(
+        np.concatenate([p.x for p in parts]),
+        np.concatenate([p.y for p in parts]),
+        pd.concat([p.rows for p in parts], ignore_index=True),
+    )
+    return pairs, np.concatenate(dec)
+
+
+def _collect(
+    params: Mapping[str, Any],
+) -> tuple[Pairs, Pairs, np.ndarray, np.ndarray, BoxHeadConfig, int]:
     from clutterbench.collapse.predict import CollapsePredictor
     from clutterbench.config import load_base, load_section
     from clutterbench.criteria import label_thresholds
     from clutterbench.data.shards import load_split
     from clutterbench.precision import inference_from_params
     from clutterbench.sim.config import SimConfig
-    from clutterbench.support.box_train import collect
     from clutterbench.support.config import SupportEvalConfig
     from clutterbench.support.evaluate import split_scenes
 
@@ -125,18 +189,22 @@ def _collect(params: Mapping[str, Any]) -> tuple[Pairs, Pairs, BoxHeadConfig, in
         "heads": EDGE_HEADS,
         "collapse_free": label_thresholds(params),
     }
-    pairs = []
+    got = []
     for split in ("train", "val"):
         scenes = split_scenes(gen, split_file, split, len(record[split]), **read)
-        pairs.append(collect(scenes, predictor, f"box_head_data: {split} scenes", len(scenes)))
-    return pairs[0], pairs[1], cfg.box_head, load_base(params).seed
+        label = f"box_head_data: {split} scenes"
+        got.append(_collect_with_decoder(scenes, predictor, label, len(scenes)))
+    (train, dec_train), (val, dec_val) = got
+    return train, val, dec_train, dec_val, cfg.box_head, load_base(params).seed
 
 
 def recheck(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
     started = time.perf_counter()
-    train, val, cfg, seed = _collect(params)
+    train, val, dec_train, dec_val, cfg, seed = _collect(params)
     named, val_pairs = variants(train, val, cfg)
     rows = {name: score(tr, val_pairs, c, seed) for name, (tr, c) in named.items()}
+    for name, (tr, va, c) in with_decoder(train, val, dec_train, dec_val, cfg).items():
+        rows[name] = score(tr, va, c, seed)
     stage = rows["stage"]["pull_collapse_auroc"]
     best = max(rows, key=lambda k: rows[k]["pull_collapse_auroc"])
     result = {
