@@ -52,11 +52,12 @@ def _subset(p: Pairs, keep: np.ndarray) -> Pairs:
     return Pairs(p.x[keep], p.y[keep], p.rows[keep].reset_index(drop=True))
 
 
-def _join(a: Pairs, b: Pairs) -> Pairs:
+def _join(parts: list[Pairs]) -> Pairs:
+    """The pairs of `parts`, one after another."""
     return Pairs(
-        np.concatenate([a.x, b.x]),
-        np.concatenate([a.y, b.y]),
-        pd.concat([a.rows, b.rows], ignore_index=True),
+        np.concatenate([p.x for p in parts]),
+        np.concatenate([p.y for p in parts]),
+        pd.concat([p.rows for p in parts], ignore_index=True),
     )
 
 
@@ -82,7 +83,7 @@ def variants(
         "stage": (stage, cfg),
         "all_train": (train, cfg),
         "unseen_val": (unseen, cfg),
-        "stage_and_unseen_val": (_join(stage, unseen), cfg),
+        "stage_and_unseen_val": (_join([stage, unseen]), cfg),
     } | wide
     return {k: v for k, v in named.items() if len(v[0])}, _subset(val, in_val)
 
@@ -154,12 +155,7 @@ def _collect_with_decoder(
                 advance(1)
     finally:
         hook.remove()
-    pairs = Pairs(
-        np.concatenate([p.x for p in parts]),
-        np.concatenate([p.y for p in parts]),
-        pd.concat([p.rows for p in parts], ignore_index=True),
-    )
-    return pairs, np.concatenate(dec)
+    return _join(parts), np.concatenate(dec)
 
 
 def _collect(
