@@ -178,11 +178,17 @@ def table_4_2_pixels(r: Report) -> None:
     )
 
 
-def support_thresholds(path: Path) -> dict[str, Any]:
-    """Each Table 6.2 method's thresholds: the rules' (`chosen`) and the box head's per pull
-    head (`box_head`, as method `<head>_box`)."""
+def support_thresholds(path: Path, fusion: Path | None = None) -> dict[str, Any]:
+    """Each Table 6.2 method's thresholds: the rules' (`chosen`), the box head's per pull
+    head (`box_head`, as method `<head>_box`) and, from `fusion` where given, the box head
+    fused with physics from depth (as method `<head>_box_fused`)."""
     box = json_key(path, "box_head") if "box_head" in read_json(path) else {}
-    return dict(json_key(path, "chosen")) | {f"{head}_box": t for head, t in box.items()}
+    fused = json_key(fusion, "chosen") if fusion is not None else {}
+    return (
+        dict(json_key(path, "chosen"))
+        | {f"{head}_box": t for head, t in box.items()}
+        | {f"{head}_box_fused": t for head, t in fused.items()}
+    )
 
 
 def table_6_1_per_box(r: Report) -> None:
@@ -198,7 +204,7 @@ def table_6_2_support(r: Report) -> None:
     support_table(
         pd.read_csv(SUPPORT / "scenes.csv"),
         r.cfg.table_6_2_methods,
-        support_thresholds(SUPPORT / "thresholds.json"),
+        support_thresholds(SUPPORT / "thresholds.json", SUPPORT / "box_fusion.json"),
         r.figures,
         TABLES,
         r.base.scale,

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from clutterbench.collapse.box_head import EDGE_HEADS
 from clutterbench.collapse.box_predict import BoxMaps
 from clutterbench.collapse.predict import CollapsePredictor
 from clutterbench.config import as_dict, load_section
@@ -24,6 +25,13 @@ from clutterbench.planning.ch6.support import oracle_heatmaps
 from clutterbench.precision import Precision, inference_from_params
 from clutterbench.progress import progress_bar
 from clutterbench.sim.config import SimConfig
+from clutterbench.support.box_fusion import (
+    SimulatePulls,
+    answer_scene,
+    choose_fusion,
+    fitted_pulls,
+    fusion_rows,
+)
 from clutterbench.support.box_run import box_rows, choose_edge_thresholds
 from clutterbench.support.config import SupportEvalConfig
 from clutterbench.support.evaluate import (
@@ -102,6 +110,9 @@ def run_support(
     box_maps = BoxMaps.from_paths(paths.model, paths.box_head, sim.camera, "pull", 0.5)
     outcome = read_json(paths.box_metrics)["thresholds"]["box_head"]
     box_chosen = choose_edge_thresholds(val, box_maps, outcome)
+    catalogue = load_section(GenerateConfig, "generate", params).datasets[cfg.val_dataset].catalogue
+    fusion = choose_box_fusion(val, box_maps, fitted_pulls_of(params, cfg, sim, ch6, catalogue))
+    write_json(paths.out / "box_fusion.json", {"chosen": fusion, "val_scenes": len(val)})
 
     # 2. test scenes from their own stream, with every removal simulated
     generate_test_scenes(cfg, sim, parallel, seed, ch6, models.heads, paths.scenes)
@@ -111,7 +122,16 @@ def run_support(
         paths.scenes, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera, **read
     )
     rows, panels, truth = score_test_scenes(
-        scenes_in, cfg, models, chosen, p_edge, rng, physics_depth, seed, (box_maps, box_chosen)
+        scenes_in,
+        cfg,
+        models,
+        chosen,
+        p_edge,
+        rng,
+        physics_depth,
+        seed,
+        (box_maps, box_chosen),
+        (fitted_pulls_of(params, cfg, sim, ch6, cfg.test.catalogue), fusion),
     )
     # edges: removing X moves Y, X and Y touch; <head>_edges: the trials' pull of X marks Y
     # under that head's label kind, X and Y touch
@@ -200,9 +220,11 @@ def score_test_scenes(
     physics_depth: PhysicsDepthSupport,
     seed: int,
     box: tuple[BoxMaps, dict[str, dict[str, float]]],
+    fusion: tuple[SimulatePulls, dict[str, dict[str, Any]]],
 ) -> tuple[list[dict], list[SupportPanel], dict[str, dict[str, list]]]:
     """Every method's rows on every test scene, the figure's panels and each head's true edges;
-    `box`: the box head and its chosen thresholds."""
+    `box`: the box head and its chosen thresholds; `fusion`: physics from depth's pulls and
+    the fusion chosen on val scenes."""
     heads = models.heads
     chosen_of = {h: {m: p for m, p in chosen.items() if method_head(m)[0] == h} for h in heads}
     deletion = {m: p for m, p in chosen.items() if method_head(m)[0] == "deletion"}
@@ -220,6 +242,9 @@ def score_test_scenes(
                 rows += evaluate_scene(view, head_heat, chosen_of[head], None, rng)[0]
                 truth[head][str(sc.index)] = sorted(map(list, view.true_edges))
             rows += box_rows(sc, *box)
+            fused = fusion_rows(answer_scene(sc, box[0], fusion[0]), fusion[1])
+            where = {"scene": sc.index, "family": sc.family, "n_objects": sc.n_objects}
+            rows += [where | {"visible": len(sc.ids)} | r for r in fused]
             if len(panels) < cfg.figure_scenes:
                 panels.append(
                     SupportPanel(
@@ -233,6 +258,30 @@ def score_test_scenes(
                 )
             advance(1)
     return rows, panels, truth
+
+
+def fitted_pulls_of(
+    params: dict, cfg: SupportEvalConfig, sim: SimConfig, ch6: Ch6TrialParams, catalogue: str
+) -> SimulatePulls:
+    """Physics from depth's pulls of every visible box (support/box_fusion.py), the boxes
+    fitted with `catalogue`'s sizes, marked as the support truth marks them."""
+    return fitted_pulls(
+        sim, ch6, cfg.moved_threshold_m, label_thresholds(params), catalogue, cfg.min_pixels
+    )
+
+
+def choose_box_fusion(
+    val: list[Scene], box_maps: BoxMaps, simulate: SimulatePulls
+) -> dict[str, dict[str, Any]]:
+    """Per pull head, the box head and physics from depth fused (support/box_fusion.py):
+    weights and thresholds chosen on the val scenes."""
+    answers = []
+    with progress_bar("support: val pulls in the fitted boxes", total=len(val)) as advance:
+        for sc in val:
+            if len(sc.ids) > 1:
+                answers.append(answer_scene(sc, box_maps, simulate))
+            advance(1)
+    return {kind: choose_fusion(answers, kind) for kind in EDGE_HEADS}
 
 
 def write_thresholds(

@@ -1,0 +1,198 @@
+"""Recheck: do the box head and physics from depth, fused per box, predict what a pull does
+better than either? Chosen and scored on the val scenes the box_head stage validates on.
+
+    python -m clutterbench.dev.box_physics_fusion     # make dev-box-physics-fusion (after box_head)
+
+For each of the stage's val scenes (the first support.box_head.val_scenes of the val
+dataset's val split) and each visible box x pulled, three answers for every other visible
+box y:
+- `box_head`: the box head's probability (collapse/box_predict.py BoxMaps), per pull label
+  kind (what the pull moves, what it collapses);
+- `physics_from_depth`: the boxes fitted to the depth image and masks, settled, x pulled out
+  by the trials' executor (the support stage's physics-from-depth row, the planners' model):
+  1 where that marks y, else 0; a box the fit dropped has no answer;
+- `fused`: a logistic regression on the head's logit and the simulated outcome (two
+  indicators: simulated and marked, simulated and not), one per label kind.
+The fusion is cross-fitted: the val scenes in two halves (alternate scenes), the weights and
+every threshold fitted on one half and scored on the other, both ways, so each scene's
+score comes from choices made without it. Scored per pair (AUROC, precision and recall at
+1/2, ECE) and as Table 6.2's support graph (an edge where outcome x contact exceeds a
+threshold chosen on the other half by the f1 of mean precision and recall; mean precision
+and recall over scenes, against that label kind's truth). Never the test dataset.
+Writes reports/dev/box_physics_fusion.{json,md}; not a dvc stage.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from clutterbench.collapse.box_head import EDGE_HEADS, off_diagonal
+from clutterbench.dev.command import OUT, run_command, save
+from clutterbench.support.box_fusion import (
+    FusionScene,
+    answer_scene,
+    choose_edge_threshold,
+    fit_logistic,
+    fitted_pulls,
+    graph_scores,
+    method_probs,
+    pairs,
+)
+from clutterbench.support.box_train import binary_scores
+
+NAME = "box_physics_fusion"
+METHODS = ("box_head", "physics_from_depth", "fused")
+FOLDS = 2
+
+
+def _probs_truth(scenes: Sequence[FusionScene], kind: str, method: str, w) -> tuple:
+    p = [off_diagonal(method_probs(sc, kind, method, w)) for sc in scenes]
+    y = [off_diagonal(sc.truth[kind]) for sc in scenes]
+    return np.concatenate(p), np.concatenate(y).astype(float)
+
+
+def cross_fit(scenes: Sequence[FusionScene], kind: str) -> dict[str, Any]:
+    """Per method, out-of-fold pair probabilities and graph scores under `kind`; each fold's
+    fusion weights and edge thresholds fitted on the other folds only."""
+    folds = [list(scenes[f::FOLDS]) for f in range(FOLDS)]
+    out: dict[str, Any] = {m: {"p": [], "y": [], "graph": [], "edge": []} for m in METHODS}
+    weights = []
+    for f, held in enumerate(folds):
+        fit = [sc for g, part in enumerate(folds) if g != f for sc in part]
+        x_fit, y_fit = pairs(fit, kind)
+        w = fit_logistic(x_fit, y_fit)
+        weights.append(w)
+        for m in METHODS:
+            prob = lambda sc, m=m, w=w: method_probs(sc, kind, m, w)  # noqa: E731
+            t = choose_edge_threshold(fit, prob, kind)
+            p, y = _probs_truth(held, kind, m, w)
+            out[m]["p"].append(p)
+            out[m]["y"].append(y)
+            out[m]["edge"].append(t)
+            out[m]["graph"].append((graph_scores(held, prob, kind, t), len(held)))
+    rows = {}
+    for m in METHODS:
+        p, y = np.concatenate(out[m]["p"]), np.concatenate(out[m]["y"])
+        s = binary_scores(p, y, 0.5)
+        n = sum(k for _, k in out[m]["graph"])
+        gp = sum(pr[0] * k for pr, k in out[m]["graph"]) / n
+        gr = sum(pr[1] * k for pr, k in out[m]["graph"]) / n
+        rows[m] = {
+            "auroc": s["auroc"],
+            "precision": s["precision"],
+            "recall": s["recall"],
+            "f1": s["f1"],
+            "ece": s["ece"],
+            "graph_precision": gp,
+            "graph_recall": gr,
+            "edge_thresholds": out[m]["edge"],
+        }
+    rows["fused"]["weights"] = [[round(float(v), 4) for v in w] for w in weights]
+    return rows
+
+
+def _val_scenes(params: Mapping[str, Any]):
+    from clutterbench.config import load_section
+    from clutterbench.criteria import label_thresholds
+    from clutterbench.sim.config import SimConfig
+    from clutterbench.support.config import SupportEvalConfig
+    from clutterbench.support.evaluate import split_scenes
+
+    cfg = load_section(SupportEvalConfig, "support", params)
+    sim = load_section(SimConfig, "sim", params)
+    scenes = split_scenes(
+        Path("data/generate"),
+        Path(f"data/split/{cfg.val_dataset}.json"),
+        "val",
+        cfg.box_head.val_scenes,
+        threshold_m=cfg.moved_threshold_m,
+        min_pixels=cfg.min_pixels,
+        camera=sim.camera,
+        heads=EDGE_HEADS,
+        collapse_free=label_thresholds(params),
+    )
+    return [sc for sc in scenes if len(sc.ids) > 1], cfg, sim
+
+
+def recheck(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
+    from clutterbench.collapse.box_predict import BoxMaps
+    from clutterbench.config import load_section
+    from clutterbench.criteria import label_thresholds
+    from clutterbench.data.config import GenerateConfig
+    from clutterbench.precision import inference_from_params
+    from clutterbench.progress import progress_bar
+    from clutterbench.trials.config import TrialsConfig
+
+    started = time.perf_counter()
+    inference_from_params(params)
+    scenes, cfg, sim = _val_scenes(params)
+    catalogue = load_section(GenerateConfig, "generate", params).datasets[cfg.val_dataset].catalogue
+    cp, box = Path(f"models/{cfg.model}/best.pt"), Path("models/box_head/best.pt")
+    maps = BoxMaps.from_paths(cp, box, sim.camera, "pull", 0.5)
+    ch6 = load_section(TrialsConfig, "trials", params).ch6
+    collapse_free = label_thresholds(params)
+    simulate = fitted_pulls(
+        sim, ch6, cfg.moved_threshold_m, collapse_free, catalogue, cfg.min_pixels
+    )
+    answers = []
+    with progress_bar("box_physics_fusion: val scenes", total=len(scenes)) as advance:
+        for sc in scenes:
+            answers.append(answer_scene(sc, maps, simulate))
+            advance(1)
+    kinds = {kind: cross_fit(answers, kind) for kind in EDGE_HEADS}
+    head, fused = kinds["pull"]["box_head"], kinds["pull"]["fused"]
+    result = {
+        "val_scenes": len(answers),
+        "pairs": int(sum(len(a.ids) * (len(a.ids) - 1) for a in answers)),
+        "pulls_simulated": int(sum(a.known.sum() for a in answers)),
+        "pulls": int(sum(len(a.ids) for a in answers)),
+        "kinds": kinds,
+        "shows": (
+            f"box_physics_fusion (pull, support graph): box head {head['graph_precision']:.3f} / "
+            f"{head['graph_recall']:.3f}, fused {fused['graph_precision']:.3f} / "
+            f"{fused['graph_recall']:.3f} (mean precision / recall, val, cross-fitted)"
+        ),
+    }
+    return save(result, started, out_dir, NAME, markdown)
+
+
+def markdown(result: Mapping[str, Any]) -> str:
+    lines = [
+        "# The box head and physics from depth, fused per box",
+        "",
+        f"`python -m clutterbench.dev.box_physics_fusion` (module docstring: what each row is). "
+        f"{result['val_scenes']} val scenes of the box_head stage, {result['pairs']} (pulled, "
+        f"other) pairs; physics from depth simulated {result['pulls_simulated']} of "
+        f"{result['pulls']} pulls (the others: boxes the fit dropped, where the head answers). "
+        f"Cross-fitted over {FOLDS} halves of the val scenes; never the test dataset. "
+        f"{result['seconds'] / 60:.1f} min.",
+        "",
+        "| label kind | method | AUROC | precision at 1/2 | recall at 1/2 | F1 | ECE | "
+        "graph: mean precision | graph: mean recall | edge thresholds (per half) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for kind, rows in result["kinds"].items():
+        for m in METHODS:
+            r = rows[m]
+            lines.append(
+                f"| {kind} | {m} | {r['auroc']:.4f} | {r['precision']:.3f} | {r['recall']:.3f} "
+                f"| {r['f1']:.3f} | {r['ece']:.3f} | {r['graph_precision']:.3f} | "
+                f"{r['graph_recall']:.3f} | {', '.join(f'{t:g}' for t in r['edge_thresholds'])} |"
+            )
+    lines += [
+        "",
+        "Fusion weights per half (head logit, simulated and marked, simulated and not, bias): "
+        + "; ".join(f"{k}: {rows['fused']['weights']}" for k, rows in result["kinds"].items()),
+        "",
+        result["shows"],
+    ]
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    run_command(recheck, NAME)

@@ -1,0 +1,266 @@
+"""The box head and physics from depth, fused per box: for a pulled box x and another box y,
+a logistic regression on the box head's logit that the pull of x marks y and on what the
+trials' pull of x does to y among the boxes fitted to the same depth image (physics from
+depth, no training). Its weights, edge and outcome thresholds are chosen on validation
+scenes (the support stage); Table 6.2 scores its support graph (method `<head>_box_fused`).
+
+A pull physics from depth cannot simulate (a box the fit dropped, a fit that failed) keeps
+the box head's answer alone: both physics inputs are 0 there.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from clutterbench.collapse.box_head import EDGE_HEADS, OUTPUTS, off_diagonal
+from clutterbench.planning.ch6.support import edge_precision_recall
+from clutterbench.support.box_train import THRESHOLDS, choose_threshold
+
+RIDGE = 1e-3
+"""L2 weight of the fusion's logistic regression, per pair (its bias left free)."""
+HEAD_ALONE = (1.0, 0.0, 0.0, 0.0)
+"""Fusion weights that give the box head's probability unchanged."""
+SimulatePulls = Callable[[np.ndarray, np.ndarray], tuple[dict[str, np.ndarray], np.ndarray]]
+"""(depth_m, masks (K, H, W)) -> (label kind -> (K, K) bool: the simulated pull of x marks y,
+(K,) bool: box x's pull was simulated)."""
+
+
+@dataclass
+class FusionScene:
+    """One scene's answers, in the order of its visible boxes (K)."""
+
+    index: int
+    ids: list[int]
+    probs: np.ndarray
+    """(K, K, len(OUTPUTS)) the box head's probabilities."""
+    simulated: dict[str, np.ndarray]
+    """label kind -> (K, K) bool: physics from depth's outcome (the pull of x marks y)."""
+    known: np.ndarray
+    """(K,) bool: box x was fitted, so its pull was simulated."""
+    truth: dict[str, np.ndarray]
+    """label kind -> (K, K) bool: the physics truth of the trials' pull."""
+    contact: np.ndarray
+    """(K, K) bool: x and y touch in the settled scene."""
+
+
+def features(p: np.ndarray, simulated: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """(..., 3) float64 fusion inputs of pairs: the head's logit, simulated and marked,
+    simulated and not marked (a pull not simulated: both 0)."""
+    q = np.clip(p.astype(np.float64), 1e-4, 1 - 1e-4)
+    sim = np.asarray(simulated, bool)
+    k = np.broadcast_to(np.asarray(known, bool), sim.shape)
+    return np.stack([np.log(q / (1 - q)), k & sim, k & ~sim], -1).astype(np.float64)
+
+
+def fit_logistic(x: np.ndarray, y: np.ndarray, ridge: float = RIDGE, steps: int = 50) -> np.ndarray:
+    """(F + 1,) weights (the last the bias) of an L2-regularised logistic regression of y on
+    x (N, F), by Newton's method: deterministic, no learning rate."""
+    a = np.concatenate([x, np.ones((len(x), 1))], 1)
+    w = np.zeros(a.shape[1])
+    reg = np.full(a.shape[1], ridge * len(x))
+    reg[-1] = 0.0
+    for _ in range(steps):
+        p = 1.0 / (1.0 + np.exp(-(a @ w)))
+        grad = a.T @ (p - y) + reg * w
+        hess = (a * (p * (1 - p))[:, None]).T @ a + np.diag(reg) + 1e-9 * np.eye(a.shape[1])
+        step = np.linalg.solve(hess, grad)
+        w = w - step
+        if np.abs(step).max() < 1e-10:
+            break
+    return w
+
+
+def fuse(weights: Sequence[float], p: np.ndarray, simulated: np.ndarray, known: np.ndarray):
+    """The fused probability of pairs (p, simulated, known broadcast together)."""
+    w = np.asarray(weights, np.float64)
+    return 1.0 / (1.0 + np.exp(-(features(p, simulated, known) @ w[:-1] + w[-1])))
+
+
+def method_probs(sc: FusionScene, kind: str, method: str, weights=None) -> np.ndarray:
+    """(K, K) probability that pulling x marks y under `kind`: the box head's (`box_head`),
+    physics from depth's where it simulated and the head's elsewhere (`physics_from_depth`),
+    or the fusion with `weights` (`fused`); diagonal 0."""
+    p = sc.probs[..., OUTPUTS.index(kind)].astype(np.float64)
+    if method == "box_head":
+        out = p.copy()
+    elif method == "physics_from_depth":
+        out = np.where(sc.known[:, None], sc.simulated[kind].astype(np.float64), p)
+    elif method == "fused":
+        assert weights is not None, "the fusion needs its weights"
+        out = fuse(weights, p, sc.simulated[kind], sc.known[:, None])
+    else:
+        raise ValueError(f"unknown method {method!r}")
+    np.fill_diagonal(out, 0.0)
+    return out
+
+
+def pairs(scenes: Sequence[FusionScene], kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """Off-diagonal pairs of the scenes: (fusion features (n, 3), truth (n,) float)."""
+    x = [
+        off_diagonal(
+            features(sc.probs[..., OUTPUTS.index(kind)], sc.simulated[kind], sc.known[:, None])
+        )
+        for sc in scenes
+    ]
+    y = [off_diagonal(sc.truth[kind]) for sc in scenes]
+    return np.concatenate(x), np.concatenate(y).astype(np.float64)
+
+
+def edges(sc: FusionScene, outcome: np.ndarray, threshold: float) -> set[tuple[int, int]]:
+    """Support edges (x, y) whose outcome x the head's contact probability exceeds threshold."""
+    edge = outcome * sc.probs[..., OUTPUTS.index("contact")]
+    return {(sc.ids[x], sc.ids[y]) for x, y in zip(*np.nonzero(edge > threshold)) if x != y}
+
+
+def true_edges(sc: FusionScene, kind: str) -> set[tuple[int, int]]:
+    a, b = np.nonzero(sc.truth[kind] & sc.contact)
+    return {(sc.ids[i], sc.ids[j]) for i, j in zip(a, b) if i != j}
+
+
+def graph_scores(
+    scenes: Sequence[FusionScene], prob: Callable[[FusionScene], np.ndarray], kind: str, t: float
+) -> tuple[float, float]:
+    """Mean precision and recall over the scenes (each where defined: Table 6.2's means) of
+    the edges at threshold t against `kind`'s truth edges."""
+    pr = np.array(
+        [edge_precision_recall(edges(sc, prob(sc), t), true_edges(sc, kind)) for sc in scenes],
+        dtype=float,
+    ).reshape(-1, 2)
+    mean = [float(np.nanmean(v)) if np.isfinite(v).any() else float("nan") for v in pr.T]
+    return mean[0], mean[1]
+
+
+def choose_edge_threshold(
+    scenes: Sequence[FusionScene], prob: Callable[[FusionScene], np.ndarray], kind: str
+) -> float:
+    """The threshold of THRESHOLDS with the best f1 of mean precision and recall (Table
+    6.2's criterion, as the box head's edge threshold is chosen)."""
+    best, best_f1 = float(THRESHOLDS[len(THRESHOLDS) // 2]), -1.0
+    for t in THRESHOLDS:
+        precision, recall = graph_scores(scenes, prob, kind, float(t))
+        f1 = 2 * precision * recall / (precision + recall) if precision + recall > 0 else -1.0
+        if np.isfinite(f1) and f1 > best_f1:
+            best, best_f1 = float(t), f1
+    return best
+
+
+def choose_fusion(scenes: Sequence[FusionScene], kind: str) -> dict[str, Any]:
+    """The fusion of label kind `kind` chosen on (validation) scenes: its weights (head
+    logit, simulated and marked, simulated and not, bias), the outcome threshold of the best
+    f1 on their pairs and the edge threshold of the best graph f1."""
+    x, y = pairs(scenes, kind) if scenes else (np.zeros((0, 3)), np.zeros(0))
+    # Pairs of one class only (a tiny profile's few scenes) teach no weights: the head alone.
+    w = fit_logistic(x, y) if len(y) and y.min() < y.max() else np.array(HEAD_ALONE)
+    p = 1.0 / (1.0 + np.exp(-(x @ w[:-1] + w[-1])))
+    outcome = choose_threshold(p, y)
+    edge = choose_edge_threshold(scenes, lambda sc: method_probs(sc, kind, "fused", w), kind)
+    return {"edge": edge, "outcome": outcome, "weights": [round(float(v), 6) for v in w]}
+
+
+def fusion_rows(sc: FusionScene, chosen: Mapping[str, Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """The scene's Table 6.2 rows of the fused support graph, one per label kind (method
+    `<head>_box_fused`), against that kind's truth (scenes.csv's columns)."""
+    rows = []
+    for kind in EDGE_HEADS:
+        c = chosen[kind]
+        truth = true_edges(sc, kind)
+        pred = set()
+        if len(sc.ids) > 1:
+            pred = edges(sc, method_probs(sc, kind, "fused", c["weights"]), c["edge"])
+        precision, recall = edge_precision_recall(pred, truth)
+        rows.append(
+            {
+                "method": f"{kind}_box_fused",
+                "n_true": len(truth),
+                "n_pred": len(pred),
+                "tp": len(pred & truth),
+                "precision": precision,
+                "recall": recall,
+            }
+        )
+    return rows
+
+
+def answer_scene(sc: Any, maps: Any, simulate: SimulatePulls) -> FusionScene:
+    """The box head's and physics from depth's answers for one support scene
+    (support/evaluate.py Scene, read with the truth of every pull head); a scene with one
+    visible box has no pair, and nothing is simulated."""
+    k = len(sc.ids)
+    if k > 1:
+        simulated, known = simulate(sc.depth_m, sc.masks)
+    else:
+        simulated, known = {h: np.zeros((k, k), bool) for h in EDGE_HEADS}, np.zeros(k, bool)
+    return FusionScene(
+        index=sc.index,
+        ids=list(sc.ids),
+        probs=maps.probs(sc.depth_m, sc.masks),
+        simulated=simulated,
+        known=known,
+        truth={k: sc.moved_by[k].astype(bool) for k in EDGE_HEADS},
+        contact=sc.contact.astype(bool),
+    )
+
+
+def fitted_pulls(
+    sim: Any,
+    ch6: Any,
+    moved_m: float,
+    collapse_free: tuple[float, float],
+    catalogue: str,
+    min_pixels: int,
+) -> SimulatePulls:
+    """Every visible box pulled out of the boxes fitted to the depth image and masks, settled
+    (trials/ch6/physics_model.py, the physics-from-depth planners' model) by the trials'
+    executor (sim.labelling.pull_outcomes, the labels' own code path), each other box marked
+    by each pull label kind's own rule (data/labels.py label_matrix)."""
+    from clutterbench.data.labels import LABEL_ARRAYS, label_matrix
+    from clutterbench.errors import PerceptionError
+    from clutterbench.observation import Observation
+    from clutterbench.sim.labelling import pull_outcomes
+    from clutterbench.sim.physics import BoxWorld
+    from clutterbench.sim.render import camera_model
+    from clutterbench.sim.shelf import Shelf
+    from clutterbench.trials.ch6.physics_model import make_estimator, scene_of
+
+    shelf = Shelf()
+    camera = camera_model(BoxWorld(shelf, sim.physics, render=True), sim.camera)
+    estimate = make_estimator(catalogue, min_pixels)
+    pull = (ch6.pull_increment_m, ch6.grasp_lift_m)
+
+    def simulate(depth: np.ndarray, masks: np.ndarray):
+        k = len(masks)
+        marked = {kind: np.zeros((k, k), bool) for kind in EDGE_HEADS}
+        known = np.zeros(k, bool)
+        instance = np.zeros(depth.shape, dtype=np.uint8)
+        for j, m in enumerate(masks):
+            instance[m] = j + 1
+        try:
+            obs = Observation(depth_m=depth, instance=instance, camera=camera)
+            scene = scene_of(
+                estimate(obs), shelf, sim.camera, sim.physics, ch6.physics_depth_settle_s
+            )
+        except PerceptionError:
+            return marked, known
+        po = pull_outcomes(scene.spec, sim.physics, pull)
+        arrays = {
+            "pullout_displacement_m": po.displacement_m,
+            "pullout_drop_m": po.drop_m,
+            "pullout_tilt_deg": po.tilt_deg,
+            "pullout_left_shelf": po.left_shelf,
+        }
+        at = [int(b) for b in scene.spec.meta["ids"]]  # fitted box a is mask at[a]
+        for kind in EDGE_HEADS:
+            assert set(LABEL_ARRAYS[kind]) <= set(arrays), kind
+            m = label_matrix(kind, arrays.__getitem__, len(at), moved_m, collapse_free)
+            for a, x in enumerate(at):
+                for b, y in enumerate(at):
+                    if a != b and x < k and y < k:
+                        marked[kind][x, y] = bool(m[a, b])
+        known[[x for x in at if x < k]] = True
+        return marked, known
+
+    return simulate
