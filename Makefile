@@ -19,7 +19,7 @@ TORCH_PIP_ARGS := $(if $(TORCH_INDEX_URL),--index-url $(TORCH_INDEX_URL))
 TORCH_CHOICE := $(if $(filter-out torch==2.13.0,$(TORCH_SPEC))$(TORCH_INDEX_URL),echo '$(TORCH_SPEC) $(TORCH_INDEX_URL)';)
 STAMP := $(VENV)/.installed-$(shell ($(TORCH_CHOICE) cat requirements.lock pyproject.toml) 2>/dev/null | sha1sum | cut -c1-12)
 
-.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner dev-perturbed-fit dev-ch6-pull dev-ch6-pull-thresholds dev-ch6-pull-watch dev-ch6-no-plan dev-ch6-no-plan-thresholds dev-ch6-idle-hold dev-ch6-clear dev-ch6-hold dev-ch6-vs-pfd dev-ch6-box dev-ch6-box-physics dev-ch6-release dev-box-head-data benchmark-scenes clean-venv shell
+.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner dev-perturbed-fit dev-ch6-pull dev-ch6-pull-thresholds dev-ch6-pull-watch dev-ch6-no-plan dev-ch6-no-plan-thresholds dev-ch6-idle-hold dev-ch6-clear dev-ch6-hold dev-ch6-vs-pfd dev-ch6-box dev-ch6-box-physics dev-ch6-release dev-box-head-data dev-box-physics-fusion benchmark-scenes clean-venv shell
 
 setup: system venv .dvc/config
 
@@ -187,6 +187,11 @@ dev-ch6-release: setup
 # val scenes -> reports/dev/box_head_data.md
 dev-box-head-data: setup
 	python -m clutterbench.dev.box_head_data
+
+# The box head and physics from depth fused per box (after box_head): each alone and fused,
+# cross-fitted over two halves of the box head's val scenes -> reports/dev/box_physics_fusion.md
+dev-box-physics-fusion: setup
+	python -m clutterbench.dev.box_physics_fusion
 
 # The benchmark scenes (data/benchmark/: every table's test-stream starts and targets, the
 # same bytes on every CPU), regenerated for the tiny and default profiles. Never run by a

@@ -181,13 +181,15 @@ def table_4_2_pixels(r: Report) -> None:
 def support_thresholds(path: Path, fusion: Path | None = None) -> dict[str, Any]:
     """Each Table 6.2 method's thresholds: the rules' (`chosen`), the box head's per pull
     head (`box_head`, as method `<head>_box`) and, from `fusion` where given, the box head
-    fused with physics from depth (as method `<head>_box_fused`)."""
+    fused with physics from depth (as method `<head>_box_fused`) and physics from depth's
+    pulls alone (`<head>_physics_pull`)."""
     box = json_key(path, "box_head") if "box_head" in read_json(path) else {}
     fused = json_key(fusion, "chosen") if fusion is not None else {}
     return (
         dict(json_key(path, "chosen"))
         | {f"{head}_box": t for head, t in box.items()}
         | {f"{head}_box_fused": t for head, t in fused.items()}
+        | {f"{head}_physics_pull": {"edge": t["physics_edge"]} for head, t in fused.items()}
     )
 
 

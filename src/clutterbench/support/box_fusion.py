@@ -158,30 +158,43 @@ def choose_fusion(scenes: Sequence[FusionScene], kind: str) -> dict[str, Any]:
     p = 1.0 / (1.0 + np.exp(-(x @ w[:-1] + w[-1])))
     outcome = choose_threshold(p, y)
     edge = choose_edge_threshold(scenes, lambda sc: method_probs(sc, kind, "fused", w), kind)
-    return {"edge": edge, "outcome": outcome, "weights": [round(float(v), 6) for v in w]}
+    alone = choose_edge_threshold(
+        scenes, lambda sc: method_probs(sc, kind, "physics_from_depth"), kind
+    )
+    return {
+        "edge": edge,
+        "outcome": outcome,
+        "weights": [round(float(v), 6) for v in w],
+        "physics_edge": alone,
+    }
 
 
 def fusion_rows(sc: FusionScene, chosen: Mapping[str, Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """The scene's Table 6.2 rows of the fused support graph, one per label kind (method
-    `<head>_box_fused`), against that kind's truth (scenes.csv's columns)."""
+    """The scene's Table 6.2 rows, per label kind against its truth (scenes.csv's columns):
+    the fused support graph (method `<head>_box_fused`) and physics from depth's pulls alone
+    with the box head's contact (`<head>_physics_pull`)."""
     rows = []
     for kind in EDGE_HEADS:
         c = chosen[kind]
         truth = true_edges(sc, kind)
-        pred = set()
-        if len(sc.ids) > 1:
-            pred = edges(sc, method_probs(sc, kind, "fused", c["weights"]), c["edge"])
-        precision, recall = edge_precision_recall(pred, truth)
-        rows.append(
-            {
-                "method": f"{kind}_box_fused",
-                "n_true": len(truth),
-                "n_pred": len(pred),
-                "tp": len(pred & truth),
-                "precision": precision,
-                "recall": recall,
-            }
-        )
+        for method, weights, t, name in (
+            ("fused", c["weights"], c["edge"], f"{kind}_box_fused"),
+            ("physics_from_depth", None, c["physics_edge"], f"{kind}_physics_pull"),
+        ):
+            pred = set()
+            if len(sc.ids) > 1:
+                pred = edges(sc, method_probs(sc, kind, method, weights), t)
+            precision, recall = edge_precision_recall(pred, truth)
+            rows.append(
+                {
+                    "method": name,
+                    "n_true": len(truth),
+                    "n_pred": len(pred),
+                    "tp": len(pred & truth),
+                    "precision": precision,
+                    "recall": recall,
+                }
+            )
     return rows
 
 

@@ -1,0 +1,132 @@
+"""The box head and physics from depth fused per box (support/box_fusion.py): the fusion's
+inputs, its fit, its fallback, the scene rows and the mapping of fitted boxes to masks."""
+
+from __future__ import annotations
+
+import types
+
+import numpy as np
+import pytest
+
+from clutterbench.collapse.box_head import EDGE_HEADS, OUTPUTS
+from clutterbench.support import box_fusion as bf
+
+
+def _scene(rng: np.random.Generator, k: int = 5, informative: bool = True) -> bf.FusionScene:
+    """A scene whose truth the simulated pulls give exactly and the head only roughly."""
+    truth = rng.random((k, k)) < 0.3
+    np.fill_diagonal(truth, False)
+    probs = np.zeros((k, k, len(OUTPUTS)), np.float32)
+    for kind in EDGE_HEADS:
+        noisy = np.clip(truth * 0.6 + rng.random((k, k)) * 0.4, 0.01, 0.99)
+        probs[..., OUTPUTS.index(kind)] = noisy
+    probs[..., OUTPUTS.index("contact")] = 0.9
+    simulated = truth if informative else rng.random((k, k)) < 0.3
+    return bf.FusionScene(
+        index=0,
+        ids=list(range(k)),
+        probs=probs,
+        simulated={kind: simulated.copy() for kind in EDGE_HEADS},
+        known=np.ones(k, bool),
+        truth={kind: truth.copy() for kind in EDGE_HEADS},
+        contact=np.ones((k, k), bool),
+    )
+
+
+def test_a_pull_not_simulated_gives_no_physics_input():
+    x = bf.features(np.array([0.5, 0.9]), np.array([True, True]), np.array([False, True]))
+    assert x[0].tolist() == [0.0, 0.0, 0.0]
+    assert x[1, 0] == pytest.approx(np.log(9.0))
+    assert x[1, 1:].tolist() == [1.0, 0.0]
+
+
+def test_the_fit_recovers_the_weights_that_made_the_labels():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(20000, 2))
+    w = np.array([1.5, -2.0, 0.5])
+    y = (rng.random(20000) < 1 / (1 + np.exp(-(x @ w[:2] + w[2])))).astype(float)
+    got = bf.fit_logistic(x, y, ridge=0.0)
+    assert np.allclose(got, w, atol=0.1)
+
+
+def test_the_fusion_leans_on_the_simulation_where_it_knows_the_truth():
+    rng = np.random.default_rng(1)
+    scenes = [_scene(rng) for _ in range(20)]
+    chosen = bf.choose_fusion(scenes, "pull")
+    assert chosen["weights"][1] > 1.0 and chosen["weights"][2] < -1.0
+    fused = bf.graph_scores(
+        scenes,
+        lambda s: bf.method_probs(s, "pull", "fused", chosen["weights"]),
+        "pull",
+        chosen["edge"],
+    )
+    assert fused == (1.0, 1.0)
+
+
+def test_pairs_of_one_class_leave_the_head_alone():
+    rng = np.random.default_rng(2)
+    sc = _scene(rng)
+    for kind in EDGE_HEADS:
+        sc.truth[kind][:] = False
+    chosen = bf.choose_fusion([sc], "pull")
+    assert chosen["weights"] == list(bf.HEAD_ALONE)
+    p = sc.probs[..., OUTPUTS.index("pull")].astype(np.float64)
+    np.fill_diagonal(p, 0.0)
+    assert np.allclose(bf.method_probs(sc, "pull", "fused", chosen["weights"]), p, atol=1e-3)
+
+
+def test_physics_from_depth_answers_only_the_pulls_it_simulated():
+    rng = np.random.default_rng(3)
+    sc = _scene(rng)
+    sc.known[2] = False
+    p = bf.method_probs(sc, "pull", "physics_from_depth")
+    head = sc.probs[..., OUTPUTS.index("pull")]
+    assert np.allclose(p[2, [0, 1, 3, 4]], head[2, [0, 1, 3, 4]])
+    assert set(np.unique(p[[0, 1, 3, 4]])) <= {0.0, 1.0}
+    assert (np.diag(p) == 0).all()
+
+
+def test_fusion_rows_score_each_kind_against_its_own_truth():
+    rng = np.random.default_rng(4)
+    sc = _scene(rng)
+    sc.truth["pull_collapse"][:] = False
+    chosen = {
+        k: {"weights": [0.0, 5.0, -5.0, 0.0], "edge": 0.5, "physics_edge": 0.5} for k in EDGE_HEADS
+    }
+    rows = {r["method"]: r for r in bf.fusion_rows(sc, chosen)}
+    assert rows["pull_physics_pull"]["tp"] == rows["pull_box_fused"]["tp"]
+    assert rows["pull_box_fused"]["precision"] == 1.0
+    assert rows["pull_box_fused"]["recall"] == 1.0
+    assert rows["pull_collapse_box_fused"]["n_true"] == 0
+    assert rows["pull_collapse_box_fused"]["n_pred"] == rows["pull_box_fused"]["n_pred"] > 0
+
+
+def test_fitted_boxes_are_mapped_to_their_masks(monkeypatch):
+    """The fit keeps masks 0 and 2 (fitted boxes 0 and 1): the pull of fitted box 0 moving
+    fitted box 1 marks mask 2 from mask 0; mask 1 was not fitted, so not simulated."""
+    from clutterbench.sim import labelling
+    from clutterbench.trials.ch6 import physics_model
+
+    n = 2
+    disp = np.array([[np.nan, 0.05], [0.0, np.nan]])
+    outcome = types.SimpleNamespace(
+        displacement_m=disp,
+        drop_m=np.nan_to_num(disp),
+        tilt_deg=np.zeros((n, n)),
+        left_shelf=np.zeros((n, n), bool),
+    )
+    scene = types.SimpleNamespace(spec=types.SimpleNamespace(meta={"ids": [0, 2]}))
+    monkeypatch.setattr(physics_model, "make_estimator", lambda *a: lambda obs: None)
+    monkeypatch.setattr(physics_model, "scene_of", lambda *a: scene)
+    monkeypatch.setattr(labelling, "pull_outcomes", lambda *a: outcome)
+    from clutterbench.sim.config import SimConfig
+    from clutterbench.trials.config import Ch6TrialParams
+
+    simulate = bf.fitted_pulls(SimConfig(), Ch6TrialParams(), 0.005, (0.01, 15.0), "various", 20)
+    masks = np.zeros((3, 8, 8), bool)
+    for j in range(3):
+        masks[j, j, j] = True
+    marked, known = simulate(np.ones((8, 8), np.float32), masks)
+    assert known.tolist() == [True, False, True]
+    assert np.argwhere(marked["pull"]).tolist() == [[0, 2]]
+    assert np.argwhere(marked["pull_collapse"]).tolist() == [[0, 2]]
