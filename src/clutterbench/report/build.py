@@ -188,7 +188,10 @@ def support_thresholds(path: Path, fusion: Path | None = None) -> dict[str, Any]
     return (
         dict(json_key(path, "chosen"))
         | {f"{head}_box": t for head, t in box.items()}
-        | {f"{head}_box_fused": t for head, t in fused.items()}
+        | {
+            f"{head}_box_fused": {k: v for k, v in t.items() if k != "physics_edge"}
+            for head, t in fused.items()
+        }
         | {f"{head}_physics_pull": {"edge": t["physics_edge"]} for head, t in fused.items()}
     )
 
