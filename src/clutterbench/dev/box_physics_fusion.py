@@ -37,11 +37,10 @@ from clutterbench.support.box_fusion import (
     FusionScene,
     answer_scene,
     choose_edge_threshold,
-    fit_logistic,
+    choose_fusion,
     fitted_pulls,
     graph_scores,
     method_probs,
-    pairs,
 )
 from clutterbench.support.box_train import binary_scores
 
@@ -64,12 +63,15 @@ def cross_fit(scenes: Sequence[FusionScene], kind: str) -> dict[str, Any]:
     weights = []
     for f, held in enumerate(folds):
         fit = [sc for g, part in enumerate(folds) if g != f for sc in part]
-        x_fit, y_fit = pairs(fit, kind)
-        w = fit_logistic(x_fit, y_fit)
+        chosen = choose_fusion(fit, kind)  # as the support stage chooses it on its val scenes
+        w = np.array(chosen["weights"])
         weights.append(w)
+        box_edge = choose_edge_threshold(fit, lambda sc: method_probs(sc, kind, "box_head"), kind)
+        edge = {"box_head": box_edge, "physics_from_depth": chosen["physics_edge"]}
+        edge["fused"] = chosen["edge"]
         for m in METHODS:
             prob = lambda sc, m=m, w=w: method_probs(sc, kind, m, w)  # noqa: E731
-            t = choose_edge_threshold(fit, prob, kind)
+            t = edge[m]
             p, y = _probs_truth(held, kind, m, w)
             out[m]["p"].append(p)
             out[m]["y"].append(y)
