@@ -34,7 +34,6 @@ from clutterbench.support.box_train import (
     train_box_head,
 )
 from clutterbench.support.config import BoxHeadConfig
-from clutterbench.trials.config import Ch6TrialParams
 
 HEADS = ("deletion", "pull", "pull_collapse")
 
@@ -140,9 +139,9 @@ class _FixedMaps(BoxMaps):
 
 
 class _FixedFused(FusedBoxMaps, _FixedMaps):
-    def __init__(self, probs, simulate, band):
+    def __init__(self, probs, simulate, weights):
         _FixedMaps.__init__(self, probs)
-        self.simulate, self.band, self._rows, self._key = simulate, band, {}, None
+        self.simulate, self.weights, self._rows, self._key = simulate, weights, {}, None
 
 
 def _obs() -> Observation:
@@ -170,22 +169,31 @@ def test_box_edges_are_outcome_times_contact_above_the_threshold():
     assert edge_probability(maps.given, "pull_collapse")[0, 1] == pytest.approx(0.81)
 
 
-def test_the_fused_predictor_simulates_only_the_rows_it_is_unsure_of():
-    collapse = np.array([[0, 0.5, 0], [0.02, 0, 0.01], [0, 0.95, 0]], np.float32)
+def test_the_fused_predictor_fuses_each_simulated_row_once_per_observation():
+    collapse = np.array([[0, 0.5, 0.5], [0.02, 0, 0.01], [0, 0.95, 0]], np.float32)
     calls = []
 
     def simulate(obs, ids, box):
         calls.append(box)
+        if box == 1:
+            return None  # the fit dropped box 1: the network's logit alone
         return np.array([False, False, True])  # the fitted boxes say: box 2 falls
 
-    maps = _FixedFused(_probs(collapse, np.ones((3, 3))), simulate, (0.15, 0.85))
+    weights = (1.0, 2.0, -2.0, 0.0)  # logit + 2 when simulated marked, - 2 when not
+    maps = _FixedFused(_probs(collapse, np.ones((3, 3))), simulate, weights)
     obs, ids, masks = _obs(), [0, 1, 2], _masks()
     rows = [maps.box_row(obs, ids, masks, k) for k in range(3)]
-    assert calls == [0]  # only row 0 had a box inside the band
-    assert rows[0].tolist() == [0.0, 0.0, 1.0]
-    assert rows[2].tolist() == pytest.approx([0.0, 0.95, 0.0])
+    assert calls == [0, 1, 2]
+    sig = lambda z: 1 / (1 + np.exp(-z))  # noqa: E731
+    assert rows[0].tolist() == pytest.approx([0.0, sig(-2.0), sig(2.0)])  # 0.5: logit 0
+    assert rows[1].tolist() == pytest.approx([0.02, 0.0, 0.01], abs=1e-6)
+    logit = np.log(0.95 / 0.05)
+    expected = [sig(-2.0 + np.log(1e-4 / (1 - 1e-4))), sig(logit - 2), 0.0]  # 0 clipped to 1e-4
+    assert rows[2].tolist() == pytest.approx(expected, rel=1e-4)
     maps.box_row(obs, ids, masks, 0)  # the same observation: not simulated again
-    assert calls == [0] and maps.simulated == 1
+    assert calls == [0, 1, 2] and maps.simulated == 3
+    with pytest.raises(ValueError, match="fusion weights"):
+        FusedBoxMaps(simulate=simulate, weights=(1.0, 0.0))
 
 
 def test_the_planner_reads_a_per_box_predictor_for_its_graph_and_its_scores():
@@ -201,11 +209,6 @@ def test_the_planner_reads_a_per_box_predictor_for_its_graph_and_its_scores():
     decision = planner.decide(obs, 0, frozenset())
     assert decision.pull == 1  # the box the target carries comes out first
     assert decision.state["edges"] == [[0, 1, 0.9]]
-
-
-def test_a_bad_physics_band_is_refused():
-    with pytest.raises(ValueError, match="box_physics_band"):
-        Ch6TrialParams(box_physics_band=(0.8, 0.2))
 
 
 def test_the_per_box_table_lists_every_method_and_refuses_a_bad_file(tmp_path):

@@ -5,15 +5,16 @@ probabilities, support edges and maps, behind the ch. 6 planner's predictor inte
 planners and the trials that construct it.
 
 `BoxMaps` answers from the network alone. `FusedBoxMaps` is the learned-plus-physics
-predictor: where the network is unsure of a pull (some box's probability inside a band
-around its threshold, chosen on validation pairs), that pull is simulated on the boxes fitted
-to the same depth image (physics from depth) and the simulated outcome replaces the
-network's row; elsewhere the network answers and nothing is simulated.
+predictor: each pull it is asked about is also simulated on the boxes fitted to the same
+depth image (physics from depth, no training), and per box a logistic regression fuses the
+network's logit with the simulated outcome (`fuse`; its weights fitted on validation scenes
+by the support stage, support/box_fusion.py). A pull the fit cannot simulate keeps the
+network's logit alone.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -79,7 +80,7 @@ class BoxMaps:
         **kwargs: object,
     ) -> BoxMaps:
         """From the two checkpoints (the box head refused where it read another network's
-        maps); `kwargs` go to the class (FusedBoxMaps: simulate, band)."""
+        maps); `kwargs` go to the class (FusedBoxMaps: simulate, weights)."""
         model, meta = load_box_head(box_path, cp_model=Path(cp_path).parent.name)
         cp = CollapsePredictor.from_checkpoint(cp_path, image_size=camera.image_size)
         return cls(cp, model, meta, camera, head, edge_threshold, **kwargs)
@@ -119,33 +120,35 @@ class BoxMaps:
 
 
 class FusedBoxMaps(BoxMaps):
-    """BoxMaps, with the pulls the network is unsure of simulated on the fitted boxes: a row
-    (one pulled box) is simulated when it is asked for, once per observation."""
+    """BoxMaps fused per box with physics from depth: a row (one pulled box) is simulated on
+    the fitted boxes when it is asked for, once per observation, and each box's probability
+    is `fuse(weights, ...)` of the network's and the simulated outcome."""
 
-    def __init__(self, *args, simulate: SimulateFn, band: tuple[float, float], **kwargs):
+    def __init__(self, *args, simulate: SimulateFn, weights: Sequence[float], **kwargs):
+        if len(weights) != FUSION_INPUTS + 1:
+            raise ValueError(f"fusion weights {list(weights)}: not {FUSION_INPUTS} and a bias")
         super().__init__(*args, **kwargs)
-        self.simulate, self.band = simulate, band
-        """The band [low, high] of the head's probability in which the network is unsure."""
+        self.simulate, self.weights = simulate, tuple(float(w) for w in weights)
+        """The fusion's weights (head logit, simulated and marked, simulated and not, bias)."""
         self._rows: dict[tuple[int, int], np.ndarray] = {}
         """(observation key, pulled box) -> its fused row, for the last observation."""
         self._key: int | None = None
 
     def box_row(self, obs: Observation, ids: list[int], masks: np.ndarray, k: int) -> np.ndarray:
-        """(K,) the network's row for pulling ids[k], or where it is unsure (some box inside
-        the band) the simulated outcome on the fitted boxes (the network's where the
-        estimate cannot answer)."""
+        """(K,) the fused probability that pulling ids[k] marks each visible box: the
+        network's row fused with the pull simulated on the fitted boxes (the network's logit
+        alone where the estimate cannot answer)."""
         key = hash(obs.depth_m.tobytes())
         if key != self._key:
             self._key, self._rows = key, {}
         if (key, k) not in self._rows:
-            row = super().box_row(obs, ids, masks, k).copy()
-            low, high = self.band
-            if ((row >= low) & (row <= high)).any():
-                outcome = self.simulate(obs, ids, ids[k])
-                self.simulated += 1
-                if outcome is not None:
-                    row = outcome.astype(np.float32)
-                    row[k] = 0.0
+            net = super().box_row(obs, ids, masks, k)
+            outcome = self.simulate(obs, ids, ids[k])
+            self.simulated += 1
+            known = outcome is not None
+            marked = outcome if known else np.zeros(len(ids), bool)
+            row = fuse(self.weights, net, marked, np.bool_(known)).astype(np.float32)
+            row[k] = 0.0
             self._rows[(key, k)] = row
         return self._rows[(key, k)]
 
@@ -154,6 +157,25 @@ class FusedBoxMaps(BoxMaps):
         p = np.stack([self.box_row(obs, ids, masks, k) for k in range(len(ids))])
         contact = self.probs(obs.depth_m, masks)[..., OUTPUTS.index("contact")]
         return _edges(ids, p * contact, self.edge_threshold)
+
+
+FUSION_INPUTS = 3
+"""The fusion's inputs per pair (`features`)."""
+
+
+def features(p: np.ndarray, simulated: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """(..., 3) float64 fusion inputs of pairs: the head's logit, simulated and marked,
+    simulated and not marked (a pull not simulated: both 0)."""
+    q = np.clip(p.astype(np.float64), 1e-4, 1 - 1e-4)
+    sim = np.asarray(simulated, bool)
+    k = np.broadcast_to(np.asarray(known, bool), sim.shape)
+    return np.stack([np.log(q / (1 - q)), k & sim, k & ~sim], -1).astype(np.float64)
+
+
+def fuse(weights: Sequence[float], p: np.ndarray, simulated: np.ndarray, known: np.ndarray):
+    """The fused probability of pairs (p, simulated, known broadcast together)."""
+    w = np.asarray(weights, np.float64)
+    return 1.0 / (1.0 + np.exp(-(features(p, simulated, known) @ w[:-1] + w[-1])))
 
 
 def cp_probs_of(predictor: CollapsePredictor, depth_m: np.ndarray, masks: np.ndarray) -> np.ndarray:

@@ -40,7 +40,8 @@ trials.ch6.score_over, and when_no_plan clear), ch6_hold (how the bimanual pull
 planners score and choose a held pull, trials.ch6.truth_hold and hold_feared), ch6_vs_pfd
 (the pull-head CP planners against physics from depth, the params' own settings, on more
 episodes than a table has), ch6_box (the box-head planners, per box and learned plus physics,
-against physics from depth and the pixel pull planners; trials.ch6.box_physics_band).
+against physics from depth and the pixel pull planners), ch6_box_physics (the box head fused
+per box with physics from depth, support/box_fusion.json, against physics from depth).
 """
 
 from __future__ import annotations
@@ -231,8 +232,8 @@ TITLES = {
     "ch6_vs_pfd": "the ch. 6 pull-head CP planners against physics from depth",
     "ch6_box": "the ch. 6 box-head planners (per box, and learned plus physics) against "
     "physics from depth",
-    "ch6_box_physics": "the ch. 6 learned-plus-physics planners (the box head, the pulls it is "
-    "unsure of simulated on the fitted boxes) against physics from depth",
+    "ch6_box_physics": "the ch. 6 learned-plus-physics planners (the box head fused per box "
+    "with each pull simulated on the fitted boxes) against physics from depth",
     "ch6_release": "how the ch. 6 executor lets go of an aborted pull's box and of a held box "
     "(every planner and both search oracles under each variant)",
 }

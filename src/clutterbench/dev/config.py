@@ -242,9 +242,8 @@ class DevConfig:
             against={"multi_step_box": "physics_from_depth"},
         )
     )
-    """The box-head planners against physics from depth and the pixel pull planners, and
-    the learned-plus-physics band (trials.ch6.box_physics_band; python -m
-    clutterbench.dev.ch6_pull ch6_box)."""
+    """The box-head planners against physics from depth and the pixel pull planners (python
+    -m clutterbench.dev.ch6_pull ch6_box)."""
     ch6_box_physics: Ch6PullConfig = dataclasses.field(
         default_factory=lambda: Ch6PullConfig(
             variants={"current": {}},
@@ -254,7 +253,7 @@ class DevConfig:
         )
     )
     """The learned-plus-physics planners against physics from depth, episode by episode (a
-    section of its own: each decision simulates the pulls the box head is unsure of; python -m
+    section of its own: each decision simulates every pull it asks the box head about; python -m
     clutterbench.dev.ch6_pull ch6_box_physics)."""
     ch6_release: Ch6PullConfig = dataclasses.field(
         default_factory=lambda: Ch6PullConfig(

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from clutterbench.collapse.box_head import EDGE_HEADS, OUTPUTS, off_diagonal
+from clutterbench.collapse.box_predict import features, fuse
 from clutterbench.planning.ch6.support import edge_precision_recall
 from clutterbench.support.box_train import THRESHOLDS, choose_threshold
 
@@ -47,15 +48,6 @@ class FusionScene:
     """(K, K) bool: x and y touch in the settled scene."""
 
 
-def features(p: np.ndarray, simulated: np.ndarray, known: np.ndarray) -> np.ndarray:
-    """(..., 3) float64 fusion inputs of pairs: the head's logit, simulated and marked,
-    simulated and not marked (a pull not simulated: both 0)."""
-    q = np.clip(p.astype(np.float64), 1e-4, 1 - 1e-4)
-    sim = np.asarray(simulated, bool)
-    k = np.broadcast_to(np.asarray(known, bool), sim.shape)
-    return np.stack([np.log(q / (1 - q)), k & sim, k & ~sim], -1).astype(np.float64)
-
-
 def fit_logistic(x: np.ndarray, y: np.ndarray, ridge: float = RIDGE, steps: int = 50) -> np.ndarray:
     """(F + 1,) weights (the last the bias) of an L2-regularised logistic regression of y on
     x (N, F), by Newton's method: deterministic, no learning rate."""
@@ -72,12 +64,6 @@ def fit_logistic(x: np.ndarray, y: np.ndarray, ridge: float = RIDGE, steps: int 
         if np.abs(step).max() < 1e-10:
             break
     return w
-
-
-def fuse(weights: Sequence[float], p: np.ndarray, simulated: np.ndarray, known: np.ndarray):
-    """The fused probability of pairs (p, simulated, known broadcast together)."""
-    w = np.asarray(weights, np.float64)
-    return 1.0 / (1.0 + np.exp(-(features(p, simulated, known) @ w[:-1] + w[-1])))
 
 
 def method_probs(sc: FusionScene, kind: str, method: str, weights=None) -> np.ndarray:

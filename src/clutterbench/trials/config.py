@@ -45,8 +45,8 @@ meaning) and of the trials' own pull; the same two on the collapse predictor's p
 arm and with a holding arm; a uniformly random visible box each step; the search on boxes
 fitted to each observation instead of the true scene, one arm and holding
 (planning/ch6/physics_depth.py); Algorithm 1 on the box head's per-box predictions
-(`*_box`: no pixel rule, collapse/box_predict.py) and on those predictions with the pulls the
-network is unsure of simulated on the fitted boxes (`*_box_physics`: learned plus physics)."""
+(`*_box`: no pixel rule, collapse/box_predict.py) and on those predictions fused per box with
+each pull simulated on the fitted boxes (`*_box_physics`: learned plus physics)."""
 
 
 PULL_HEAD_PLANNERS = ("multi_step_pull", "bimanual_pull")
@@ -55,7 +55,11 @@ which one: PULL_MAP_HEADS), with the support thresholds the support stage chose 
 head (`<head>_<rule>`)."""
 BOX_PLANNERS = ("multi_step_box", "bimanual_box", "multi_step_box_physics", "bimanual_box_physics")
 """The CP planners that read the box head (stage box_head) on the head of pull_map_meaning,
-with the thresholds the support stage chose for it on validation scenes (`box_head`)."""
+with the thresholds the support stage chose for it on validation scenes (`box_head`; the
+`*_box_physics` ones the fusion's, support/box_fusion.json)."""
+BOX_PHYSICS_PLANNERS = ("multi_step_box_physics", "bimanual_box_physics")
+"""The box planners that fuse the box head with physics from depth (collapse/box_predict.py
+FusedBoxMaps)."""
 PULL_MAP_HEADS = {"moved": "pull", "collapse": "pull_collapse"}
 """trials.ch6.pull_map_meaning -> the collapse predictor's head (data.labels.LABEL_KINDS)
 whose maps mean the same: every box the pull moves, or only what it collapses."""
@@ -160,10 +164,6 @@ class Ch6TrialParams:
     """The second arm lets go of the box it held where it holds it (drop: in mid-air when the
     pull took what it rested on), or first sets it down onto what is below it (lower).
     Executed steps, the search oracles and the truth maps of the pull alike."""
-    box_physics_band: tuple[float, float] = (0.15, 0.85)
-    """The learned-plus-physics planners (`*_box_physics`) simulate a pull on the fitted boxes
-    when the box head gives some other box a probability inside [low, high] for it (the
-    network unsure); outside it the network answers alone."""
 
     def release(self) -> dict[str, bool]:
         """execute_pull's options for releasing a pulled or held box (sim/pull.py)."""
@@ -171,13 +171,6 @@ class Ch6TrialParams:
             "return_aborted": self.abort_release == "back",
             "lower_held": self.held_release == "lower",
         }
-
-    def __post_init__(self) -> None:
-        low, high = self.box_physics_band
-        if not 0.0 <= low <= high <= 1.0:
-            raise ValueError(
-                f"box_physics_band: {list(self.box_physics_band)} is not 0 <= low <= high <= 1"
-            )
 
     ch4_model: str = "ch4_various"
     """The chapter 4 network (a key of train.models) of the single-step rows: the thesis'

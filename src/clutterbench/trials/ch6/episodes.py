@@ -35,6 +35,7 @@ from clutterbench.trials.ch6.planners import (  # noqa: F401  (register_planner,
     BOX_HEAD,
     CP_PLANNERS,
     PLANNERS,
+    box_fusion,
     box_thresholds,
     chosen_support,
     load_planners,
@@ -44,6 +45,7 @@ from clutterbench.trials.ch6.planners import (  # noqa: F401  (register_planner,
     truth_maps_of,
 )
 from clutterbench.trials.config import (
+    BOX_PHYSICS_PLANNERS,
     BOX_PLANNERS,
     PULL_HEAD_PLANNERS,
     PULL_MAP_HEADS,
@@ -415,13 +417,18 @@ def planner_support(
 
 
 def box_fields(thresholds: Path, planner: str, ch6: Any) -> tuple[dict[str, Any], float | None]:
-    """A box planner's job fields (its head's checkpoint and edge threshold) and its cp_max
-    (the box head's outcome threshold), both chosen on validation scenes by the support stage;
-    ({}, None) for any other planner. One line when the box head is missing."""
+    """A box planner's job fields (its head's checkpoint, edge threshold and, learned plus
+    physics, its fusion's weights) and its cp_max (the outcome threshold), all chosen on
+    validation scenes by the support stage; ({}, None) for any other planner. One line when
+    the box head is missing."""
     if planner not in BOX_PLANNERS:
         return {}, None
     if not BOX_HEAD.exists():
         raise ClutterbenchError(f"{BOX_HEAD} missing (planner {planner} reads it); run box_head")
+    if planner in BOX_PHYSICS_PLANNERS:
+        edge, outcome, weights = box_fusion(thresholds, ch6.pull_map_meaning)
+        fields = {"box_head_path": BOX_HEAD, "box_edge_threshold": edge, "box_fusion": weights}
+        return fields, outcome
     edge, outcome = box_thresholds(thresholds, ch6.pull_map_meaning)
     return {"box_head_path": BOX_HEAD, "box_edge_threshold": edge}, outcome
 

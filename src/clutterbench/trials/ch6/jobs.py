@@ -44,3 +44,7 @@ class Ch6Job(ShelfJob):
     box_edge_threshold: float | None = None
     """The box planners' support edge where its probability exceeds this (the support
     stage's choice on validation scenes; None: not a box planner)."""
+    box_fusion: tuple[float, ...] | None = None
+    """The learned-plus-physics box planners' fusion weights (head logit, simulated and
+    marked, simulated and not, bias; the support stage's fit on validation scenes; None:
+    another planner)."""

@@ -102,6 +102,26 @@ def box_thresholds(thresholds: Path, meaning: str) -> tuple[float, float]:
         ) from None
 
 
+def box_fusion(thresholds: Path, meaning: str) -> tuple[float, float, tuple[float, ...]]:
+    """(edge, outcome, weights) of the box head fused with physics from depth on the head of
+    pull_map_meaning `meaning`: its support-edge and outcome thresholds and its logistic
+    weights, chosen on validation scenes by the support stage, which writes them beside
+    `thresholds` (box_fusion.json)."""
+    from clutterbench.io import read_json
+
+    head = PULL_MAP_HEADS[meaning]
+    path = thresholds.with_name("box_fusion.json")
+    try:
+        chosen = read_json(path)["chosen"][head]
+        weights = tuple(float(w) for w in chosen["weights"])
+        return float(chosen["edge"]), float(chosen["outcome"]), weights
+    except (OSError, KeyError, TypeError, ValueError) as exc:
+        raise ClutterbenchError(
+            f"{path}: no box-head fusion for the {head} head ({exc}); rerun the support stage "
+            "after box_head"
+        ) from None
+
+
 def register_planner(name: str):
     """Register a ch. 6 planner factory under `name` (usable as a condition's planner)."""
 
@@ -243,8 +263,8 @@ def _box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = F
     """Algorithm 1 on the box head's per-box predictions of the head of pull_map_meaning:
     its support graph (no pixel rule), each box's probability as its collapse score against
     cp_max (the head's own threshold, chosen on validation pairs); the pull planners' other
-    choices. `physics`: the pulls the network is unsure of simulated on the fitted boxes
-    (collapse/box_predict.py FusedBoxMaps)."""
+    choices. `physics`: each pull also simulated on the fitted boxes and fused per box with
+    the network (collapse/box_predict.py FusedBoxMaps; the fusion's thresholds)."""
     from clutterbench.collapse.box_predict import BoxMaps, FusedBoxMaps
 
     params: Ch6TrialParams = job.params
@@ -252,8 +272,9 @@ def _box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = F
     head = PULL_MAP_HEADS[params.pull_map_meaning]
     args = (job.model_path, job.box_head_path, job.camera, head, job.box_edge_threshold)
     if physics:
+        assert job.box_fusion is not None, job.planner
         simulate = fitted_pull(job, spec, head)
-        maps = FusedBoxMaps.from_paths(*args, simulate=simulate, band=params.box_physics_band)
+        maps = FusedBoxMaps.from_paths(*args, simulate=simulate, weights=job.box_fusion)
     else:
         maps = BoxMaps.from_paths(*args)
     return CollapseGraphPlanner(
