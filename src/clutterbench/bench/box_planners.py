@@ -1,10 +1,11 @@
 """`make bench`, box-planner part: the decision time per step of the box-head planners on one
-core, the network alone (`*_box`) against learned plus physics (`*_box_physics`: the pulls the
-network is unsure of simulated on the fitted boxes), with the pulls simulated per decision ->
+core, the network alone (`*_box`) against learned plus physics (`*_box_physics`: the network fused
+per box with each pull simulated on the fitted boxes), with the pulls simulated per decision ->
 reports/bench/box_planners.{json,md}.
 
 Episodes on bench scenes of the 3-10 stream (seed 99, never a table's). Needs the collapse
-predictor, the box head and the support thresholds; skipped with a message when missing.
+predictor, the box head and the support stage's thresholds and fusion; skipped with a message
+when missing.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from clutterbench.platform_info import cpu_description
 EPISODES = 6
 PLANNERS = ("multi_step_box", "multi_step_box_physics", "bimanual_box", "bimanual_box_physics")
 THRESHOLDS = Path("reports/support/thresholds.json")
+FUSION = THRESHOLDS.with_name("box_fusion.json")
 
 
 def bench_box_planners(out_dir: Path = Path("reports/bench"), episodes: int = EPISODES) -> dict:
@@ -35,10 +37,10 @@ def bench_box_planners(out_dir: Path = Path("reports/bench"), episodes: int = EP
     params = load_params("params.yaml")
     trials = load_section(TrialsConfig, "trials", params)
     model = Path(f"models/{trials.ch6.model}/best.pt")
-    if not (model.exists() and BOX_HEAD.exists() and THRESHOLDS.exists()):
+    if not all(p.exists() for p in (model, BOX_HEAD, THRESHOLDS, FUSION)):
         print(
-            "bench box_planners: skipped (needs the collapse predictor, the box head and "
-            "reports/support/thresholds.json; run dvc repro support)"
+            "bench box_planners: skipped (needs the collapse predictor, the box head, "
+            f"{THRESHOLDS} and {FUSION}; run dvc repro support)"
         )
         return {}
     torch.set_num_threads(1)
