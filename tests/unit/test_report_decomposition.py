@@ -103,3 +103,16 @@ def test_the_robust_oracles_gap_is_beside_the_decomposition(tmp_path):
     decomposition_table(by_condition | robust, tmp_path, "tiny")
     text = (tmp_path / "table_6_3_decomposition.md").read_text()
     assert "points below the robust oracle" in text and "50.0 [" in text
+
+
+def test_every_planner_that_may_hold_is_measured_against_the_holding_oracle():
+    from clutterbench.report.decomposition import ORACLE_OF
+    from clutterbench.report.table_6_3 import MATCHING_ORACLE
+    from clutterbench.trials.config import PLANNERS
+
+    holding = [p for p in PLANNERS if p.startswith("bimanual") or p.endswith("_hold")]
+    assert {"bimanual_box", "bimanual_box_physics", "physics_from_depth_hold"} <= set(holding)
+    for planner in holding:
+        assert MATCHING_ORACLE.get(planner, "oracle") == "oracle_hold", planner
+    for planner, oracle in ORACLE_OF.items():
+        assert oracle == ("oracle_hold" if planner in holding else "oracle"), planner

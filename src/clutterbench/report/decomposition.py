@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from clutterbench.report.table_6_3 import MATCHING_ORACLE
 from clutterbench.report.tables import Column, write_raw_csv, write_table
 from clutterbench.trials.config import PULL_MAP_HEADS
 from clutterbench.trials.core.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
@@ -67,16 +68,7 @@ is of the pull (shown in its column)."""
 PULL_TRUTH_OF = {"multi_step": "multi_step_pull_truth", "bimanual": "bimanual_pull_truth"}
 """CP planner -> the same planner on physics-truth maps of the trials' pull."""
 
-ORACLE_OF = {
-    "multi_step": "oracle",
-    "bimanual": "oracle_hold",
-    "multi_step_pull": "oracle",
-    "bimanual_pull": "oracle_hold",
-    "multi_step_box": "oracle",
-    "bimanual_box": "oracle_hold",
-    "multi_step_box_physics": "oracle",
-    "bimanual_box_physics": "oracle_hold",
-}
+ORACLE_OF = {planner: MATCHING_ORACLE.get(planner, "oracle") for planner in TRUTH_OF}
 """CP planner -> its matching search oracle (the one its Table 6.3 row is measured against)."""
 
 CRITERIA = {"success": "collapse-free", "strict_success": "strict"}

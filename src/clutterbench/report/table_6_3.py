@@ -60,6 +60,8 @@ MATCHING_ORACLE = {
     "bimanual_truth": "oracle_hold",
     "bimanual_pull_truth": "oracle_hold",
     "bimanual_pull": "oracle_hold",
+    "bimanual_box": "oracle_hold",
+    "bimanual_box_physics": "oracle_hold",
     "oracle_hold": "oracle_hold",
     "physics_from_depth_hold": "oracle_hold",
 }
