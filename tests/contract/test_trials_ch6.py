@@ -23,6 +23,7 @@ from clutterbench.trials.ch6.episodes import (
     run_extraction,
 )
 from clutterbench.trials.config import (
+    BOX_PHYSICS_PLANNERS,
     BOX_PLANNERS,
     PULL_HEAD_PLANNERS,
     SceneStreamConfig,
@@ -452,19 +453,20 @@ def test_every_planner_gives_a_judged_record(
     if planner in BOX_PLANNERS:  # the box head over a three-head CP's maps
         cp = tiny_cp_three_heads
         box = {"box_head_path": tiny_box_head, "box_edge_threshold": 0.5, "cp_max": 0.5}
+        if planner in BOX_PHYSICS_PLANNERS:  # the fusion: the head's logit and the simulation
+            box["box_fusion"] = (1.0, 2.0, -2.0, 0.0)
     job = dataclasses.replace(_jobs(planner, cp, 1)[0], ch4_model_path=tiny_ch4, **box)
     rec = run_ch6_episode(job).record
     assert rec["planner"] == planner and rec["steps"]
     if planner in PULL_HEAD_PLANNERS:  # the record says which head its maps came from
         assert rec["collapse_maps"] == "predicted by the pull head"
         assert rec["support_method"] == f"pull_{rec['rule']}"
-    if planner in BOX_PLANNERS:  # ... and that they were per box, simulated where unsure
+    if planner in BOX_PLANNERS:  # ... and that they were per box, fused with the simulation
         assert rec["collapse_maps"].startswith("predicted by the pull head per box (box head)")
-        assert rec["collapse_maps"].endswith("simulated where unsure") == planner.endswith(
-            "_physics"
-        )
-        # an untrained head is unsure of every pull: the fused planner simulates them
-        assert (rec["box_pulls_simulated"] > 0) == planner.endswith("_physics")
+        fused = rec["collapse_maps"].endswith("fused with each pull simulated on the fitted boxes")
+        assert fused == (planner in BOX_PHYSICS_PLANNERS)
+        # the fused planner simulates every pull it asks about, the network alone none
+        assert (rec["box_pulls_simulated"] > 0) == (planner in BOX_PHYSICS_PLANNERS)
     assert rec["success"] == (rec["end"] == "target_out")
     for s in rec["steps"]:
         expected = (s["extracted"] and s["collapse_free"]) if s["counted"] else None

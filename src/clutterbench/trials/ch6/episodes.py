@@ -354,7 +354,11 @@ class Extraction:
                 (
                     f"predicted by the {PULL_MAP_HEADS[job.params.pull_map_meaning]} head"
                     + (" per box (box head)" if job.planner in BOX_PLANNERS else "")
-                    + (", simulated where unsure" if job.planner.endswith("_physics") else "")
+                    + (
+                        ", fused with each pull simulated on the fitted boxes"
+                        if job.planner in BOX_PHYSICS_PLANNERS
+                        else ""
+                    )
                     if job.planner in PULL_HEAD_PLANNERS + BOX_PLANNERS
                     else "predicted"
                 )
