@@ -259,9 +259,10 @@ def _ray_map(
     finally:
         if started:
             ray.shutdown()
-        else:  # an instance this run did not start goes on: its jobs of this run stop
-            for ref in pending:
-                ray.cancel(ref)
+        # an instance this run did not start goes on: the jobs already submitted (a window
+        # at most) run to their end there, their results dropped with the references. Not
+        # ray.cancel: a cancel that races a finishing task aborts this process inside Ray
+        # ("Tried to complete task that was not pending", seen with ray 2.58 on 2 cores)
 
 
 def _ray_result(ray: Any, label: str, job: Any, ref: Any, retries: int) -> Any:
