@@ -47,6 +47,34 @@ def test_a_record_mixes_no_machines(tmp_path):
         collect(tmp_path)
 
 
+def test_a_run_that_missed_a_stage_is_no_whole_record_but_may_be_a_partial_one(tmp_path):
+    from clutterbench.bench.run_times import readme_block
+
+    timing(tmp_path, "train@a", 60.0)
+    timing(tmp_path, "report", 30.0)
+    expected = {"train@a", "train@b", "report", "trials"}
+    with pytest.raises(ClutterbenchError, match=r"2 stage\(s\) have no timing.*train@b, trials"):
+        collect(tmp_path, expected)
+    rec = collect(tmp_path, expected, partial=True)
+    assert rec["partial"] and rec["missing"] == ["train@b", "trials"]
+    assert rec["total_minutes"] == 1.5
+    md = table(rec)
+    assert "**stages run**" in md and "Not run (partial record): train@b, trials." in md
+    whole = collect(tmp_path, {"train@a", "report"})
+    assert "partial" not in whole and "**all stages**" in table(whole)
+    assert "No whole default-scale run" in readme_block([_record(100.0) | {"partial": True}])
+
+
+def test_the_pipelines_stages_are_dvc_yamls_with_foreach_expanded():
+    from pathlib import Path
+
+    from clutterbench.bench.run_times import pipeline_stages
+
+    names = pipeline_stages(Path(__file__).resolve().parents[2])
+    assert {"train@cp_focal", "report", "trials", "generate@ch6"} <= names
+    assert not any(n in ("train", "generate") for n in names)
+
+
 def test_no_timings_is_one_line(tmp_path):
     with pytest.raises(ClutterbenchError, match="no stage timings"):
         collect(tmp_path)
