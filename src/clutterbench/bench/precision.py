@@ -1,17 +1,18 @@
-"""Do fp32 networks give statistically the same tables as bf16 ones? (README: Determinism)
+"""Do two runs of the networks' stages give statistically the same tables? (README: Determinism)
 
-`make crosscheck` asks that of the data; this asks it of the networks. Run the networks'
-stages in one precision on this machine (e.g. `dvc repro evaluate@cp_focal_ch6_test support`
-with `precision: auto` on a CPU that resolves it to fp32), then compare the outputs in the
-working tree with those committed at a git revision (made in the other precision):
+`make crosscheck` asks that of the data; this asks it of the networks: fp32 against bf16
+networks, or the whole pipeline rerun on another CPU. Run the networks' stages on this machine
+(e.g. `dvc repro evaluate@cp_focal_ch6_test support` with `precision: auto` on a CPU that
+resolves it to fp32, or a whole `make repro`), then compare the outputs in the working tree
+with those committed at a git revision (made in the other precision, or on the other CPU):
 
-    python -m clutterbench.bench.precision --against HEAD
+    python -m clutterbench.bench.precision --against HEAD [--out reports/bench]
 
 Compared, for whatever both sides have: each model's training summary (best epoch, val
 scores), each evaluation's pixel scores (Table 5.1 / 6.1 rows), Table 6.2's per-scene
 support precision / recall (paired: the test scenes are the same), and each trials
 condition's episode and step success (Wilson 95% intervals, two-proportion z-test). Writes
-reports/bench/precision.{json,md}.
+precision.{json,md} into --out (default reports/bench).
 """
 
 from __future__ import annotations
@@ -125,10 +126,11 @@ def _share(k: int, n: int) -> str:
 
 
 def markdown(result: dict[str, Any]) -> list[str]:
-    lines = header("fp32 vs bf16 networks: the same tables statistically?", result)
+    lines = header("Two runs of the networks: the same tables statistically?", result)
     lines += [
-        f"Committed outputs at `{result['against']}` (old) against this working tree (new). "
-        "Only outputs that differ are listed.",
+        f"Committed outputs at `{result['against']}` (old) against this working tree (new), for "
+        "example fp32 against bf16 networks, or a run on another CPU. Only outputs that differ "
+        "are listed.",
         "",
     ]
     if result["training"]:
@@ -193,6 +195,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m clutterbench.bench.precision")
     parser.add_argument("--against", default="HEAD", help="git revision of the old outputs")
     parser.add_argument("--root", type=Path, default=Path("."), help="repository root")
+    parser.add_argument(
+        "--out", type=Path, default=Path("reports/bench"), help="folder of the report (in root)"
+    )
     args = parser.parse_args(argv)
     root = args.root.resolve()
     result: dict[str, Any] = {
@@ -206,7 +211,7 @@ def main(argv: list[str] | None = None) -> int:
     if not any(result[k] for k in ("training", "evaluation", "support", "trials")):
         print("precision: no output differs from the committed one; nothing to compare")
         return 1
-    write_result(root / "reports/bench", "precision", result, markdown(result))
+    write_result(root / args.out, "precision", result, markdown(result))
     print("\n".join(markdown(result)))
     return 0
 
