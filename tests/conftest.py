@@ -59,7 +59,7 @@ def tiny_cp(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def tiny_cp_heads(tmp_path_factory) -> Path:
-    """An untrained collapse predictor with a deletion and a pull head (issue 50)."""
+    """An untrained collapse predictor with a deletion and a pull head."""
     meta = {"epoch": 0, "heads": ["deletion", "pull"]}
     return _untrained(tmp_path_factory, "cp_heads", meta, n_classes=2)
 

@@ -486,7 +486,7 @@ def test_the_plan_env_replays_a_committed_episode(plan_env, condition, episode):
     mine = plan_env.unwrapped.episode_result().record
     keys = ("end", "success", "strict_success", "counted_steps", "strict_steps")
     assert {k: mine[k] for k in keys} == {k: rec[k] for k in keys}
-    # records before issue 50 named it target_out
+    # records before the pull-outcome labels named it target_out
     assert mine["target_extracted"] == rec.get("target_extracted", rec.get("target_out"))
 
 

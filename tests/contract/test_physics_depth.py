@@ -1,4 +1,4 @@
-"""The physics-from-depth planner (issue 39): boxes fitted to one observation, a valid
+"""The physics-from-depth planner: boxes fitted to one observation, a valid
 estimated scene, and a planner that sees the observation only."""
 
 from __future__ import annotations
@@ -163,7 +163,7 @@ def _refuse(*args, **kwargs):
 
 
 def test_a_perception_failure_is_recorded_in_the_episode_not_raised(stack3, monkeypatch):
-    """Issue 53: an observation the world model cannot make a scene of ends nothing: the
+    """An observation the world model cannot make a scene of ends nothing: the
     step records the failure, the planner pulls the target, the record counts it."""
     import clutterbench.trials.ch6.physics_model as physics_model
 

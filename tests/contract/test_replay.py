@@ -102,7 +102,7 @@ def test_stacked_removals_move_something_and_clusters_cover_every_box(shards):
 
 
 def test_stored_pull_outcomes_replay_as_the_trials_pull(tmp_path, camera):
-    """Issue 50's labels: the stored outcome of pulling each box is what the trials' executor
+    """The pull-outcome labels: the stored outcome of pulling each box is what the trials' executor
     does from the stored start, bit for bit; without the trials' pull the stage refuses."""
     from clutterbench.errors import ClutterbenchError
     from clutterbench.sim.pull import SceneState, execute_pull, world_at

@@ -305,7 +305,7 @@ def test_a_truth_map_covers_exactly_the_boxes_its_removal_moves(spec_path, physi
 
 @pytest.mark.parametrize("spec_path", [STACK3, HOLD_QUIET])
 def test_a_pull_truth_map_is_what_executing_the_whole_pull_moves(spec_path, physics):
-    """Issue 50: the map of pulling x is the boxes that executing the trials' whole pull of x
+    """The pull truth: the map of pulling x is the boxes that executing the trials' whole pull of x
     moves beyond the label threshold or off the shelf, bit for bit (the same executor, the
     same increments, from the same state)."""
     from clutterbench.planning.ch6.extraction import visible_objects

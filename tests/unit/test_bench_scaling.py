@@ -1,4 +1,4 @@
-"""bench.scaling's arithmetic (issue 52): per-job costs, efficiency and Ray's overhead from
+"""bench.scaling's arithmetic: per-job costs, efficiency and Ray's overhead from
 the cases, and the paper scale costed from them (hand-made cases; no backend runs); and the
 bench's workloads (bench.workloads): each a stage's own jobs on the bench's seed, only the
 conditions it may run without a trained network (built, never run)."""
@@ -249,3 +249,24 @@ def test_every_workload_costs_its_stage(bench):
     assert "no_convnet" in rows["trials_ch3"]["cost_of"]
     assert rows["trials_arm"]["cost_of"].startswith("an arm-level episode (Pandas) of various_5")
     assert not any("not measured" in line for line in cost_markdown(paper_cost(full)))
+
+
+def test_busy_cores_count_the_workers_the_case_waited_for():
+    import subprocess
+    import sys
+
+    before = scaling.cpu_seconds()
+    burn = "import time\nt = time.process_time()\nwhile time.process_time() - t < 0.3: pass"
+    subprocess.run([sys.executable, "-c", burn], check=True)
+    assert scaling.cpu_seconds() - before >= 0.3
+
+
+def test_busy_cores_cell_is_of_the_processes_backend_only():
+    case = _case("generate", "processes", 2, 10.0) | {"cpu_s": 16.0, "jobs_per_s": 0.4}
+    assert scaling.busy_cell(case) == "1.60 (80%)"
+    assert scaling.busy_cell(case | {"backend": "ray"}) == ""
+    assert scaling.busy_cell(_case("generate", "processes", 2, 10.0)) == ""  # an older bench
+    machine = {"cpu_model": "test CPU", "logical_cpus": 2, "torch_threads": 2, "machine": "x"}
+    result = {"scale": "default", **machine, "cases": [case], "derived": {}}
+    lines = scaling.ray_markdown(result)
+    assert any(line.endswith("| 1.60 (80%) |") for line in lines)

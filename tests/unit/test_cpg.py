@@ -126,7 +126,7 @@ def test_duplicate_edges_keep_the_highest_score_and_self_support_is_rejected():
 
 
 def test_bimanual_clears_the_held_boxs_load_first_when_asked():
-    """Issue 50: the held box is let go after the pull and what it carries falls then; with
+    """The held box is let go after the pull and what it carries falls then; with
     clear_hold_load its subtree goes first, leaves first, then the held pull."""
     g = build_cpg(edges((0, 1, 0.9), (1, 2, 0.9), (2, 3, 0.9)), target=0)
     assert bimanual_plan(g, 0) == BimanualPlan(hold=1, pull=0, steps_to_target=0)  # thesis

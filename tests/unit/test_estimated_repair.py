@@ -1,4 +1,4 @@
-"""The estimate's repair is total (issue 53): any fit of boxes to a depth image becomes a
+"""The estimate's repair is total: any fit of boxes to a depth image becomes a
 scene that `validate_spec` accepts. A property test over adversarial fits (centres outside
 every wall and above the top board, boxes inside each other, lifted boxes pushed out of the
 top, sizes from every catalogue, fits that are no box) and the fit that stopped a whole
@@ -47,7 +47,7 @@ def _adversarial_fit(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.n
     elif mode == 2:  # a tower lifted out of the top
         centres[:, :2] = centres[0, :2]
         centres[:, 2] = SHELF.height_m - 0.02 + 0.03 * np.arange(n)
-    elif mode == 3:  # in front of the opening, near the front edge (the fit of issue 53)
+    elif mode == 3:  # in front of the opening, near the front edge (the fit that stopped a run)
         centres[:, 0] = rng.uniform(-0.06, 0.01, n)
     upright = rng.random() < 0.7
     quats = np.array([_random_quat(rng, upright) for _ in range(n)])
@@ -111,9 +111,9 @@ def physics() -> PhysicsConfig:
 
 
 def test_the_fit_that_stopped_make_repro_gives_a_scene(physics):
-    """Issue 53's box 7: a centre 8 mm in front of the opening, 0.1 m to the side. Before the
-    repair was total it raised 'centre ... is outside the shelf' and ended the support stage;
-    now it is dropped, counted, and the other box stays."""
+    """The box that stopped a run: a centre 8 mm in front of the opening, 0.1 m to the side.
+    Before the repair was total it raised 'centre ... is outside the shelf' and ended the
+    support stage; now it is dropped, counted, and the other box stays."""
     sizes = np.array([[0.06, 0.10, 0.166], [0.06, 0.06, 0.06]])
     poses = np.array(
         [[-0.0084, 0.0994, 0.083, 1, 0, 0, 0], [0.15, -0.05, 0.03, 1, 0, 0, 0]], dtype=float

@@ -1,5 +1,5 @@
 """map_in_workers: a job that raises ends the run with one line naming the run, the job and
-its seed (issue 53), in-process and in worker processes; params.yaml `parallel` is checked,
+its seed, in-process and in worker processes; params.yaml `parallel` is checked,
 and the default backend runs without Ray (its own tests: test_parallel_ray.py)."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""parallel's Ray backend (issue 52): the processes backend's results in the same order, the
+"""parallel's Ray backend: the processes backend's results in the same order, the
 same bytes from real simulation jobs (scene shards, ch. 3 slide data, ch. 6 episodes), a
 worker killed mid-run rerun by Ray with the same bytes out, a job that raises one line naming
 it, an unreachable cluster one line before any job starts.

@@ -1,4 +1,4 @@
-"""Issue 50's protocol fixes, on hand-made pull results (no physics): every executed step is
+"""The pull protocol's fixes, on hand-made pull results (no physics): every executed step is
 judged with the pulled box included when its pull stopped, a box already off the shelf at a
 step's start is not that step's collapse, and the aborts are counted for what they are."""
 

@@ -1,4 +1,4 @@
-"""The collapse predictor's pull head (issue 50): pull labels (the truth maps' definition),
+"""The collapse predictor's pull head: pull labels (the truth maps' definition),
 datasets with a channel per label kind, a two-head network trained, saved and read per
 head, the config's one-line errors, and the pull rows' plumbing (support thresholds per
 head, the decomposition's pull chain)."""

@@ -1,4 +1,4 @@
-"""Re-judging against outcomes worked out by hand (issue 50, item 6): the re-judging test of
+"""Re-judging against outcomes worked out by hand: the re-judging test of
 the trials re-judges with the same criteria.py that judged, so it cannot catch a bug there.
 Here every expected outcome is written down from the thresholds alone, never computed by
 criteria.py: a bug in collapse_free, still or the episode rule fails this test."""

@@ -1,4 +1,4 @@
-"""Do two runs of the networks' stages give statistically the same tables? (README: Determinism)
+"""Do two runs of the networks' stages give statistically the same tables? (docs/determinism.md)
 
 `make crosscheck` asks that of the data; this asks it of the networks: fp32 against bf16
 networks, or the whole pipeline rerun on another CPU. Run the networks' stages on this machine

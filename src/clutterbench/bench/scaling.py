@@ -18,8 +18,10 @@ Every job times itself in its worker; a case's wall time includes starting its w
 pool, or a local Ray instance and its workers) and shutting them down. Measures per case: jobs
 per second, overhead per job (wall time not spent in jobs, the jobs' time spread over the
 workers; starting the workers and their renderers included, a local Ray instance's own start
-and stop not: that is given apart), parallel efficiency (1-worker wall / (2 x 2-worker wall))
-and whether every case gave the same bytes.
+and stop not: that is given apart), busy cores (the CPU seconds of the case's process and of
+every process it started and waited for, over its wall time; of the processes backend: Ray's
+own processes are not all its children), parallel efficiency (1-worker wall / (2 x 2-worker
+wall)) and whether every case gave the same bytes.
 
     python -m clutterbench.bench.scaling [--scale default] [--shards 8] [--shard-size 5]
                                          [--episodes 16] [--arm-episodes 4]
@@ -32,6 +34,7 @@ import argparse
 import hashlib
 import json
 import os
+import resource
 import subprocess
 import sys
 import time
@@ -80,6 +83,15 @@ def _digest(result: Any) -> str:
     return h.hexdigest()
 
 
+def cpu_seconds() -> float:
+    """User + system CPU seconds of this process and of the children it has waited for (a
+    worker pool's processes once it is shut down)."""
+    own, children = (
+        resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
+    )
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
 def run_case(
     workload: str, backend: str, workers: int, scale: str, shards: int, shard_size: int, n: int
 ) -> dict[str, Any]:
@@ -87,6 +99,7 @@ def run_case(
     fn, jobs, units = workload_jobs(workload, scale, shards, shard_size, n)
     wrapped = [{"index": k, "fn": fn, "job": job} for k, job in enumerate(jobs)]
     parallel = ParallelConfig(backend=backend)
+    cpu0 = cpu_seconds()
     start = time.perf_counter()
     start_s = shutdown_s = 0.0
     if backend == "ray":
@@ -102,6 +115,7 @@ def run_case(
         ray.shutdown()
         shutdown_s = time.perf_counter() - t
     wall = time.perf_counter() - start
+    cpu_s = cpu_seconds() - cpu0
     job_s = [s for s, _ in results]
     digest = hashlib.sha256("".join(_digest(r) for _, r in results).encode()).hexdigest()
     return {
@@ -116,6 +130,8 @@ def run_case(
         "job_s_sum": float(sum(job_s)),
         "jobs_per_s": len(jobs) / wall,
         "overhead_per_job_s": (wall - start_s - shutdown_s - sum(job_s) / workers) / len(jobs),
+        "cpu_s": cpu_s,
+        "busy_cores": cpu_s / wall,
         "digest": digest,
         "conditions": job_conditions(jobs),
     }
@@ -195,18 +211,20 @@ def ray_markdown(result: dict[str, Any]) -> list[str]:
         "wall time includes starting and stopping the workers (a local Ray instance: start "
         "and shut down given apart). Overhead per job: wall time not spent in jobs (their "
         "summed time over the workers; a Ray instance's start and stop left out), per job. "
-        "`python -m clutterbench.bench.scaling`.",
+        "Busy cores: CPU seconds of the case's processes over its wall time, and that over the "
+        "workers (processes backend only: Ray's own processes are not all children of the "
+        "case). `python -m clutterbench.bench.scaling`.",
         "",
         "| workload | backend | workers | jobs | wall s | Ray start + stop s | jobs/s | "
-        "overhead per job s |",
-        "|---|---|---|---|---|---|---|---|",
+        "overhead per job s | busy cores (of workers) |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for c in result["cases"]:
         ray_s = f"{c['start_s'] + c['shutdown_s']:.2f}" if c["backend"] == "ray" else ""
         lines.append(
             f"| {c['workload']} | {c['backend']} | {c['workers']} | {c['jobs']} | "
             f"{c['wall_s']:.2f} | {ray_s} | {c['jobs_per_s']:.3f} | "
-            f"{c['overhead_per_job_s']:.3f} |"
+            f"{c['overhead_per_job_s']:.3f} | {busy_cell(c)} |"
         )
     lines += [
         "",
@@ -227,11 +245,24 @@ def ray_markdown(result: dict[str, Any]) -> list[str]:
     if target is not None:
         lines += [
             "",
-            f"Issue 52's target (Ray overhead <= 5% of a trials stage's wall time at default "
+            f"The Ray backend's target (overhead <= 5% of a trials stage's wall time at default "
             f"scale on 2 workers), estimated from these numbers for the default `trials` stage "
             f"({target['episodes']} episodes): {100 * target['fraction']:.2f}%.",
         ]
     return lines
+
+
+def busy_cores_text(cpu_s: float, wall_s: float, workers: int) -> str:
+    """'1.62 (81%)': busy cores over the wall time, and their share of the workers."""
+    busy = cpu_s / wall_s if wall_s > 0 else 0.0
+    return f"{busy:.2f} ({100 * busy / workers:.0f}%)"
+
+
+def busy_cell(case: dict[str, Any]) -> str:
+    """A case's busy cores (processes backend; measured only by benches since added)."""
+    if case["backend"] != "processes" or "cpu_s" not in case:
+        return ""
+    return busy_cores_text(case["cpu_s"], case["wall_s"], case["workers"])
 
 
 def trials_target(result: dict[str, Any]) -> dict[str, Any] | None:
