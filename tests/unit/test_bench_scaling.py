@@ -262,7 +262,11 @@ def test_busy_cores_count_the_workers_the_case_waited_for():
 
 
 def test_busy_cores_cell_is_of_the_processes_backend_only():
-    case = _case("generate", "processes", 2, 10.0) | {"cpu_s": 16.0, "jobs_per_s": 0.4}
+    case = _case("generate", "processes", 2, 10.0) | {
+        "cpu_s": 16.0,
+        "busy_cores": 1.6,
+        "jobs_per_s": 0.4,
+    }
     assert scaling.busy_cell(case) == "1.60 (80%)"
     assert scaling.busy_cell(case | {"backend": "ray"}) == ""
     assert scaling.busy_cell(_case("generate", "processes", 2, 10.0)) == ""  # an older bench

@@ -252,17 +252,12 @@ def ray_markdown(result: dict[str, Any]) -> list[str]:
     return lines
 
 
-def busy_cores_text(cpu_s: float, wall_s: float, workers: int) -> str:
-    """'1.62 (81%)': busy cores over the wall time, and their share of the workers."""
-    busy = cpu_s / wall_s if wall_s > 0 else 0.0
-    return f"{busy:.2f} ({100 * busy / workers:.0f}%)"
-
-
 def busy_cell(case: dict[str, Any]) -> str:
-    """A case's busy cores (processes backend; measured only by benches since added)."""
-    if case["backend"] != "processes" or "cpu_s" not in case:
+    """'1.62 (81%)': a case's busy cores and their share of its workers (processes backend;
+    measured only by benches since added)."""
+    if case["backend"] != "processes" or "busy_cores" not in case:
         return ""
-    return busy_cores_text(case["cpu_s"], case["wall_s"], case["workers"])
+    return f"{case['busy_cores']:.2f} ({100 * case['busy_cores'] / case['workers']:.0f}%)"
 
 
 def trials_target(result: dict[str, Any]) -> dict[str, Any] | None:
