@@ -130,3 +130,50 @@ def test_fitted_boxes_are_mapped_to_their_masks(monkeypatch):
     assert known.tolist() == [True, False, True]
     assert np.argwhere(marked["pull"]).tolist() == [[0, 2]]
     assert np.argwhere(marked["pull_collapse"]).tolist() == [[0, 2]]
+
+
+def test_the_trials_fitted_pull_maps_a_held_box_onto_the_fit(monkeypatch):
+    """The fit keeps boxes 0 and 2 of the observation (fitted 0 and 1). A held pull is asked
+    of the fit by fitted indices and answered over the visible ids; a held box the fit
+    dropped cannot be simulated (None)."""
+    from clutterbench.sim import pull
+    from clutterbench.trials.ch6 import physics_model, planners
+
+    asked = []
+
+    class Fit:
+        def __init__(self, *args):
+            pass
+
+        def at(self, *args):
+            pass
+
+        def moved_by_removing(self, box):
+            asked.append((box, None))
+            return np.array([False, False])
+
+        def moved_by_held_pull(self, box, hold):
+            asked.append((box, hold))
+            return np.array([False, True])  # the held box (fitted 1) leaves the shelf
+
+    scene = types.SimpleNamespace(spec=types.SimpleNamespace(meta={"ids": [0, 2]}))
+    monkeypatch.setattr(physics_model, "make_estimator", lambda *a: lambda obs: None)
+    monkeypatch.setattr(physics_model, "scene_of", lambda *a: scene)
+    monkeypatch.setattr(planners, "TruthCollapseMaps", Fit)
+    monkeypatch.setattr(pull, "SceneState", types.SimpleNamespace(start=lambda spec: None))
+    from clutterbench.trials.config import Ch6TrialParams
+
+    job = types.SimpleNamespace(
+        params=Ch6TrialParams(),
+        stream_cfg=types.SimpleNamespace(catalogue="various"),
+        camera=None,
+        physics=None,
+        collapse_free=None,
+    )
+    spec = types.SimpleNamespace(shelf=None)
+    simulate = planners.fitted_pull(job, spec, "pull_collapse")
+    obs = types.SimpleNamespace(depth_m=np.ones((4, 4), np.float32))
+    assert simulate(obs, [0, 1, 2], 0).tolist() == [False, False, False]
+    assert simulate(obs, [0, 1, 2], 0, 2).tolist() == [False, False, True]
+    assert asked == [(0, None), (0, 1)]
+    assert simulate(obs, [0, 1, 2], 0, 1) is None  # box 1 was not fitted

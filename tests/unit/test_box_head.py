@@ -139,9 +139,10 @@ class _FixedMaps(BoxMaps):
 
 
 class _FixedFused(FusedBoxMaps, _FixedMaps):
-    def __init__(self, probs, simulate, weights):
+    def __init__(self, probs, simulate, weights, simulate_held=False):
         _FixedMaps.__init__(self, probs)
         self.simulate, self.weights, self._rows, self._key = simulate, weights, {}, None
+        self.simulate_held = simulate_held
 
 
 def _obs() -> Observation:
@@ -173,7 +174,7 @@ def test_the_fused_predictor_fuses_each_simulated_row_once_per_observation():
     collapse = np.array([[0, 0.5, 0.5], [0.02, 0, 0.01], [0, 0.95, 0]], np.float32)
     calls = []
 
-    def simulate(obs, ids, box):
+    def simulate(obs, ids, box, hold=None):
         calls.append(box)
         if box == 1:
             return None  # the fit dropped box 1: the network's logit alone
@@ -194,6 +195,51 @@ def test_the_fused_predictor_fuses_each_simulated_row_once_per_observation():
     assert calls == [0, 1, 2] and maps.simulated == 3
     with pytest.raises(ValueError, match="fusion weights"):
         FusedBoxMaps(simulate=simulate, weights=(1.0, 0.0))
+
+
+def test_a_held_pull_simulated_on_the_fitted_boxes_judges_the_held_box_too():
+    """Pulling 0 collapses 1 (network 0.6). Held, 1 falls once let go in one fit and is
+    saved in the other: only the simulated held pull tells them apart; left out (Fig. 6.7
+    (d)), the held box is never judged and the held pull always passes."""
+    collapse = np.array([[0, 0.6, 0], [0.05, 0, 0], [0, 0, 0]], np.float32)
+    weights = (1.0, 2.0, -2.0, 0.0)
+    params = SupportParams("coverage", 0.5, 0.5, 2, 0.0)
+    asked = []
+
+    def fit(held_falls: bool):
+        def simulate(obs, ids, box, hold=None):
+            asked.append((box, hold))
+            marked = np.zeros(3, bool)
+            marked[1] = box == 0 and (hold is None or held_falls)
+            return marked
+
+        return simulate
+
+    def score(held_falls: bool, simulate_held: bool) -> float:
+        maps = _FixedFused(_probs(collapse, np.ones((3, 3))), fit(held_falls), weights)
+        maps.simulate_held = simulate_held
+        planner = CollapseGraphPlanner(
+            maps, params, cp_max=0.5, min_pixels=1, bimanual=True, score_over="visible"
+        )
+        return planner.collapse_score(_obs(), 0, hold=1)
+
+    assert score(held_falls=True, simulate_held=False) < 0.01  # box 2 only: 0 clipped
+    assert score(held_falls=False, simulate_held=False) < 0.01
+    assert asked and all(hold is None for _, hold in asked)
+    asked.clear()
+    sig = lambda z: 1 / (1 + np.exp(-z))  # noqa: E731
+    logit = np.log(0.6 / 0.4)
+    assert score(held_falls=True, simulate_held=True) == pytest.approx(sig(logit + 2), rel=1e-5)
+    assert score(held_falls=False, simulate_held=True) == pytest.approx(sig(logit - 2), rel=1e-5)
+    assert (0, 1) in asked  # the held pull itself was simulated
+
+    def unknown(obs, ids, box, hold=None):
+        return None if hold is not None else np.array([False, True, False])
+
+    maps = _FixedFused(_probs(collapse, np.ones((3, 3))), unknown, weights, simulate_held=True)
+    assert maps.held_row(_obs(), [0, 1, 2], _masks(), 0, 1) is None  # the fit cannot answer
+    planner = CollapseGraphPlanner(maps, params, cp_max=0.5, min_pixels=1, score_over="visible")
+    assert planner.collapse_score(_obs(), 0, hold=1) < 0.01  # then the held box is left out
 
 
 def test_the_planner_reads_a_per_box_predictor_for_its_graph_and_its_scores():

@@ -38,10 +38,12 @@ Edge = tuple[int, int, float]
 """(supporter box id, supported box id, probability): one support edge of the box head's graph
 (the planner reads it as planning/ch6/support.py's SupportEdge)."""
 
-SimulateFn = Callable[[Observation, list[int], int], np.ndarray | None]
-"""(observation, visible ids, pulled box id) -> (K,) bool over the visible ids: the boxes the
-pull collapses (or moves, by the head) in the scene fitted to the observation; None where
-the estimate cannot answer (the network's row stays)."""
+SimulateFn = Callable[[Observation, list[int], int, int | None], np.ndarray | None]
+"""(observation, visible ids, pulled box id, held box id or None) -> (K,) bool over the
+visible ids: the boxes the pull collapses (or moves, by the head) in the scene fitted to the
+observation, a held box held during the pull, let go and settled at its end and judged as the
+trials judge a released box; None where the estimate cannot answer (the network's row
+stays)."""
 
 
 class BoxMaps:
@@ -124,33 +126,66 @@ class FusedBoxMaps(BoxMaps):
     the fitted boxes when it is asked for, once per observation, and each box's probability
     is `fuse(weights, ...)` of the network's and the simulated outcome."""
 
-    def __init__(self, *args, simulate: SimulateFn, weights: Sequence[float], **kwargs):
+    def __init__(
+        self,
+        *args,
+        simulate: SimulateFn,
+        weights: Sequence[float],
+        simulate_held: bool = False,
+        **kwargs,
+    ):
         if len(weights) != FUSION_INPUTS + 1:
             raise ValueError(f"fusion weights {list(weights)}: not {FUSION_INPUTS} and a bias")
         super().__init__(*args, **kwargs)
         self.simulate, self.weights = simulate, tuple(float(w) for w in weights)
         """The fusion's weights (head logit, simulated and marked, simulated and not, bias)."""
-        self._rows: dict[tuple[int, int], np.ndarray] = {}
-        """(observation key, pulled box) -> its fused row, for the last observation."""
+        self.simulate_held = simulate_held
+        """Answer a pull made holding a box (`held_row`) from that very held pull simulated
+        on the fitted boxes (trials.ch6.box_hold simulate); False: `held_row` answers None
+        and the planner leaves the held box out of the unheld pull's row (Fig. 6.7 (d))."""
+        self._rows: dict[tuple[int, int, int], np.ndarray] = {}
+        """(observation key, pulled box, held box or -1) -> its fused row, for the last
+        observation."""
         self._key: int | None = None
 
     def box_row(self, obs: Observation, ids: list[int], masks: np.ndarray, k: int) -> np.ndarray:
         """(K,) the fused probability that pulling ids[k] marks each visible box: the
         network's row fused with the pull simulated on the fitted boxes (the network's logit
         alone where the estimate cannot answer)."""
+        row = self._fused_row(obs, ids, masks, k, None)
+        assert row is not None
+        return row
+
+    def held_row(
+        self, obs: Observation, ids: list[int], masks: np.ndarray, k: int, hold: int
+    ) -> np.ndarray | None:
+        """(K,) as box_row for pulling ids[k] while ids[hold] is held, the held box judged
+        too: the network's row (it sees no hold) fused with that held pull simulated on the
+        fitted boxes, the held box let go at its end. None where the held pull is not
+        simulated (simulate_held off, or the fit cannot answer it)."""
+        if not self.simulate_held:
+            return None
+        return self._fused_row(obs, ids, masks, k, hold)
+
+    def _fused_row(
+        self, obs: Observation, ids: list[int], masks: np.ndarray, k: int, hold: int | None
+    ) -> np.ndarray | None:
         key = hash(obs.depth_m.tobytes())
         if key != self._key:
             self._key, self._rows = key, {}
-        if (key, k) not in self._rows:
+        slot = (key, k, -1 if hold is None else hold)
+        if slot not in self._rows:
             net = super().box_row(obs, ids, masks, k)
-            outcome = self.simulate(obs, ids, ids[k])
+            outcome = self.simulate(obs, ids, ids[k], None if hold is None else ids[hold])
             self.simulated += 1
+            if outcome is None and hold is not None:
+                return None
             known = outcome is not None
             marked = outcome if known else np.zeros(len(ids), bool)
             row = fuse(self.weights, net, marked, np.bool_(known)).astype(np.float32)
             row[k] = 0.0
-            self._rows[(key, k)] = row
-        return self._rows[(key, k)]
+            self._rows[slot] = row
+        return self._rows[slot]
 
     def box_edges(self, obs: Observation, ids: list[int], masks: np.ndarray) -> list[Edge]:
         """Edges of the fused outcome and the network's contact."""

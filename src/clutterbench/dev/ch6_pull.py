@@ -11,6 +11,7 @@
     python -m clutterbench.dev.ch6_pull ch6_vs_pfd            # make dev-ch6-vs-pfd
     python -m clutterbench.dev.ch6_pull ch6_box               # make dev-ch6-box
     python -m clutterbench.dev.ch6_pull ch6_box_physics       # make dev-ch6-box-physics
+    python -m clutterbench.dev.ch6_pull ch6_box_hold          # make dev-ch6-box-hold
     python -m clutterbench.dev.ch6_pull ch6_release           # make dev-ch6-release
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
@@ -41,7 +42,9 @@ planners score and choose a held pull, trials.ch6.truth_hold and hold_feared), c
 (the pull-head CP planners against physics from depth, the params' own settings, on more
 episodes than a table has), ch6_box (the box-head planners, per box and learned plus physics,
 against physics from depth and the pixel pull planners), ch6_box_physics (the box head fused
-per box with physics from depth, support/box_fusion.json, against physics from depth).
+per box with physics from depth, support/box_fusion.json, against physics from depth),
+ch6_box_hold (how that planner, bimanual, scores a pull made holding a box, trials.ch6.box_hold),
+ch6_release (how the executor lets go of an aborted pull's box and of a held box).
 """
 
 from __future__ import annotations
@@ -234,6 +237,8 @@ TITLES = {
     "physics from depth",
     "ch6_box_physics": "the ch. 6 learned-plus-physics planners (the box head fused per box "
     "with each pull simulated on the fitted boxes) against physics from depth",
+    "ch6_box_hold": "how the ch. 6 learned-plus-physics bimanual planner scores a pull made "
+    "holding a box (the held box left out, or the held pull simulated on the fitted boxes)",
     "ch6_release": "how the ch. 6 executor lets go of an aborted pull's box and of a held box "
     "(every planner and both search oracles under each variant)",
 }

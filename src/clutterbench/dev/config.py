@@ -101,6 +101,7 @@ CH6_VARIED = (
     "pull_watch_m",
     "hold_feared",
     "truth_hold",
+    "box_hold",
     "abort_release",
     "held_release",
 )
@@ -255,6 +256,15 @@ class DevConfig:
     """The learned-plus-physics planners against physics from depth, episode by episode (a
     section of its own: each decision simulates every pull it asks the box head about; python -m
     clutterbench.dev.ch6_pull ch6_box_physics)."""
+    ch6_box_hold: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(
+            variants={"leave_out": {}, "simulate": {"box_hold": "simulate"}},
+            planners=("bimanual_box_physics",),
+            oracle=False,
+        )
+    )
+    """How the learned-plus-physics bimanual planner scores a held pull (trials.ch6.box_hold;
+    python -m clutterbench.dev.ch6_pull ch6_box_hold)."""
     ch6_release: Ch6PullConfig = dataclasses.field(
         default_factory=lambda: Ch6PullConfig(
             variants={"drop": {}, "lower": {"held_release": "lower"}},
@@ -285,6 +295,7 @@ class DevConfig:
             ("ch6_vs_pfd", self.ch6_vs_pfd.streams),
             ("ch6_box", self.ch6_box.streams),
             ("ch6_box_physics", self.ch6_box_physics.streams),
+            ("ch6_box_hold", self.ch6_box_hold.streams),
             ("ch6_release", self.ch6_release.streams),
         ):
             for name in names:

@@ -227,6 +227,14 @@ class Ch6TrialParams:
     held pull passes (differs from any only on maps that know a held pull: truth_hold
     simulate). never: the candidate is rejected (thesis). Chosen on dev streams
     (make dev-ch6-hold)."""
+    box_hold: Literal["leave_out", "simulate"] = "leave_out"
+    """How the learned-plus-physics bimanual planner (`bimanual_box_physics`) scores a pull
+    made holding a box: leave_out, the unheld pull's fused row with the held box left out
+    (Fig. 6.7 (d): what a network that sees no hold can say; a held box that falls once let
+    go goes unseen); simulate, the network's row fused with that very held pull simulated on
+    the boxes fitted to the depth image, the held box let go at the end and judged as the
+    trials judge a released box (it may settle, it may not leave the shelf). Chosen on dev
+    streams (make dev-ch6-box-hold)."""
     truth_hold: Literal["leave_out", "simulate"] = "leave_out"
     """How the truth-map bimanual pull planners (`bimanual_pull_truth`) score a
     pull made holding a box: leave_out, the map of the unheld pull with the held box left

@@ -74,7 +74,8 @@ whose collapse score exceeds cp_max: never (the candidate is rejected, thesis);
 any, the box that score fears for; free, that box only where it carries nothing in the graph
 (what a held box carries falls when it is let go); search, that box and then every other
 visible one in id order, the first whose held pull passes (with maps that know a held pull,
-predict_held; without them, holding a box only removes its own share, so it is `any`)."""
+predict_held, or a per-box predictor's held_row; without them, holding a box only removes its
+own share, so it is `any`)."""
 
 
 def visible_objects(obs: Observation, min_pixels: int) -> tuple[list[int], np.ndarray]:
@@ -419,7 +420,13 @@ class CollapseGraphPlanner:
         box_row = getattr(self.predict, "box_row", None)
         if box_row is not None:  # a per-box predictor: each box's probability is its share
             near = self._near(obs, masks, k, contact)
-            p = box_row(obs, ids, masks, k)
+            p = self._held_box_row(obs, ids, masks, k, hold)
+            if p is None:
+                p = box_row(obs, ids, masks, k)
+            else:  # the held pull itself: the held box judged as the others
+                near = near.copy()
+                near[ids.index(hold)] = True
+                hold = None
             return {
                 ids[j]: float(p[j])
                 for j in range(len(ids))
@@ -440,6 +447,16 @@ class CollapseGraphPlanner:
             for j in range(len(ids))
             if j != k and near[j] and ids[j] != hold
         }
+
+    def _held_box_row(
+        self, obs: Observation, ids: list[int], masks: np.ndarray, k: int, hold: int | None
+    ) -> np.ndarray | None:
+        """(K,) a per-box predictor's row for pulling ids[k] while `hold` is held, the held
+        box judged too, where it answers for a held pull (`held_row`); else None."""
+        held_row = getattr(self.predict, "held_row", None)
+        if hold is None or held_row is None or hold not in ids:
+            return None
+        return held_row(obs, ids, masks, k, ids.index(hold))
 
     def _near(self, obs: Observation, masks: np.ndarray, k: int, contact: bool) -> np.ndarray:
         """(K,) bool: the objects a share is taken of for object k (its pseudo-direct

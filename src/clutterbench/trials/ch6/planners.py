@@ -264,7 +264,8 @@ def _box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = F
     its support graph (no pixel rule), each box's probability as its collapse score against
     cp_max (the head's own threshold, chosen on validation pairs); the pull planners' other
     choices. `physics`: each pull also simulated on the fitted boxes and fused per box with
-    the network (collapse/box_predict.py FusedBoxMaps; the fusion's thresholds)."""
+    the network (collapse/box_predict.py FusedBoxMaps; the fusion's thresholds); bimanual,
+    a pull made holding a box is simulated holding it where trials.ch6.box_hold says so."""
     from clutterbench.collapse.box_predict import BoxMaps, FusedBoxMaps
 
     params: Ch6TrialParams = job.params
@@ -274,7 +275,12 @@ def _box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = F
     if physics:
         assert job.box_fusion is not None, job.planner
         simulate = fitted_pull(job, spec, head)
-        maps = FusedBoxMaps.from_paths(*args, simulate=simulate, weights=job.box_fusion)
+        maps = FusedBoxMaps.from_paths(
+            *args,
+            simulate=simulate,
+            weights=job.box_fusion,
+            simulate_held=bimanual and params.box_hold == "simulate",
+        )
     else:
         maps = BoxMaps.from_paths(*args)
     return CollapseGraphPlanner(
@@ -284,8 +290,10 @@ def _box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = F
 
 def fitted_pull(job: Ch6Job, spec: SceneSpec, head: str):
     """SimulateFn of FusedBoxMaps: the trials' pull of one box in the scene fitted to the
-    observation (physics from depth's estimate, settled), the boxes it marks by `head`. Of
-    the episode's spec it reads the shelf only; of its stream the catalogue."""
+    observation (physics from depth's estimate, settled), the boxes it marks by `head`; with
+    a held box, the pull made holding it, the held box let go and judged as the trials judge
+    a released box. Of the episode's spec it reads the shelf only; of its stream the
+    catalogue."""
     from clutterbench.errors import PerceptionError
     from clutterbench.sim.pull import SceneState
     from clutterbench.trials.ch6.physics_model import make_estimator, scene_of
@@ -296,7 +304,7 @@ def fitted_pull(job: Ch6Job, spec: SceneSpec, head: str):
     falls = job.collapse_free if head == "pull_collapse" else None
     cache: dict[int, tuple[Any, Any]] = {}  # the last observation's estimate and its maps
 
-    def simulate(obs, ids: list[int], box: int) -> np.ndarray | None:
+    def simulate(obs, ids: list[int], box: int, hold: int | None = None) -> np.ndarray | None:
         key = hash(obs.depth_m.tobytes())  # one estimate per observation
         if key not in cache:
             cache.clear()
@@ -324,9 +332,12 @@ def fitted_pull(job: Ch6Job, spec: SceneSpec, head: str):
             cache[key] = (scene, maps)
         scene, maps = cache[key]
         fitted = [] if scene is None else [int(b) for b in scene.spec.meta["ids"]]
-        if box not in fitted:
+        if box not in fitted or (hold is not None and hold not in fitted):
             return None
-        marked = maps.moved_by_removing(fitted.index(box))
+        if hold is None:
+            marked = maps.moved_by_removing(fitted.index(box))
+        else:
+            marked = maps.moved_by_held_pull(fitted.index(box), fitted.index(hold))
         out = np.zeros(len(ids), bool)
         for j, other in enumerate(fitted):
             if other in ids and marked[j]:
