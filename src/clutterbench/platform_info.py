@@ -106,3 +106,49 @@ def environment() -> dict[str, Any]:
         "sapien": package_version("sapien"),
         "platform": f"{platform.system()} {platform.release()}",
     }
+
+
+PROC_STAT = Path("/proc/stat")
+
+
+def cpu_clock(stat: Path = PROC_STAT) -> dict[str, float | None]:
+    """CPU seconds so far: this process and its waited-for children (`own`), and the whole
+    machine's busy and stolen time from /proc/stat's `cpu` line (`machine`, `steal`; None
+    where it cannot be read). Two readings around a job tell whether it had the cores
+    (cpu_shares)."""
+    import resource
+
+    own = sum(
+        getattr(resource.getrusage(who), field)
+        for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
+        for field in ("ru_utime", "ru_stime")
+    )
+    machine = steal = None
+    try:
+        fields = stat.read_text().splitlines()[0].split()
+        if fields[0] == "cpu":
+            ticks = [int(x) for x in fields[1:]]
+            hz = os.sysconf("SC_CLK_TCK")
+            # user nice system idle iowait irq softirq steal [guest guest_nice: inside user]
+            machine = (sum(ticks[:8]) - ticks[3] - ticks[4] - ticks[7]) / hz
+            steal = ticks[7] / hz if len(ticks) > 7 else 0.0
+    except (OSError, ValueError, IndexError):
+        pass
+    return {"own": own, "machine": machine, "steal": steal}
+
+
+def cpu_shares(start: dict[str, float | None], end: dict[str, float | None], wall_s: float):
+    """Cores on average over `wall_s` between two cpu_clock readings: this job's own
+    (`busy_cores`), the rest of the machine's busy time (`other_cores`: other jobs on the
+    same cores) and the time the hypervisor gave to other machines (`steal_cores`); the
+    last two None where /proc/stat was not read."""
+    wall = max(wall_s, 1e-9)
+    out: dict[str, float | None] = {"busy_cores": round((end["own"] - start["own"]) / wall, 3)}
+    for key, name in (("machine", "other_cores"), ("steal", "steal_cores")):
+        a, b = start[key], end[key]
+        out[name] = None if a is None or b is None else (b - a) / wall
+    if out["other_cores"] is not None:
+        out["other_cores"] = round(max(out["other_cores"] - out["busy_cores"], 0.0), 3)
+    if out["steal_cores"] is not None:
+        out["steal_cores"] = round(out["steal_cores"], 3)
+    return out

@@ -15,7 +15,7 @@ import numpy as np
 from clutterbench.config import BaseConfig, load_base, load_params
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json
-from clutterbench.platform_info import cpu_model
+from clutterbench.platform_info import cpu_clock, cpu_model, cpu_shares
 
 STAGE_TIMING = Path("reports/timing/stages")
 """Where each stage run leaves its wall time (no dvc output: a rerun leaves every tracked
@@ -42,9 +42,9 @@ def run_stage(main: Callable[[dict[str, Any], BaseConfig], None]) -> None:
         params = load_params("params.yaml")
         base = load_base(params)
         seed_everything(base.seed, base.torch_threads)
-        started = time.perf_counter()
+        started, clock = time.perf_counter(), cpu_clock()
         main(params, base)
-        record_wall_time(time.perf_counter() - started, base)
+        record_wall_time(time.perf_counter() - started, base, clock)
     except ClutterbenchError as exc:
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)
@@ -56,9 +56,15 @@ def stage_name(argv: list[str]) -> str:
     return f"{stem}@{'_'.join(argv[1:])}" if argv[1:] else stem
 
 
-def record_wall_time(seconds: float, base: BaseConfig) -> None:
-    """reports/timing/stages/<stage>.json: this run's wall time, scale and machine."""
+def record_wall_time(
+    seconds: float, base: BaseConfig, clock: dict[str, float | None] | None = None
+) -> None:
+    """reports/timing/stages/<stage>.json: this run's wall time, scale and machine; with the
+    cpu_clock reading taken at its start, the cores it kept busy and what else ran on the
+    machine meanwhile (platform_info.cpu_shares: a time measured beside other work is too
+    long, and the record says so)."""
     name = stage_name(sys.argv)
+    shares = cpu_shares(clock, cpu_clock(), seconds) if clock is not None else {}
     write_json(
         STAGE_TIMING / f"{name}.json",
         {
@@ -68,5 +74,6 @@ def record_wall_time(seconds: float, base: BaseConfig) -> None:
             "cores": base.cores,
             "cpu_model": cpu_model(),
             "logical_cpus": os.cpu_count(),
-        },
+        }
+        | shares,
     )

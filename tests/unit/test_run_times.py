@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from clutterbench.bench.run_times import collect, table
@@ -10,7 +12,7 @@ from clutterbench.io import write_json
 from clutterbench.stage import stage_name
 
 
-def timing(d, stage, seconds, cpu="CPU X"):
+def timing(d, stage, seconds, cpu="CPU X", **shares):
     write_json(
         d / f"{stage}.json",
         {
@@ -20,8 +22,64 @@ def timing(d, stage, seconds, cpu="CPU X"):
             "cores": 2,
             "cpu_model": cpu,
             "logical_cpus": 2,
-        },
+        }
+        | shares,
     )
+
+
+def test_a_clock_reading_counts_the_jobs_own_cores_and_the_rest_of_the_machines(tmp_path):
+    from clutterbench.platform_info import cpu_clock, cpu_shares
+
+    hz = os.sysconf("SC_CLK_TCK")
+    stat = tmp_path / "stat"
+    # user nice system idle iowait irq softirq steal
+    stat.write_text(f"cpu  {10 * hz} 0 {2 * hz} {50 * hz} {hz} 0 0 {hz} 0 0\ncpu0 1 2 3\n")
+    a = cpu_clock(stat)
+    assert a["machine"] == pytest.approx(12.0) and a["steal"] == pytest.approx(1.0)
+    b = dict(a, own=a["own"] + 19.0, machine=a["machine"] + 29.0, steal=a["steal"] + 2.0)
+    # 10 s of wall: the job kept 1.9 cores busy, the machine 2.9, 0.2 stolen
+    assert cpu_shares(a, b, 10.0) == {"busy_cores": 1.9, "other_cores": 1.0, "steal_cores": 0.2}
+    stat.write_text("garbage")
+    unread = cpu_clock(stat)
+    assert unread["machine"] is None and unread["steal"] is None
+    assert cpu_shares(unread, unread, 1.0)["other_cores"] is None
+
+
+def test_a_stage_timing_says_whether_it_had_the_cores(tmp_path, monkeypatch):
+    from clutterbench import stage
+    from clutterbench.config import BaseConfig
+    from clutterbench.io import read_json
+
+    readings = iter(
+        [
+            {"own": 0.0, "machine": 100.0, "steal": 0.0},
+            {"own": 18.0, "machine": 128.0, "steal": 0.0},
+        ]
+    )
+    monkeypatch.setattr(stage, "cpu_clock", lambda: next(readings))
+    monkeypatch.setattr(stage, "STAGE_TIMING", tmp_path)
+    monkeypatch.setattr(stage.sys, "argv", ["stages/report.py"])
+    stage.record_wall_time(10.0, BaseConfig(), stage.cpu_clock())
+    rec = read_json(tmp_path / "report.json")
+    assert rec["busy_cores"] == 1.8 and rec["other_cores"] == 1.0 and rec["seconds"] == 10.0
+
+
+def test_a_record_names_the_stages_that_shared_the_cores_and_leaves_dev_timings_out(tmp_path):
+    alone = {"busy_cores": 1.9, "other_cores": 0.02, "steal_cores": 0.0}
+    timing(tmp_path, "train@a", 120.0, **alone)
+    timing(tmp_path, "report", 30.0, busy_cores=1.0, other_cores=0.9, steal_cores=0.0)
+    timing(tmp_path, "trials", 60.0, busy_cores=1.5, other_cores=0.0, steal_cores=0.4)
+    timing(tmp_path, "ch6_pull@ch6_hold", 600.0, **alone)
+    rec = collect(tmp_path, {"train@a", "report", "trials"})
+    assert rec["shared"] == ["report", "trials"] and rec["ignored"] == ["ch6_pull@ch6_hold"]
+    assert rec["total_minutes"] == 3.5
+    md = table(rec)
+    assert "`report` (other work 0.90 cores, stolen 0.00)" in md
+    assert "`trials` (other work 0.00 cores, stolen 0.40)" in md and "`train@a` (" not in md
+    for name in ("report", "trials"):
+        timing(tmp_path, name, 30.0, **alone)
+    rec = collect(tmp_path, {"train@a", "report", "trials"})
+    assert rec["shared"] == [] and "had the cores to itself" in table(rec)
 
 
 def test_stage_name_is_dvc_s():

@@ -8,6 +8,11 @@ README's run-time table from every record in reports/run_times/ (readme_block, b
 RUN_TIMES_BEGIN and RUN_TIMES_END; clutterbench.readme), so the README quotes only measured
 records.
 
+Each timing also says what the stage had of the cores (platform_info.cpu_shares): the
+record lists the stages beside which other work or the hypervisor took more than SHARED_CORES
+cores on average, whose minutes are then upper bounds. Timings of no pipeline stage (a dev
+recheck's) are left out and named.
+
 A record is of a whole run: a stage of dvc.yaml with no timing (a run cut off, a stage
 skipped) stops it with one line naming the missing stages. `--partial` writes what there is
 to reports/run_times/partial/ instead, marked partial with its missing stages, where the
@@ -73,6 +78,10 @@ def collect(
     if not files:
         raise ClutterbenchError(f"{timing_dir}: no stage timings; run dvc repro first")
     runs = [read_json(f) for f in files]
+    ignored = sorted(str(r["stage"]) for r in runs if expected and r["stage"] not in expected)
+    runs = [r for r in runs if not expected or r["stage"] in expected]
+    if not runs:
+        raise ClutterbenchError(f"{timing_dir}: no timing of a pipeline stage; run dvc repro")
     missing = sorted((expected or set()) - {str(r["stage"]) for r in runs})
     if missing and not partial:
         raise ClutterbenchError(
@@ -84,7 +93,13 @@ def collect(
         if len(seen) > 1:
             raise ClutterbenchError(f"{timing_dir}: stage timings of more than one {key}: {seen}")
     stages = {r["stage"]: round(r["seconds"] / 60.0, 2) for r in runs}
-    extra = {"partial": True, "missing": missing} if missing else {}
+    extra: dict[str, Any] = {"partial": True, "missing": missing} if missing else {}
+    if ignored:  # dev rechecks leave timings too (dev/command.py); no stage of the pipeline
+        extra["ignored"] = ignored
+    shares = {r["stage"]: {k: r[k] for k in SHARE_KEYS} for r in runs if "busy_cores" in r}
+    if shares:
+        extra["shares"] = shares
+        extra["shared"] = sorted(n for n, v in shares.items() if shared(v))
     return extra | {
         "cpu_model": runs[0]["cpu_model"],
         "logical_cpus": runs[0]["logical_cpus"],
@@ -94,6 +109,17 @@ def collect(
         "groups": group_minutes(stages),
         "total_minutes": round(sum(stages.values()), 1),
     }
+
+
+SHARE_KEYS = ("busy_cores", "other_cores", "steal_cores")
+"""What a stage's timing says of the cores (platform_info.cpu_shares)."""
+SHARED_CORES = 0.25
+"""A stage shared the cores when other work (or the hypervisor's other machines) took more
+than this many cores on average while it ran: its time is then an upper bound."""
+
+
+def shared(share: dict[str, float | None]) -> bool:
+    return any((share.get(k) or 0.0) > SHARED_CORES for k in ("other_cores", "steal_cores"))
 
 
 def group_minutes(stages: dict[str, float]) -> dict[str, float]:
@@ -125,6 +151,21 @@ def table(record: dict[str, Any]) -> str:
     lines.append(f"| **{what}** | **{record['total_minutes']:.1f}** | |")
     if record.get("partial"):
         lines += ["", f"Not run (partial record): {', '.join(record['missing'])}."]
+    if record.get("shared"):
+        cells = ", ".join(
+            f"`{n}` (other work {record['shares'][n]['other_cores'] or 0:.2f} cores, stolen "
+            f"{record['shares'][n]['steal_cores'] or 0:.2f})"
+            for n in record["shared"]
+        )
+        lines += [
+            "",
+            f"Shared the cores (more than {SHARED_CORES} cores on average taken by other work "
+            f"or stolen by the hypervisor while the stage ran), so their minutes are upper "
+            f"bounds: {cells}.",
+        ]
+    elif record.get("shares"):
+        timed = len(record["shares"])
+        lines += ["", f"Every stage of the {timed} that measured it had the cores to itself."]
     return "\n".join(lines) + "\n"
 
 
