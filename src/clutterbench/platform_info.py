@@ -111,18 +111,23 @@ def environment() -> dict[str, Any]:
 PROC_STAT = Path("/proc/stat")
 
 
-def cpu_clock(stat: Path = PROC_STAT) -> dict[str, float | None]:
-    """CPU seconds so far: this process and its waited-for children (`own`), and the whole
-    machine's busy and stolen time from /proc/stat's `cpu` line (`machine`, `steal`; None
-    where it cannot be read). Two readings around a job tell whether it had the cores
-    (cpu_shares)."""
+def cpu_seconds() -> float:
+    """User + system CPU seconds of this process and of the children it has waited for (a
+    worker pool's processes once it is shut down)."""
     import resource
 
-    own = sum(
-        getattr(resource.getrusage(who), field)
-        for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
-        for field in ("ru_utime", "ru_stime")
+    own, children = (
+        resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
     )
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+def cpu_clock(stat: Path = PROC_STAT) -> dict[str, float | None]:
+    """CPU seconds so far: this process and its waited-for children (`own`, cpu_seconds),
+    and the whole machine's busy and stolen time from /proc/stat's `cpu` line (`machine`,
+    `steal`; None where it cannot be read). Two readings around a job tell whether it had
+    the cores (cpu_shares)."""
+    own = cpu_seconds()
     machine = steal = None
     try:
         fields = stat.read_text().splitlines()[0].split()

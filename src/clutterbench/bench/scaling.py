@@ -34,7 +34,6 @@ import argparse
 import hashlib
 import json
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -55,7 +54,7 @@ from clutterbench.config import load_section
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import read_json, write_json, write_text
 from clutterbench.parallel import BACKENDS, ParallelConfig, connect_ray, map_in_workers
-from clutterbench.platform_info import cpu_description
+from clutterbench.platform_info import cpu_description, cpu_seconds
 
 OUT = Path("reports/bench")
 CASES = [(b, w) for b in ("processes", "ray") for w in (1, 2)]
@@ -81,15 +80,6 @@ def _digest(result: Any) -> str:
     else:
         h.update(json.dumps(result.record, sort_keys=True).encode())
     return h.hexdigest()
-
-
-def cpu_seconds() -> float:
-    """User + system CPU seconds of this process and of the children it has waited for (a
-    worker pool's processes once it is shut down)."""
-    own, children = (
-        resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
-    )
-    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 def run_case(
