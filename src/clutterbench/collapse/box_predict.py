@@ -39,11 +39,11 @@ Edge = tuple[int, int, float]
 (the planner reads it as planning/ch6/support.py's SupportEdge)."""
 
 SimulateFn = Callable[[Observation, list[int], int, int | None], np.ndarray | None]
-"""(observation, visible ids, pulled box id, held box id or None) -> (K,) bool over the
-visible ids: the boxes the pull collapses (or moves, by the head) in the scene fitted to the
-observation, a held box held during the pull, let go and settled at its end and judged as the
-trials judge a released box; None where the estimate cannot answer (the network's row
-stays)."""
+"""(observation, visible ids, pulled box id, held box id or None) -> (K,) float over the
+visible ids: the share of the scenes fitted to the observation in which the pull collapses
+(or moves, by the head) the box (0 or 1 with one fit; a bool array is read as one), a held
+box held during the pull, let go and settled at its end and judged as the trials judge a
+released box; None where the estimate cannot answer (the network's row stays)."""
 
 
 class BoxMaps:
@@ -181,7 +181,7 @@ class FusedBoxMaps(BoxMaps):
             if outcome is None and hold is not None:
                 return None
             known = outcome is not None
-            marked = outcome if known else np.zeros(len(ids), bool)
+            marked = outcome if known else np.zeros(len(ids))
             row = fuse(self.weights, net, marked, np.bool_(known)).astype(np.float32)
             row[k] = 0.0
             self._rows[slot] = row
@@ -200,11 +200,12 @@ FUSION_INPUTS = 3
 
 def features(p: np.ndarray, simulated: np.ndarray, known: np.ndarray) -> np.ndarray:
     """(..., 3) float64 fusion inputs of pairs: the head's logit, simulated and marked,
-    simulated and not marked (a pull not simulated: both 0)."""
+    simulated and not marked (a pull not simulated: both 0). `simulated` is the share of the
+    fitted scenes whose pull marks the box (0 or 1 with one fit; a bool is read as one)."""
     q = np.clip(p.astype(np.float64), 1e-4, 1 - 1e-4)
-    sim = np.asarray(simulated, bool)
-    k = np.broadcast_to(np.asarray(known, bool), sim.shape)
-    return np.stack([np.log(q / (1 - q)), k & sim, k & ~sim], -1).astype(np.float64)
+    sim = np.asarray(simulated, np.float64)
+    k = np.broadcast_to(np.asarray(known, bool), sim.shape).astype(np.float64)
+    return np.stack([np.log(q / (1 - q)), k * sim, k * (1.0 - sim)], -1)
 
 
 def fuse(weights: Sequence[float], p: np.ndarray, simulated: np.ndarray, known: np.ndarray):

@@ -13,6 +13,7 @@
     python -m clutterbench.dev.ch6_pull ch6_box_physics       # make dev-ch6-box-physics
     python -m clutterbench.dev.ch6_pull ch6_box_hold          # make dev-ch6-box-hold
     python -m clutterbench.dev.ch6_pull ch6_release           # make dev-ch6-release
+    python -m clutterbench.dev.ch6_pull ch6_fit_hypotheses    # make dev-ch6-fit-hypotheses
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
 rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull
@@ -44,7 +45,10 @@ episodes than a table has), ch6_box (the box-head planners, per box and learned 
 against physics from depth and the pixel pull planners), ch6_box_physics (the box head fused
 per box with physics from depth, support/box_fusion.json, against physics from depth),
 ch6_box_hold (how that planner, bimanual, scores a pull made holding a box, trials.ch6.box_hold),
-ch6_release (how the executor lets go of an aborted pull's box and of a held box).
+ch6_release (how the executor lets go of an aborted pull's box and of a held box),
+ch6_fit_hypotheses (how many scenes the learned-plus-physics planners fit to one observation,
+trials.ch6.fit_hypotheses; a variant that changes them gets its fusion chosen again on the
+support stage's val scenes, variant_thresholds).
 """
 
 from __future__ import annotations
@@ -79,6 +83,55 @@ ORACLE_VARIANT = "-"
 """The oracles read no variant: they run once per stream under this name."""
 
 
+FUSION_FIELDS = frozenset({"fit_hypotheses", "fit_noise_mm"})
+"""Fields of trials.ch6 that change what the box-physics fusion sees: a variant that sets one
+gets that fusion chosen again for itself (variant_thresholds)."""
+
+
+def variant_thresholds(params: Mapping[str, Any], variant: str, ch6: Any, section: str) -> Path:
+    """The thresholds file a variant's learned-plus-physics planners read, with its fusion
+    (box_fusion.json) beside it: the support stage's own, or, for a variant that sets a
+    FUSION_FIELDS field, the fusion chosen again as the support stage chooses it (the same
+    val scenes, the box head, the fitted pulls the variant asks for) and written with a copy
+    of the stage's thresholds to reports/dev/<section>/<variant>/."""
+    import shutil
+
+    from clutterbench.collapse.box_head import EDGE_HEADS
+    from clutterbench.collapse.box_predict import BoxMaps
+    from clutterbench.criteria import label_thresholds
+    from clutterbench.data.config import GenerateConfig
+    from clutterbench.io import write_json
+    from clutterbench.precision import inference_from_params
+    from clutterbench.sim.config import SimConfig
+    from clutterbench.support.config import SupportEvalConfig
+    from clutterbench.support.evaluate import split_scenes
+    from clutterbench.support.run import choose_box_fusion, fitted_pulls_of
+
+    cfg = load_section(SupportEvalConfig, "support", params)
+    sim = load_section(SimConfig, "sim", params)
+    inference_from_params(params)
+    val = split_scenes(
+        Path("data/generate"),
+        Path(f"data/split/{cfg.val_dataset}.json"),
+        "val",
+        cfg.val_scenes,
+        cfg.moved_threshold_m,
+        cfg.min_pixels,
+        sim.camera,
+        heads=EDGE_HEADS,
+        collapse_free=label_thresholds(params),
+    )
+    model, head = Path(f"models/{cfg.model}/best.pt"), Path("models/box_head/best.pt")
+    box_maps = BoxMaps.from_paths(model, head, sim.camera, "pull", 0.5)
+    catalogue = load_section(GenerateConfig, "generate", params).datasets[cfg.val_dataset].catalogue
+    fusion = choose_box_fusion(val, box_maps, fitted_pulls_of(params, cfg, sim, ch6, catalogue))
+    out = OUT / section / variant
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "box_fusion.json", {"chosen": fusion, "val_scenes": len(val)})
+    shutil.copyfile(THRESHOLDS, out / THRESHOLDS.name)
+    return out / THRESHOLDS.name
+
+
 def condition_label(variant: str, planner: str) -> str:
     return f"{variant}:{planner}"
 
@@ -95,6 +148,7 @@ def trial_jobs(
     with trials.ch6 as params set it but for the variant's overrides, and both oracles'."""
     from clutterbench.sim.config import SimConfig
     from clutterbench.trials.ch6.episodes import (
+        BOX_PHYSICS_PLANNERS,
         CP_PLANNERS,
         box_fields,
         ch6_jobs,
@@ -118,13 +172,18 @@ def trial_jobs(
     arms = [(v, p) for v in cfg.variants for p in cfg.planners]
     arms += [(ORACLE_VARIANT, o) for o in ("oracle", "oracle_hold")] * cfg.oracle
     rule = ConditionConfig.__dataclass_fields__["rule"].default
+    refit = {  # the variants whose fusion is chosen again for them
+        v: variant_thresholds(params, v, dataclasses.replace(trials.ch6, **over), section)
+        for v, over in cfg.variants.items()
+        if FUSION_FIELDS & set(over) and set(cfg.planners) & set(BOX_PHYSICS_PLANNERS)
+    }
     jobs = []
     for stream in cfg.streams:
         for variant, planner in arms:
             over = cfg.variants.get(variant, {})
             ch6 = dataclasses.replace(trials.ch6, **over)
             support, cp_max = planner_support(THRESHOLDS, planner, rule, ch6)
-            box, box_cp_max = box_fields(THRESHOLDS, planner, ch6)
+            box, box_cp_max = box_fields(refit.get(variant, THRESHOLDS), planner, ch6)
             cp_max = box_cp_max if box_cp_max is not None else cp_max
             jobs += ch6_jobs(
                 f"{condition_label(variant, planner)}/{stream}",
@@ -239,6 +298,9 @@ TITLES = {
     "with each pull simulated on the fitted boxes) against physics from depth",
     "ch6_box_hold": "how the ch. 6 learned-plus-physics bimanual planner scores a pull made "
     "holding a box (the held box left out, or the held pull simulated on the fitted boxes)",
+    "ch6_fit_hypotheses": "how many scenes the ch. 6 learned-plus-physics planners fit to one "
+    "observation (the fit alone, or with fits of the depth image with noise; each variant's "
+    "fusion chosen again on the val scenes)",
     "ch6_release": "how the ch. 6 executor lets go of an aborted pull's box and of a held box "
     "(every planner and both search oracles under each variant)",
 }

@@ -102,6 +102,8 @@ CH6_VARIED = (
     "hold_feared",
     "truth_hold",
     "box_hold",
+    "fit_hypotheses",
+    "fit_noise_mm",
     "abort_release",
     "held_release",
 )
@@ -265,6 +267,16 @@ class DevConfig:
     )
     """How the learned-plus-physics bimanual planner scores a held pull (trials.ch6.box_hold;
     python -m clutterbench.dev.ch6_pull ch6_box_hold)."""
+    ch6_fit_hypotheses: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(
+            variants={"one": {}, "four": {"fit_hypotheses": 4}},
+            planners=("multi_step_box_physics", "bimanual_box_physics"),
+            oracle=False,
+        )
+    )
+    """How many scenes the learned-plus-physics planners fit to one observation
+    (trials.ch6.fit_hypotheses, fit_noise_mm); each variant's fusion chosen again on the
+    support stage's val scenes (python -m clutterbench.dev.ch6_pull ch6_fit_hypotheses)."""
     ch6_release: Ch6PullConfig = dataclasses.field(
         default_factory=lambda: Ch6PullConfig(
             variants={"drop": {}, "lower": {"held_release": "lower"}},
@@ -297,6 +309,7 @@ class DevConfig:
             ("ch6_box_physics", self.ch6_box_physics.streams),
             ("ch6_box_hold", self.ch6_box_hold.streams),
             ("ch6_release", self.ch6_release.streams),
+            ("ch6_fit_hypotheses", self.ch6_fit_hypotheses.streams),
         ):
             for name in names:
                 if name not in self.streams:

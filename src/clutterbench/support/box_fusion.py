@@ -26,8 +26,9 @@ RIDGE = 1e-3
 HEAD_ALONE = (1.0, 0.0, 0.0, 0.0)
 """Fusion weights that give the box head's probability unchanged."""
 SimulatePulls = Callable[[np.ndarray, np.ndarray], tuple[dict[str, np.ndarray], np.ndarray]]
-"""(depth_m, masks (K, H, W)) -> (label kind -> (K, K) bool: the simulated pull of x marks y,
-(K,) bool: box x's pull was simulated)."""
+"""(depth_m, masks (K, H, W)) -> (label kind -> (K, K) float: the share of the fitted scenes
+whose simulated pull of x marks y (0 or 1 with one fit), (K,) bool: box x's pull was
+simulated)."""
 
 
 @dataclass
@@ -39,7 +40,8 @@ class FusionScene:
     probs: np.ndarray
     """(K, K, len(OUTPUTS)) the box head's probabilities."""
     simulated: dict[str, np.ndarray]
-    """label kind -> (K, K) bool: physics from depth's outcome (the pull of x marks y)."""
+    """label kind -> (K, K) float: physics from depth's outcome (the share of the fitted
+    scenes whose pull of x marks y; 0 or 1 with one fit)."""
     known: np.ndarray
     """(K,) bool: box x was fitted, so its pull was simulated."""
     truth: dict[str, np.ndarray]
@@ -215,15 +217,16 @@ def fitted_pulls(
     """Every visible box pulled out of the boxes fitted to the depth image and masks, settled
     (trials/ch6/physics_model.py, the physics-from-depth planners' model) by the trials'
     executor (sim.labelling.pull_outcomes, the labels' own code path), each other box marked
-    by each pull label kind's own rule (data/labels.py label_matrix)."""
+    by each pull label kind's own rule (data/labels.py label_matrix); with
+    ch6.fit_hypotheses > 1, in each of the scenes fitted to the image and its noisy copies
+    (fitted_scenes), each pair's outcome the share of the fits that pulled x and marked y."""
     from clutterbench.data.labels import LABEL_ARRAYS, label_matrix
-    from clutterbench.errors import PerceptionError
     from clutterbench.observation import Observation
     from clutterbench.sim.labelling import pull_outcomes
     from clutterbench.sim.physics import BoxWorld
     from clutterbench.sim.render import camera_model
     from clutterbench.sim.shelf import Shelf
-    from clutterbench.trials.ch6.physics_model import make_estimator, scene_of
+    from clutterbench.trials.ch6.physics_model import fitted_scenes, make_estimator
 
     shelf = Shelf()
     camera = camera_model(BoxWorld(shelf, sim.physics, render=True), sim.camera)
@@ -232,34 +235,40 @@ def fitted_pulls(
 
     def simulate(depth: np.ndarray, masks: np.ndarray):
         k = len(masks)
-        marked = {kind: np.zeros((k, k), bool) for kind in EDGE_HEADS}
-        known = np.zeros(k, bool)
+        marks = {kind: np.zeros((k, k)) for kind in EDGE_HEADS}
+        fits = np.zeros(k)  # the fits in which box x was pulled
         instance = np.zeros(depth.shape, dtype=np.uint8)
         for j, m in enumerate(masks):
             instance[m] = j + 1
-        try:
-            obs = Observation(depth_m=depth, instance=instance, camera=camera)
-            scene = scene_of(
-                estimate(obs), shelf, sim.camera, sim.physics, ch6.physics_depth_settle_s
-            )
-        except PerceptionError:
-            return marked, known
-        po = pull_outcomes(scene.spec, sim.physics, pull)
-        arrays = {
-            "pullout_displacement_m": po.displacement_m,
-            "pullout_drop_m": po.drop_m,
-            "pullout_tilt_deg": po.tilt_deg,
-            "pullout_left_shelf": po.left_shelf,
-        }
-        at = [int(b) for b in scene.spec.meta["ids"]]  # fitted box a is mask at[a]
-        for kind in EDGE_HEADS:
-            assert set(LABEL_ARRAYS[kind]) <= set(arrays), kind
-            m = label_matrix(kind, arrays.__getitem__, len(at), moved_m, collapse_free)
-            for a, x in enumerate(at):
-                for b, y in enumerate(at):
-                    if a != b and x < k and y < k:
-                        marked[kind][x, y] = bool(m[a, b])
-        known[[x for x in at if x < k]] = True
-        return marked, known
+        scenes = fitted_scenes(
+            estimate,
+            Observation(depth_m=depth, instance=instance, camera=camera),
+            shelf,
+            sim.camera,
+            sim.physics,
+            ch6.physics_depth_settle_s,
+            ch6.fit_hypotheses,
+            ch6.fit_noise_mm / 1000.0,
+        )
+        for scene in scenes:
+            po = pull_outcomes(scene.spec, sim.physics, pull)
+            arrays = {
+                "pullout_displacement_m": po.displacement_m,
+                "pullout_drop_m": po.drop_m,
+                "pullout_tilt_deg": po.tilt_deg,
+                "pullout_left_shelf": po.left_shelf,
+            }
+            at = [int(b) for b in scene.spec.meta["ids"]]  # fitted box a is mask at[a]
+            for kind in EDGE_HEADS:
+                assert set(LABEL_ARRAYS[kind]) <= set(arrays), kind
+                m = label_matrix(kind, arrays.__getitem__, len(at), moved_m, collapse_free)
+                for a, x in enumerate(at):
+                    for b, y in enumerate(at):
+                        if a != b and x < k and y < k and m[a, b]:
+                            marks[kind][x, y] += 1.0
+            fits[[x for x in at if x < k]] += 1.0
+        known = fits > 0
+        share = {kind: marks[kind] / np.maximum(fits, 1.0)[:, None] for kind in EDGE_HEADS}
+        return share, known
 
     return simulate

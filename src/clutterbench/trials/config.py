@@ -227,6 +227,14 @@ class Ch6TrialParams:
     held pull passes (differs from any only on maps that know a held pull: truth_hold
     simulate). never: the candidate is rejected (thesis). Chosen on dev streams
     (make dev-ch6-hold)."""
+    fit_hypotheses: int = bounded(1, ge=1)
+    """How many scenes the learned-plus-physics planners (`*_box_physics`) and Table 6.2's
+    fused and physics-from-depth rows fit to one observation: the fit of its depth image,
+    then fits of that image with Gaussian noise of fit_noise_mm on every pixel (the same
+    observation, the same noise). A pull's outcome for a box is the share of the fits whose
+    pull marks it (1: the fit alone, 0 or 1)."""
+    fit_noise_mm: float = bounded(1.0, gt=0.0)
+    """The depth noise (standard deviation, mm) of the fits after the first (fit_hypotheses)."""
     box_hold: Literal["leave_out", "simulate"] = "leave_out"
     """How the learned-plus-physics bimanual planner (`bimanual_box_physics`) scores a pull
     made holding a box: leave_out, the unheld pull's fused row with the held box left out

@@ -12,6 +12,7 @@ and the camera (fixed, known to a robot) and the catalogue of box types; it sees
 from __future__ import annotations
 
 import dataclasses
+import zlib
 from typing import Any
 
 import numpy as np
@@ -92,6 +93,37 @@ def scene_of(
         raise
     except ClutterbenchError as exc:
         raise PerceptionError(f"estimated scene: {exc}") from None
+
+
+def fitted_scenes(
+    estimate: Any,
+    obs: Observation,
+    shelf: Shelf,
+    camera: CameraConfig,
+    physics: PhysicsConfig,
+    settle_s: float,
+    hypotheses: int = 1,
+    noise_m: float = 0.0,
+) -> list[EstimatedScene]:
+    """The settled scenes fitted to one observation (`scene_of`): the fit of its depth image,
+    then `hypotheses - 1` fits of that image with Gaussian noise of `noise_m` on every pixel
+    that saw something, as a depth sensor's error could make them. The noise is seeded by
+    the image's bytes: the same observation gives the same scenes, in any process. A fit the
+    observation gives no model for (a PerceptionError) is left out, so the list may be
+    empty."""
+    scenes = []
+    seed = zlib.crc32(np.ascontiguousarray(obs.depth_m).tobytes())
+    for h in range(hypotheses):
+        seen = obs
+        if h > 0:
+            noise = np.random.default_rng([seed, h]).normal(0.0, noise_m, obs.depth_m.shape)
+            depth = np.where(obs.depth_m > 0, obs.depth_m + noise, obs.depth_m)
+            seen = dataclasses.replace(obs, depth_m=depth.astype(obs.depth_m.dtype))
+        try:
+            scenes.append(scene_of(estimate(seen), shelf, camera, physics, settle_s))
+        except PerceptionError:
+            continue
+    return scenes
 
 
 def catalogue_of(stream_catalogue: str) -> np.ndarray:

@@ -289,37 +289,36 @@ def _box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = F
 
 
 def fitted_pull(job: Ch6Job, spec: SceneSpec, head: str):
-    """SimulateFn of FusedBoxMaps: the trials' pull of one box in the scene fitted to the
-    observation (physics from depth's estimate, settled), the boxes it marks by `head`; with
-    a held box, the pull made holding it, the held box let go and judged as the trials judge
-    a released box. Of the episode's spec it reads the shelf only; of its stream the
-    catalogue."""
-    from clutterbench.errors import PerceptionError
+    """SimulateFn of FusedBoxMaps: the trials' pull of one box in the scenes fitted to the
+    observation (physics from depth's estimate, settled; trials.ch6.fit_hypotheses of them,
+    physics_model.fitted_scenes), each box's outcome the share of those fits whose pull marks
+    it by `head`; with a held box, the pull made holding it, the held box let go and judged
+    as the trials judge a released box. Of the episode's spec it reads the shelf only; of
+    its stream the catalogue."""
     from clutterbench.sim.pull import SceneState
-    from clutterbench.trials.ch6.physics_model import make_estimator, scene_of
+    from clutterbench.trials.ch6.physics_model import fitted_scenes, make_estimator
 
     params: Ch6TrialParams = job.params
     estimate = make_estimator(job.stream_cfg.catalogue, params.min_pixels)
     action = (params.pull_increment_m, params.grasp_lift_m)
     falls = job.collapse_free if head == "pull_collapse" else None
-    cache: dict[int, tuple[Any, Any]] = {}  # the last observation's estimate and its maps
+    cache: dict[int, list[tuple[list[int], Any]]] = {}  # the last observation's fits and maps
 
-    def simulate(obs, ids: list[int], box: int, hold: int | None = None) -> np.ndarray | None:
+    def fits_of(obs) -> list[tuple[list[int], Any]]:
         key = hash(obs.depth_m.tobytes())  # one estimate per observation
         if key not in cache:
             cache.clear()
-            try:
-                scene = scene_of(
-                    estimate(obs),
-                    spec.shelf,
-                    job.camera,
-                    job.physics,
-                    params.physics_depth_settle_s,
-                )
-            except PerceptionError:
-                scene = None
-            maps = None
-            if scene is not None:
+            fits = []
+            for scene in fitted_scenes(
+                estimate,
+                obs,
+                spec.shelf,
+                job.camera,
+                job.physics,
+                params.physics_depth_settle_s,
+                params.fit_hypotheses,
+                params.fit_noise_mm / 1000.0,
+            ):
                 maps = TruthCollapseMaps(
                     scene.spec,
                     job.physics,
@@ -329,20 +328,24 @@ def fitted_pull(job: Ch6Job, spec: SceneSpec, head: str):
                     params.release(),
                 )
                 maps.at(SceneState.start(scene.spec), np.zeros(obs.depth_m.shape, np.uint8))
-            cache[key] = (scene, maps)
-        scene, maps = cache[key]
-        fitted = [] if scene is None else [int(b) for b in scene.spec.meta["ids"]]
-        if box not in fitted or (hold is not None and hold not in fitted):
-            return None
-        if hold is None:
-            marked = maps.moved_by_removing(fitted.index(box))
-        else:
-            marked = maps.moved_by_held_pull(fitted.index(box), fitted.index(hold))
-        out = np.zeros(len(ids), bool)
-        for j, other in enumerate(fitted):
-            if other in ids and marked[j]:
-                out[ids.index(other)] = True
-        return out
+                fits.append(([int(b) for b in scene.spec.meta["ids"]], maps))
+            cache[key] = fits
+        return cache[key]
+
+    def simulate(obs, ids: list[int], box: int, hold: int | None = None) -> np.ndarray | None:
+        share, n = np.zeros(len(ids)), 0
+        for fitted, maps in fits_of(obs):
+            if box not in fitted or (hold is not None and hold not in fitted):
+                continue
+            if hold is None:
+                marked = maps.moved_by_removing(fitted.index(box))
+            else:
+                marked = maps.moved_by_held_pull(fitted.index(box), fitted.index(hold))
+            n += 1
+            for j, other in enumerate(fitted):
+                if other in ids and marked[j]:
+                    share[ids.index(other)] += 1.0
+        return share / n if n else None
 
     return simulate
 
