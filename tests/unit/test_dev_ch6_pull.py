@@ -244,3 +244,48 @@ def test_pull_thresholds_reach_only_the_pull_head_planners(root, tmp_path, monke
         "support:multi_step": (0.5, 0.3),
         "high:multi_step": (0.5, 0.3),
     }
+
+
+def test_a_variant_that_changes_the_fits_gets_its_own_fusion(root, tmp_path, monkeypatch):
+    """dev.<section>: a variant setting trials.ch6.fit_hypotheses reads the fusion chosen again
+    for it (variant_thresholds), once; a variant that does not, the support stage's."""
+    params = load_params(root / "params.yaml")
+    params["base"]["scale"] = "tiny"
+    monkeypatch.chdir(tmp_path)
+    trials = load_section(TrialsConfig, "trials", params)
+    for model in (trials.ch6.model, trials.ch6.ch4_model, "box_head"):
+        (tmp_path / "models" / model).mkdir(parents=True)
+        (tmp_path / "models" / model / "best.pt").write_bytes(b"")
+
+    def write(folder, weight: float):
+        folder.mkdir(parents=True, exist_ok=True)
+        fusion = {"edge": 0.3, "outcome": 0.4, "weights": [weight, 1.0, -1.0, 0.0]}
+        chosen = {head: fusion for head in ("pull", "pull_collapse")}
+        (folder / "box_fusion.json").write_text(json.dumps({"chosen": chosen}))
+        rule = {"rule": "coverage", "prob_threshold": 0.5, "score_threshold": 0.3}
+        rule |= {"bbox_margin_px": 2, "adjacency_iou": 0.0, "max_gap_m": 0.05}
+        rules = {f"{h}coverage_gap": rule for h in ("", "pull_", "pull_collapse_")}
+        (folder / "thresholds.json").write_text(json.dumps({"chosen": rules}))
+        return folder / "thresholds.json"
+
+    monkeypatch.setattr(ch6_pull, "THRESHOLDS", write(tmp_path / "stage", 0.5))
+    asked = []
+
+    def refit(params, variant, ch6, section):
+        asked.append((variant, ch6.fit_hypotheses))
+        return write(tmp_path / variant, 0.9)
+
+    monkeypatch.setattr(ch6_pull, "variant_thresholds", refit)
+    params["dev"]["ch6_fit_hypotheses"]["variants"] = {"one": {}, "four": {"fit_hypotheses": 4}}
+    dev = load_section(DevConfig, "dev", params)
+    got = {
+        j.condition.split("/")[0]: j.box_fusion[0]
+        for j in trial_jobs(dev, params, "ch6_fit_hypotheses")
+    }
+    assert asked == [("four", 4)]
+    assert got == {
+        "one:multi_step_box_physics": 0.5,
+        "one:bimanual_box_physics": 0.5,
+        "four:multi_step_box_physics": 0.9,
+        "four:bimanual_box_physics": 0.9,
+    }
