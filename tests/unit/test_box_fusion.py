@@ -177,3 +177,22 @@ def test_the_trials_fitted_pull_maps_a_held_box_onto_the_fit(monkeypatch):
     assert simulate(obs, [0, 1, 2], 0, 2).tolist() == [False, False, True]
     assert asked == [(0, None), (0, 1)]
     assert simulate(obs, [0, 1, 2], 0, 1) is None  # box 1 was not fitted
+
+
+def test_the_edges_take_the_contact_they_are_given_and_the_head_s_by_default():
+    """A recheck may score the graph with another contact (dev box_physics_fusion: the fitted
+    scene's, or the truth as a ceiling); the stage's edges keep the head's."""
+    from clutterbench.dev.box_physics_fusion import contact_of
+
+    sc = _scene(np.random.default_rng(4), k=3)
+    sc.probs[..., OUTPUTS.index("contact")] = 0.9
+    sc.contact = np.array([[0, 1, 0], [1, 0, 0], [0, 0, 0]], bool)
+    outcome = np.ones((3, 3))
+    assert bf.edges(sc, outcome, 0.5) == {(0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)}
+    truth = contact_of("truth", {})
+    assert bf.edges(sc, outcome, 0.5, truth) == {(0, 1), (1, 0)}
+    fitted = {0: np.array([[np.nan, 0.0, 1.0], [0.0, np.nan, np.nan], [1.0, np.nan, np.nan]])}
+    seen = contact_of("fitted", fitted)
+    assert bf.edges(sc, outcome, 0.5, seen) == {(0, 2), (2, 0), (1, 2), (2, 1)}
+    mean = contact_of("mean", fitted)(sc)
+    assert mean[0, 1] == pytest.approx(0.45) and mean[1, 2] == pytest.approx(0.9)

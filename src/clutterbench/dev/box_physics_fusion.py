@@ -13,6 +13,11 @@ box y:
   1 where that marks y, else 0; a box the fit dropped has no answer;
 - `fused`: a logistic regression on the head's logit and the simulated outcome (two
   inputs: simulated and marked, simulated and not), one per label kind.
+The support graph's edge is the fused outcome times a contact probability, the box head's in
+the stage. On one fit, the fused graph is also scored with other contacts (CONTACTS): the
+fitted scene's own (its boxes touching once settled, the truth's rule, sim.labelling
+settled_contacts; the head's where a box was not fitted), the mean of the two, and the true
+contact (a ceiling no robot has): how much of the graph's error is the contact's.
 Physics from depth and the fusion are scored for each number of scenes fitted to the image in
 FITS (trials.ch6.fit_hypotheses: the fit, then fits of noisy copies of the depth image with
 trials.ch6.fit_noise_mm; the outcome the share of fits whose pull marks y).
@@ -53,6 +58,98 @@ METHODS = ("box_head", "physics_from_depth", "fused")
 FOLDS = 2
 FITS = (1, 4)
 """The numbers of scenes fitted to one image that the recheck scores (trials.ch6.fit_hypotheses)."""
+CONTACTS = ("head", "fitted", "mean", "truth")
+"""The contacts of the one-fit fused graph's edges (module docstring)."""
+
+
+def contact_of(name: str, fitted: Mapping[int, np.ndarray]):
+    """ContactFn of contact `name`; `fitted`: scene index -> (K, K) share of its fits in which
+    x and y touch, NaN where a fit lacks either."""
+    from clutterbench.support.box_fusion import head_contact
+
+    def contact(sc: FusionScene) -> np.ndarray:
+        head = head_contact(sc)
+        if name == "head":
+            return head
+        if name == "truth":
+            return sc.contact.astype(np.float64)
+        mine = fitted[sc.index]
+        known = np.isfinite(mine)
+        if name == "fitted":
+            return np.where(known, mine, head)
+        if name == "mean":
+            return np.where(known, 0.5 * (np.nan_to_num(mine) + head), head)
+        raise ValueError(f"unknown contact {name!r}")
+
+    return contact
+
+
+def fitted_contacts(sim: Any, ch6: Any, catalogue: str, min_pixels: int):
+    """(depth_m, masks (K, H, W)) -> (K, K): the share of the scenes fitted to the image
+    (physics_model.fitted_scenes, settled) in which boxes x and y touch, by the truth's own
+    rule (sim.labelling.settled_contacts); NaN where no fit holds both."""
+    from clutterbench.observation import Observation
+    from clutterbench.sim.labelling import settled_contacts
+    from clutterbench.sim.physics import BoxWorld
+    from clutterbench.sim.render import camera_model
+    from clutterbench.sim.shelf import Shelf
+    from clutterbench.trials.ch6.physics_model import fitted_scenes, make_estimator
+
+    shelf = Shelf()
+    camera = camera_model(BoxWorld(shelf, sim.physics, render=True), sim.camera)
+    estimate = make_estimator(catalogue, min_pixels)
+
+    def touching(depth: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        k = len(masks)
+        instance = np.zeros(depth.shape, dtype=np.uint8)
+        for j, m in enumerate(masks):
+            instance[m] = j + 1
+        obs = Observation(depth_m=depth, instance=instance, camera=camera)
+        touch, both = np.zeros((k, k)), np.zeros((k, k))
+        for scene in fitted_scenes(
+            estimate,
+            obs,
+            shelf,
+            sim.camera,
+            sim.physics,
+            ch6.physics_depth_settle_s,
+            ch6.fit_hypotheses,
+            ch6.fit_noise_mm / 1000.0,
+        ):
+            at = [int(b) for b in scene.spec.meta["ids"]]
+            both[np.ix_(at, at)] += 1.0
+            for a, b in settled_contacts(scene.spec, sim.physics):
+                touch[at[a], at[b]] += 1.0
+                touch[at[b], at[a]] += 1.0
+        return np.where(both > 0, touch / np.maximum(both, 1.0), np.nan)
+
+    return touching
+
+
+def contact_cross_fit(
+    scenes: Sequence[FusionScene], kind: str, fitted: Mapping[int, np.ndarray]
+) -> dict[str, Any]:
+    """The fused graph under `kind` with each of CONTACTS: per fold, the fusion's weights and
+    the contact's edge threshold chosen on the other folds, scored on it."""
+    folds = [list(scenes[f::FOLDS]) for f in range(FOLDS)]
+    rows = {}
+    for name in CONTACTS:
+        contact = contact_of(name, fitted)
+        graph, edge = [], []
+        for f, held in enumerate(folds):
+            fit = [sc for g, part in enumerate(folds) if g != f for sc in part]
+            w = np.array(choose_fusion(fit, kind)["weights"])
+            prob = lambda sc, w=w: method_probs(sc, kind, "fused", w)  # noqa: E731
+            t = choose_edge_threshold(fit, prob, kind, contact)
+            edge.append(t)
+            graph.append((graph_scores(held, prob, kind, t, contact), len(held)))
+        n = sum(k for _, k in graph)
+        rows[name] = {
+            "graph_precision": sum(pr[0] * k for pr, k in graph) / n,
+            "graph_recall": sum(pr[1] * k for pr, k in graph) / n,
+            "edge_thresholds": edge,
+        }
+    return rows
 
 
 def _probs_truth(scenes: Sequence[FusionScene], kind: str, method: str, w) -> tuple:
@@ -165,6 +262,16 @@ def recheck(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
             "pulls_simulated": int(sum(a.known.sum() for a in answers)),
             "kinds": {kind: cross_fit(answers, kind) for kind in EDGE_HEADS},
         }
+        if fits == FITS[0]:
+            touching = fitted_contacts(
+                sim, dataclasses.replace(ch6, fit_hypotheses=fits), catalogue, cfg.min_pixels
+            )
+            with progress_bar("box_physics_fusion: fitted contacts", total=len(scenes)) as tick:
+                fitted = {}
+                for sc in scenes:
+                    fitted[sc.index] = touching(sc.depth_m, sc.masks)
+                    tick(1)
+            contacts = {kind: contact_cross_fit(answers, kind, fitted) for kind in EDGE_HEADS}
     one, most = by_fits[FITS[0]]["kinds"]["pull"], by_fits[FITS[-1]]["kinds"]["pull"]
     result = {
         "val_scenes": len(answers),
@@ -172,6 +279,7 @@ def recheck(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
         "pulls": int(sum(len(a.ids) for a in answers)),
         "fit_noise_mm": ch6.fit_noise_mm,
         "fits": {str(k): v for k, v in by_fits.items()},
+        "contacts": contacts,
         "shows": (
             f"box_physics_fusion (pull, support graph): box head "
             f"{one['box_head']['graph_precision']:.3f} / {one['box_head']['graph_recall']:.3f}, "
@@ -179,7 +287,9 @@ def recheck(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
             f"{one['fused']['graph_recall']:.3f}, on {FITS[-1]} fits "
             f"{most['fused']['graph_precision']:.3f} / {most['fused']['graph_recall']:.3f} "
             f"(mean precision / recall, val, cross-fitted); AUROC fused "
-            f"{one['fused']['auroc']:.4f} -> {most['fused']['auroc']:.4f}"
+            f"{one['fused']['auroc']:.4f} -> {most['fused']['auroc']:.4f}; with the true contact "
+            f"{contacts['pull']['truth']['graph_precision']:.3f} / "
+            f"{contacts['pull']['truth']['graph_recall']:.3f}"
         ),
     }
     return save(result, started, out_dir, NAME, markdown)
@@ -225,6 +335,24 @@ def markdown(result: Mapping[str, Any]) -> str:
             f"- {k} fit(s): "
             + "; ".join(f"{kind}: {rows['fused']['weights']}" for kind, rows in v["kinds"].items())
         )
+    lines += [
+        "",
+        f"## The edges' contact (fused, {FITS[0]} fit, cross-fitted)",
+        "",
+        "head: the box head's contact probability (the support stage's); fitted: the fitted "
+        "scene's boxes touching once settled (the truth's rule), the head's where a box was not "
+        "fitted; mean: of the two; truth: the true contact, a ceiling no robot has.",
+        "",
+        "| label kind | contact | graph: mean precision | graph: mean recall | "
+        "edge thresholds (per half) |",
+        "|---|---|---|---|---|",
+    ]
+    for kind, rows in result["contacts"].items():
+        for name, r in rows.items():
+            lines.append(
+                f"| {kind} | {name} | {r['graph_precision']:.3f} | {r['graph_recall']:.3f} | "
+                f"{', '.join(f'{t:g}' for t in r['edge_thresholds'])} |"
+            )
     lines += ["", result["shows"]]
     return "\n".join(lines) + "\n"
 

@@ -98,9 +98,20 @@ def pairs(scenes: Sequence[FusionScene], kind: str) -> tuple[np.ndarray, np.ndar
     return np.concatenate(x), np.concatenate(y).astype(np.float64)
 
 
-def edges(sc: FusionScene, outcome: np.ndarray, threshold: float) -> set[tuple[int, int]]:
-    """Support edges (x, y) whose outcome x the head's contact probability exceeds threshold."""
-    edge = outcome * sc.probs[..., OUTPUTS.index("contact")]
+ContactFn = Callable[[FusionScene], np.ndarray]
+"""scene -> (K, K) probability that x and y touch (the edges' contact)."""
+
+
+def head_contact(sc: FusionScene) -> np.ndarray:
+    """The box head's contact probability: the edges' contact everywhere but in rechecks."""
+    return sc.probs[..., OUTPUTS.index("contact")]
+
+
+def edges(
+    sc: FusionScene, outcome: np.ndarray, threshold: float, contact: ContactFn = head_contact
+) -> set[tuple[int, int]]:
+    """Support edges (x, y) whose outcome x contact probability exceeds threshold."""
+    edge = outcome * contact(sc)
     return {(sc.ids[x], sc.ids[y]) for x, y in zip(*np.nonzero(edge > threshold)) if x != y}
 
 
@@ -110,12 +121,19 @@ def true_edges(sc: FusionScene, kind: str) -> set[tuple[int, int]]:
 
 
 def graph_scores(
-    scenes: Sequence[FusionScene], prob: Callable[[FusionScene], np.ndarray], kind: str, t: float
+    scenes: Sequence[FusionScene],
+    prob: Callable[[FusionScene], np.ndarray],
+    kind: str,
+    t: float,
+    contact: ContactFn = head_contact,
 ) -> tuple[float, float]:
     """Mean precision and recall over the scenes (each where defined: Table 6.2's means) of
     the edges at threshold t against `kind`'s truth edges."""
     pr = np.array(
-        [edge_precision_recall(edges(sc, prob(sc), t), true_edges(sc, kind)) for sc in scenes],
+        [
+            edge_precision_recall(edges(sc, prob(sc), t, contact), true_edges(sc, kind))
+            for sc in scenes
+        ],
         dtype=float,
     ).reshape(-1, 2)
     mean = [float(np.nanmean(v)) if np.isfinite(v).any() else float("nan") for v in pr.T]
@@ -123,13 +141,16 @@ def graph_scores(
 
 
 def choose_edge_threshold(
-    scenes: Sequence[FusionScene], prob: Callable[[FusionScene], np.ndarray], kind: str
+    scenes: Sequence[FusionScene],
+    prob: Callable[[FusionScene], np.ndarray],
+    kind: str,
+    contact: ContactFn = head_contact,
 ) -> float:
     """The threshold of THRESHOLDS with the best f1 of mean precision and recall (Table
     6.2's criterion, as the box head's edge threshold is chosen)."""
     best, best_f1 = float(THRESHOLDS[len(THRESHOLDS) // 2]), -1.0
     for t in THRESHOLDS:
-        precision, recall = graph_scores(scenes, prob, kind, float(t))
+        precision, recall = graph_scores(scenes, prob, kind, float(t), contact)
         f1 = 2 * precision * recall / (precision + recall) if precision + recall > 0 else -1.0
         if np.isfinite(f1) and f1 > best_f1:
             best, best_f1 = float(t), f1
