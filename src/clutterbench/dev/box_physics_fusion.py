@@ -86,36 +86,17 @@ def contact_of(name: str, fitted: Mapping[int, np.ndarray]):
 
 def fitted_contacts(sim: Any, ch6: Any, catalogue: str, min_pixels: int):
     """(depth_m, masks (K, H, W)) -> (K, K): the share of the scenes fitted to the image
-    (physics_model.fitted_scenes, settled) in which boxes x and y touch, by the truth's own
+    (support/box_fusion.py scenes_fitted_to) in which boxes x and y touch, by the truth's own
     rule (sim.labelling.settled_contacts); NaN where no fit holds both."""
-    from clutterbench.observation import Observation
     from clutterbench.sim.labelling import settled_contacts
-    from clutterbench.sim.physics import BoxWorld
-    from clutterbench.sim.render import camera_model
-    from clutterbench.sim.shelf import Shelf
-    from clutterbench.trials.ch6.physics_model import fitted_scenes, make_estimator
+    from clutterbench.support.box_fusion import scenes_fitted_to
 
-    shelf = Shelf()
-    camera = camera_model(BoxWorld(shelf, sim.physics, render=True), sim.camera)
-    estimate = make_estimator(catalogue, min_pixels)
+    fit = scenes_fitted_to(sim, ch6, catalogue, min_pixels)
 
     def touching(depth: np.ndarray, masks: np.ndarray) -> np.ndarray:
         k = len(masks)
-        instance = np.zeros(depth.shape, dtype=np.uint8)
-        for j, m in enumerate(masks):
-            instance[m] = j + 1
-        obs = Observation(depth_m=depth, instance=instance, camera=camera)
         touch, both = np.zeros((k, k)), np.zeros((k, k))
-        for scene in fitted_scenes(
-            estimate,
-            obs,
-            shelf,
-            sim.camera,
-            sim.physics,
-            ch6.physics_depth_settle_s,
-            ch6.fit_hypotheses,
-            ch6.fit_noise_mm / 1000.0,
-        ):
+        for scene in fit(depth, masks):
             at = [int(b) for b in scene.spec.meta["ids"]]
             both[np.ix_(at, at)] += 1.0
             for a, b in settled_contacts(scene.spec, sim.physics):

@@ -227,6 +227,40 @@ def answer_scene(sc: Any, maps: Any, simulate: SimulatePulls) -> FusionScene:
     )
 
 
+def scenes_fitted_to(
+    sim: Any, ch6: Any, catalogue: str, min_pixels: int
+) -> Callable[[np.ndarray, np.ndarray], list[Any]]:
+    """(depth_m, masks (K, H, W)) -> the settled scenes fitted to that image with `catalogue`'s
+    sizes (trials/ch6/physics_model.py fitted_scenes: ch6.fit_hypotheses of them), mask j
+    seen as box j; a fitted scene's box a is mask `spec.meta["ids"][a]`."""
+    from clutterbench.observation import Observation
+    from clutterbench.sim.physics import BoxWorld
+    from clutterbench.sim.render import camera_model
+    from clutterbench.sim.shelf import Shelf
+    from clutterbench.trials.ch6.physics_model import fitted_scenes, make_estimator
+
+    shelf = Shelf()
+    camera = camera_model(BoxWorld(shelf, sim.physics, render=True), sim.camera)
+    estimate = make_estimator(catalogue, min_pixels)
+
+    def fit(depth: np.ndarray, masks: np.ndarray) -> list[Any]:
+        instance = np.zeros(depth.shape, dtype=np.uint8)
+        for j, m in enumerate(masks):
+            instance[m] = j + 1
+        return fitted_scenes(
+            estimate,
+            Observation(depth_m=depth, instance=instance, camera=camera),
+            shelf,
+            sim.camera,
+            sim.physics,
+            ch6.physics_depth_settle_s,
+            ch6.fit_hypotheses,
+            ch6.fit_noise_mm / 1000.0,
+        )
+
+    return fit
+
+
 def fitted_pulls(
     sim: Any,
     ch6: Any,
@@ -240,38 +274,18 @@ def fitted_pulls(
     executor (sim.labelling.pull_outcomes, the labels' own code path), each other box marked
     by each pull label kind's own rule (data/labels.py label_matrix); with
     ch6.fit_hypotheses > 1, in each of the scenes fitted to the image and its noisy copies
-    (fitted_scenes), each pair's outcome the share of the fits that pulled x and marked y."""
+    (scenes_fitted_to), each pair's outcome the share of the fits that pulled x and marked y."""
     from clutterbench.data.labels import LABEL_ARRAYS, label_matrix
-    from clutterbench.observation import Observation
     from clutterbench.sim.labelling import pull_outcomes
-    from clutterbench.sim.physics import BoxWorld
-    from clutterbench.sim.render import camera_model
-    from clutterbench.sim.shelf import Shelf
-    from clutterbench.trials.ch6.physics_model import fitted_scenes, make_estimator
 
-    shelf = Shelf()
-    camera = camera_model(BoxWorld(shelf, sim.physics, render=True), sim.camera)
-    estimate = make_estimator(catalogue, min_pixels)
+    fit = scenes_fitted_to(sim, ch6, catalogue, min_pixels)
     pull = (ch6.pull_increment_m, ch6.grasp_lift_m)
 
     def simulate(depth: np.ndarray, masks: np.ndarray):
         k = len(masks)
         marks = {kind: np.zeros((k, k)) for kind in EDGE_HEADS}
         fits = np.zeros(k)  # the fits in which box x was pulled
-        instance = np.zeros(depth.shape, dtype=np.uint8)
-        for j, m in enumerate(masks):
-            instance[m] = j + 1
-        scenes = fitted_scenes(
-            estimate,
-            Observation(depth_m=depth, instance=instance, camera=camera),
-            shelf,
-            sim.camera,
-            sim.physics,
-            ch6.physics_depth_settle_s,
-            ch6.fit_hypotheses,
-            ch6.fit_noise_mm / 1000.0,
-        )
-        for scene in scenes:
+        for scene in fit(depth, masks):
             po = pull_outcomes(scene.spec, sim.physics, pull)
             arrays = {
                 "pullout_displacement_m": po.displacement_m,
