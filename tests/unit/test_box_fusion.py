@@ -196,3 +196,32 @@ def test_the_edges_take_the_contact_they_are_given_and_the_head_s_by_default():
     assert bf.edges(sc, outcome, 0.5, seen) == {(0, 2), (2, 0), (1, 2), (2, 1)}
     mean = contact_of("mean", fitted)(sc)
     assert mean[0, 1] == pytest.approx(0.45) and mean[1, 2] == pytest.approx(0.9)
+
+
+def test_the_learned_contact_follows_the_fitted_contact_where_it_tells_the_truth():
+    """dev box_physics_fusion's learned contact: fitted on scenes whose fitted contact is the
+    truth and whose head says 0.9 everywhere, it puts touching pairs above the others and
+    falls back on the head's logit where no fit holds the pair."""
+    from clutterbench.dev.box_physics_fusion import contact_of, fit_contact
+
+    rng = np.random.default_rng(7)
+    scenes, fitted = [], {}
+    for i in range(40):
+        sc = _scene(rng, k=4)
+        sc.index = i
+        sc.contact = rng.random((4, 4)) < 0.4
+        sc.contact = sc.contact | sc.contact.T
+        np.fill_diagonal(sc.contact, False)
+        fitted[i] = sc.contact.astype(float)
+        fitted[i][3, :] = fitted[i][:, 3] = np.nan  # box 3 was not fitted
+        scenes.append(sc)
+    w = fit_contact(scenes, fitted)
+    learned = contact_of("learned", fitted, w)
+    c = np.stack([learned(sc) for sc in scenes])
+    touch = np.stack([sc.contact for sc in scenes])
+    known = np.stack([np.isfinite(fitted[sc.index]) for sc in scenes])
+    off = ~np.eye(4, dtype=bool)[None]
+    assert c[touch & known & off].min() > 0.5 > c[~touch & known & off].max()
+    assert np.allclose(c[~known & off], c[0, 0, 3])  # the head alone: one value for them all
+    with pytest.raises(ValueError, match="four weights"):
+        contact_of("learned", fitted)

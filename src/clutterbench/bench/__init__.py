@@ -9,8 +9,9 @@ planner's decision time per step (`physics_depth`), every registered environment
 with defaults, reset and stepped (`envs`), the same simulation jobs on both parallel
 backends, processes and Ray, with 1 and 2 workers (`ray`: `bench/scaling.py`, its
 workloads built in `bench/workloads.py`; it also costs the paper scale from them), and how
-much of this CPU's matmul rate training the networks reaches (`train_rate`) and where a
-slice of a training epoch spends its time (`train_profile`). Results go
+much of this CPU's matmul rate training the networks reaches (`train_rate`), where a
+slice of a training epoch spends its time (`train_profile`) and what dvc's own YAML work costs
+per stage (`dvc`). Results go
 to reports/bench/: one JSON per part and a markdown table beside most; each records the CPU
 model it ran on.
 """

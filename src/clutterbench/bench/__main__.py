@@ -10,6 +10,7 @@ from collections.abc import Callable
 
 from clutterbench.bench.arm import bench_arm
 from clutterbench.bench.box_planners import bench_box_planners
+from clutterbench.bench.dvc_overhead import bench_dvc
 from clutterbench.bench.envs import bench_envs
 from clutterbench.bench.grouped import bench_grouped
 from clutterbench.bench.models import bench_models
@@ -45,6 +46,7 @@ PARTS: list[tuple[str, Callable[[], object]]] = [
     ("ray", bench_ray),  # ray.json, ray.md (both parallel backends, 1 and 2 workers; needs ray)
     ("train_rate", bench_train_rate),  # train_rate.json, .md (training FLOP/s vs matmul; no data)
     ("train_profile", bench_train_profile),  # train_profile.json, .md (a cp_focal epoch's slice)
+    ("dvc", bench_dvc),  # dvc.json, dvc.md (dvc's own YAML work per stage; no data needed)
 ]
 
 

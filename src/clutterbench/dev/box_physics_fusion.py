@@ -16,7 +16,9 @@ box y:
 The support graph's edge is the fused outcome times a contact probability, the box head's in
 the stage. On one fit, the fused graph is also scored with other contacts (CONTACTS): the
 fitted scene's own (its boxes touching once settled, the truth's rule, sim.labelling
-settled_contacts; the head's where a box was not fitted), the mean of the two, and the true
+settled_contacts; the head's where a box was not fitted), the mean of the two, a learned
+contact (a logistic regression of the true contact on the head's contact logit and the fitted
+share of touching, `fit_contact`, fitted on the other half as the fusion is), and the true
 contact (a ceiling no robot has): how much of the graph's error is the contact's.
 Physics from depth and the fusion are scored for each number of scenes fitted to the image in
 FITS (trials.ch6.fit_hypotheses: the fit, then fits of noisy copies of the depth image with
@@ -58,14 +60,39 @@ METHODS = ("box_head", "physics_from_depth", "fused")
 FOLDS = 2
 FITS = (1, 4)
 """The numbers of scenes fitted to one image that the recheck scores (trials.ch6.fit_hypotheses)."""
-CONTACTS = ("head", "fitted", "mean", "truth")
+CONTACTS = ("head", "fitted", "mean", "learned", "truth")
 """The contacts of the one-fit fused graph's edges (module docstring)."""
 
 
-def contact_of(name: str, fitted: Mapping[int, np.ndarray]):
-    """ContactFn of contact `name`; `fitted`: scene index -> (K, K) share of its fits in which
-    x and y touch, NaN where a fit lacks either."""
+def contact_inputs(sc: FusionScene, fitted: Mapping[int, np.ndarray]) -> np.ndarray:
+    """(K, K, 3) inputs of the learned contact: the head's contact logit, the fitted share
+    of touching, its complement (both 0 where no fit holds the pair), as the pull fusion's."""
+    from clutterbench.collapse.box_predict import features
     from clutterbench.support.box_fusion import head_contact
+
+    mine = fitted[sc.index]
+    known = np.isfinite(mine)
+    return features(head_contact(sc), np.nan_to_num(mine), known)
+
+
+def fit_contact(scenes: Sequence[FusionScene], fitted: Mapping[int, np.ndarray]) -> np.ndarray:
+    """(4,) weights of the learned contact (a logistic regression of the true contact on
+    `contact_inputs`, box_fusion.fit_logistic) over the scenes' off-diagonal pairs."""
+    from clutterbench.support.box_fusion import fit_logistic
+
+    x = np.concatenate([off_diagonal(contact_inputs(sc, fitted)) for sc in scenes])
+    y = np.concatenate([off_diagonal(sc.contact) for sc in scenes]).astype(np.float64)
+    return fit_logistic(x, y)
+
+
+def contact_of(name: str, fitted: Mapping[int, np.ndarray], weights: Sequence[float] = ()):
+    """ContactFn of contact `name`; `fitted`: scene index -> (K, K) share of its fits in which
+    x and y touch, NaN where a fit lacks either; `weights`: the learned contact's
+    (`fit_contact`)."""
+    from clutterbench.support.box_fusion import head_contact
+
+    if name == "learned" and len(weights) != 4:
+        raise ValueError("the learned contact needs its four weights (fit_contact)")
 
     def contact(sc: FusionScene) -> np.ndarray:
         head = head_contact(sc)
@@ -79,6 +106,9 @@ def contact_of(name: str, fitted: Mapping[int, np.ndarray]):
             return np.where(known, mine, head)
         if name == "mean":
             return np.where(known, 0.5 * (np.nan_to_num(mine) + head), head)
+        if name == "learned":
+            a = contact_inputs(sc, fitted) @ np.asarray(weights[:-1]) + weights[-1]
+            return 1.0 / (1.0 + np.exp(-a))
         raise ValueError(f"unknown contact {name!r}")
 
     return contact
@@ -115,21 +145,30 @@ def contact_cross_fit(
     folds = [list(scenes[f::FOLDS]) for f in range(FOLDS)]
     rows = {}
     for name in CONTACTS:
-        contact = contact_of(name, fitted)
-        graph, edge = [], []
+        graph, edge, learned, touch_p, touch_y = [], [], [], [], []
         for f, held in enumerate(folds):
             fit = [sc for g, part in enumerate(folds) if g != f for sc in part]
+            cw = fit_contact(fit, fitted) if name == "learned" else ()
+            learned.append([round(float(v), 4) for v in cw])
+            contact = contact_of(name, fitted, cw)
             w = np.array(choose_fusion(fit, kind)["weights"])
             prob = lambda sc, w=w: method_probs(sc, kind, "fused", w)  # noqa: E731
             t = choose_edge_threshold(fit, prob, kind, contact)
             edge.append(t)
             graph.append((graph_scores(held, prob, kind, t, contact), len(held)))
+            touch_p.append(np.concatenate([off_diagonal(contact(sc)) for sc in held]))
+            touch_y.append(np.concatenate([off_diagonal(sc.contact) for sc in held]))
         n = sum(k for _, k in graph)
         rows[name] = {
+            "contact_auroc": binary_scores(
+                np.concatenate(touch_p), np.concatenate(touch_y).astype(float), 0.5
+            )["auroc"],
             "graph_precision": sum(pr[0] * k for pr, k in graph) / n,
             "graph_recall": sum(pr[1] * k for pr, k in graph) / n,
             "edge_thresholds": edge,
         }
+        if name == "learned":
+            rows[name]["weights"] = learned
     return rows
 
 
@@ -270,7 +309,9 @@ def recheck(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
             f"(mean precision / recall, val, cross-fitted); AUROC fused "
             f"{one['fused']['auroc']:.4f} -> {most['fused']['auroc']:.4f}; with the true contact "
             f"{contacts['pull']['truth']['graph_precision']:.3f} / "
-            f"{contacts['pull']['truth']['graph_recall']:.3f}"
+            f"{contacts['pull']['truth']['graph_recall']:.3f}, with the learned contact "
+            f"{contacts['pull']['learned']['graph_precision']:.3f} / "
+            f"{contacts['pull']['learned']['graph_recall']:.3f}"
         ),
     }
     return save(result, started, out_dir, NAME, markdown)
@@ -322,18 +363,27 @@ def markdown(result: Mapping[str, Any]) -> str:
         "",
         "head: the box head's contact probability (the support stage's); fitted: the fitted "
         "scene's boxes touching once settled (the truth's rule), the head's where a box was not "
-        "fitted; mean: of the two; truth: the true contact, a ceiling no robot has.",
+        "fitted; mean: of the two; learned: a logistic regression of the true contact on the "
+        "head's contact logit and the fitted share of touching (fitted on the other half); "
+        "truth: the true contact, a ceiling no robot has. Contact AUROC: the contact alone, per "
+        "pair, out of fold.",
         "",
-        "| label kind | contact | graph: mean precision | graph: mean recall | "
+        "| label kind | contact | contact AUROC | graph: mean precision | graph: mean recall | "
         "edge thresholds (per half) |",
-        "|---|---|---|---|---|",
+        "|---|---|---|---|---|---|",
     ]
     for kind, rows in result["contacts"].items():
         for name, r in rows.items():
             lines.append(
-                f"| {kind} | {name} | {r['graph_precision']:.3f} | {r['graph_recall']:.3f} | "
-                f"{', '.join(f'{t:g}' for t in r['edge_thresholds'])} |"
+                f"| {kind} | {name} | {r['contact_auroc']:.4f} | {r['graph_precision']:.3f} | "
+                f"{r['graph_recall']:.3f} | {', '.join(f'{t:g}' for t in r['edge_thresholds'])} |"
             )
+    learned = result["contacts"]["pull"]["learned"]["weights"]
+    lines += [
+        "",
+        "Learned contact weights per half (head contact logit, fitted and touching, fitted and "
+        f"not, bias): {learned}",
+    ]
     lines += ["", result["shows"]]
     return "\n".join(lines) + "\n"
 
