@@ -189,39 +189,95 @@ def test_the_edges_take_the_contact_they_are_given_and_the_head_s_by_default():
     sc.contact = np.array([[0, 1, 0], [1, 0, 0], [0, 0, 0]], bool)
     outcome = np.ones((3, 3))
     assert bf.edges(sc, outcome, 0.5) == {(0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)}
-    truth = contact_of("truth", {})
+    truth = contact_of("truth")
     assert bf.edges(sc, outcome, 0.5, truth) == {(0, 1), (1, 0)}
-    fitted = {0: np.array([[np.nan, 0.0, 1.0], [0.0, np.nan, np.nan], [1.0, np.nan, np.nan]])}
-    seen = contact_of("fitted", fitted)
+    sc.fitted_contact = np.array([[np.nan, 0.0, 1.0], [0.0, np.nan, np.nan], [1.0, np.nan, np.nan]])
+    seen = contact_of("fitted")
     assert bf.edges(sc, outcome, 0.5, seen) == {(0, 2), (2, 0), (1, 2), (2, 1)}
-    mean = contact_of("mean", fitted)(sc)
+    mean = contact_of("mean")(sc)
     assert mean[0, 1] == pytest.approx(0.45) and mean[1, 2] == pytest.approx(0.9)
 
 
-def test_the_learned_contact_follows_the_fitted_contact_where_it_tells_the_truth():
-    """dev box_physics_fusion's learned contact: fitted on scenes whose fitted contact is the
-    truth and whose head says 0.9 everywhere, it puts touching pairs above the others and
-    falls back on the head's logit where no fit holds the pair."""
-    from clutterbench.dev.box_physics_fusion import contact_of, fit_contact
-
-    rng = np.random.default_rng(7)
-    scenes, fitted = [], {}
-    for i in range(40):
-        sc = _scene(rng, k=4)
+def _touching_scenes(
+    rng: np.random.Generator, n: int = 40, informative: bool = True
+) -> list[bf.FusionScene]:
+    """Scenes whose fitted contact is the truth (box 3 never fitted) and whose head says 0.9."""
+    scenes = []
+    for i in range(n):
+        sc = _scene(rng, k=4, informative=informative)
         sc.index = i
         sc.contact = rng.random((4, 4)) < 0.4
         sc.contact = sc.contact | sc.contact.T
         np.fill_diagonal(sc.contact, False)
-        fitted[i] = sc.contact.astype(float)
-        fitted[i][3, :] = fitted[i][:, 3] = np.nan  # box 3 was not fitted
+        sc.fitted_contact = sc.contact.astype(float)
+        sc.fitted_contact[3, :] = sc.fitted_contact[:, 3] = np.nan  # box 3 was not fitted
         scenes.append(sc)
-    w = fit_contact(scenes, fitted)
-    learned = contact_of("learned", fitted, w)
+    return scenes
+
+
+def test_the_learned_contact_follows_the_fitted_contact_where_it_tells_the_truth():
+    """trials.ch6.box_contact learned: fitted on scenes whose fitted contact is the truth and
+    whose head says 0.9 everywhere, it puts touching pairs above the others and falls back on
+    the head's logit where no fit holds the pair."""
+    from clutterbench.dev.box_physics_fusion import contact_of
+
+    scenes = _touching_scenes(np.random.default_rng(7))
+    w = bf.fit_contact(scenes)
+    learned = contact_of("learned", w)
     c = np.stack([learned(sc) for sc in scenes])
     touch = np.stack([sc.contact for sc in scenes])
-    known = np.stack([np.isfinite(fitted[sc.index]) for sc in scenes])
+    known = np.stack([np.isfinite(sc.fitted_contact) for sc in scenes])
     off = ~np.eye(4, dtype=bool)[None]
     assert c[touch & known & off].min() > 0.5 > c[~touch & known & off].max()
     assert np.allclose(c[~known & off], c[0, 0, 3])  # the head alone: one value for them all
     with pytest.raises(ValueError, match="four weights"):
-        contact_of("learned", fitted)
+        contact_of("learned")
+
+
+def test_the_chosen_fusion_carries_its_contact_into_table_6_2s_fused_row():
+    """A fusion chosen with the learned contact scores Table 6.2's fused row with it; one
+    without contact weights keeps the head's (what the stage does by default)."""
+    scenes = _touching_scenes(np.random.default_rng(8))
+    w = bf.fit_contact(scenes)
+    with_learned = bf.choose_fusion(scenes, "pull", bf.learned_contact(w))
+    with_learned["contact_weights"] = list(w)
+    head_only = bf.choose_fusion(scenes, "pull")
+    assert bf.contact_fn(head_only) is bf.head_contact
+
+    def pooled(chosen: dict, method: str) -> tuple[float, list[dict]]:
+        rows = [
+            r
+            for sc in scenes
+            for r in bf.fusion_rows(sc, {k: chosen for k in EDGE_HEADS})
+            if r["method"] == method
+        ]
+        return sum(r["tp"] for r in rows) / sum(r["n_pred"] for r in rows), rows
+
+    learned_precision, _ = pooled(with_learned, "pull_box_fused")
+    head_precision, _ = pooled(head_only, "pull_box_fused")
+    assert learned_precision > head_precision + 0.1  # it prunes the edges that do not touch
+    # physics from depth's row keeps the head's contact either way (repr: NaN recalls)
+    alone = [repr(pooled(c, "pull_physics_pull")[1]) for c in (with_learned, head_only)]
+    assert alone[0] == alone[1]
+
+
+def test_the_support_stage_learns_the_contact_only_when_asked(monkeypatch):
+    """trials.ch6.box_contact head (the default): box_fusion.json's fusion has the keys it
+    always had; learned: the contact's weights too, the edge threshold chosen with it."""
+    from clutterbench.support import run
+
+    scenes = _touching_scenes(np.random.default_rng(9), informative=False)
+    it = iter(scenes * 2)
+    monkeypatch.setattr(run, "answer_scene", lambda sc, maps, sim, contacts=None: next(it))
+    val = [types.SimpleNamespace(ids=[0, 1, 2, 3]) for _ in scenes]
+    head = run.choose_box_fusion(val, None, None)
+    assert {k: set(v) for k, v in head.items()} == {
+        k: {"edge", "outcome", "weights", "physics_edge"} for k in EDGE_HEADS
+    }
+    learned = run.choose_box_fusion(val, None, None, contacts=lambda d, m: None)
+    w = bf.fit_contact(scenes)
+    for kind in EDGE_HEADS:
+        assert learned[kind]["contact_weights"] == pytest.approx(w, abs=1e-6)
+        again = bf.choose_fusion(scenes, kind, bf.learned_contact(learned[kind]["contact_weights"]))
+        assert learned[kind]["edge"] == again["edge"]
+    assert learned["pull"]["edge"] != head["pull"]["edge"]  # here the contact moves it

@@ -139,10 +139,11 @@ class _FixedMaps(BoxMaps):
 
 
 class _FixedFused(FusedBoxMaps, _FixedMaps):
-    def __init__(self, probs, simulate, weights, simulate_held=False):
+    def __init__(self, probs, simulate, weights, simulate_held=False, contact=None, cw=None):
         _FixedMaps.__init__(self, probs)
         self.simulate, self.weights, self._rows, self._key = simulate, weights, {}, None
         self.simulate_held = simulate_held
+        self.contact, self.contact_weights = contact, cw
 
 
 def _obs() -> Observation:
@@ -195,6 +196,35 @@ def test_the_fused_predictor_fuses_each_simulated_row_once_per_observation():
     assert calls == [0, 1, 2] and maps.simulated == 3
     with pytest.raises(ValueError, match="fusion weights"):
         FusedBoxMaps(simulate=simulate, weights=(1.0, 0.0))
+
+
+def test_the_learned_contact_prunes_an_edge_the_fitted_boxes_do_not_touch():
+    """trials.ch6.box_contact learned: the head says every pair touches (0.9); the fitted
+    scenes say boxes 0 and 2 do not, 0 and 1 do; the learned contact (weights chosen on val
+    by the support stage) keeps (0, 1) and drops (0, 2), which the head's contact keeps."""
+    collapse = np.array([[0, 0.9, 0.9], [0, 0, 0], [0, 0, 0]], np.float32)
+
+    def simulate(obs, ids, box, hold=None):
+        return np.array([False, True, True]) if box == 0 else np.zeros(3, bool)
+
+    weights = (1.0, 0.0, 0.0, 0.0)  # the network's row alone
+    fitted = np.array([[np.nan, 1.0, 0.0], [1.0, np.nan, 0.0], [0.0, 0.0, np.nan]])
+    asked = []
+
+    def contact(obs, ids):
+        asked.append(list(ids))
+        return fitted
+
+    probs = _probs(collapse, np.full((3, 3), 0.9))
+    obs, ids, masks = _obs(), [0, 1, 2], _masks()
+    head = _FixedFused(probs, simulate, weights)
+    assert [(a, b) for a, b, _ in head.box_edges(obs, ids, masks)] == [(0, 1), (0, 2)]
+    cw = (0.0, 4.0, -4.0, 0.0)  # touching in the fits: logit + 4; not: - 4
+    learned = _FixedFused(probs, simulate, weights, contact=contact, cw=cw)
+    assert [(a, b) for a, b, _ in learned.box_edges(obs, ids, masks)] == [(0, 1)]
+    assert asked == [[0, 1, 2]]
+    with pytest.raises(ValueError, match="both the fitted contacts and weights"):
+        FusedBoxMaps(simulate=simulate, weights=weights, contact=contact)
 
 
 def test_a_held_pull_simulated_on_the_fitted_boxes_judges_the_held_box_too():

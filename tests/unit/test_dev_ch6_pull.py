@@ -246,9 +246,9 @@ def test_pull_thresholds_reach_only_the_pull_head_planners(root, tmp_path, monke
     }
 
 
-def test_a_variant_that_changes_the_fits_gets_its_own_fusion(root, tmp_path, monkeypatch):
-    """dev.<section>: a variant setting trials.ch6.fit_hypotheses reads the fusion chosen again
-    for it (variant_thresholds), once; a variant that does not, the support stage's."""
+def _tiny_with_models(root, tmp_path, monkeypatch) -> dict:
+    """The tiny params, run from tmp_path with an empty checkpoint for every network a ch. 6
+    box planner job names."""
     params = load_params(root / "params.yaml")
     params["base"]["scale"] = "tiny"
     monkeypatch.chdir(tmp_path)
@@ -256,17 +256,30 @@ def test_a_variant_that_changes_the_fits_gets_its_own_fusion(root, tmp_path, mon
     for model in (trials.ch6.model, trials.ch6.ch4_model, "box_head"):
         (tmp_path / "models" / model).mkdir(parents=True)
         (tmp_path / "models" / model / "best.pt").write_bytes(b"")
+    return params
 
-    def write(folder, weight: float):
-        folder.mkdir(parents=True, exist_ok=True)
-        fusion = {"edge": 0.3, "outcome": 0.4, "weights": [weight, 1.0, -1.0, 0.0]}
-        chosen = {head: fusion for head in ("pull", "pull_collapse")}
-        (folder / "box_fusion.json").write_text(json.dumps({"chosen": chosen}))
-        rule = {"rule": "coverage", "prob_threshold": 0.5, "score_threshold": 0.3}
-        rule |= {"bbox_margin_px": 2, "adjacency_iou": 0.0, "max_gap_m": 0.05}
-        rules = {f"{h}coverage_gap": rule for h in ("", "pull_", "pull_collapse_")}
-        (folder / "thresholds.json").write_text(json.dumps({"chosen": rules}))
-        return folder / "thresholds.json"
+
+def _write_fusion(folder, weight: float, contact: list[float] | None = None):
+    """thresholds.json and, beside it, box_fusion.json (head-logit weight `weight`; the learned
+    contact's weights where given)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    fusion = {"edge": 0.3, "outcome": 0.4, "weights": [weight, 1.0, -1.0, 0.0]}
+    if contact is not None:
+        fusion["contact_weights"] = contact
+    chosen = {head: fusion for head in ("pull", "pull_collapse")}
+    (folder / "box_fusion.json").write_text(json.dumps({"chosen": chosen}))
+    rule = {"rule": "coverage", "prob_threshold": 0.5, "score_threshold": 0.3}
+    rule |= {"bbox_margin_px": 2, "adjacency_iou": 0.0, "max_gap_m": 0.05}
+    rules = {f"{h}coverage_gap": rule for h in ("", "pull_", "pull_collapse_")}
+    (folder / "thresholds.json").write_text(json.dumps({"chosen": rules}))
+    return folder / "thresholds.json"
+
+
+def test_a_variant_that_changes_the_fits_gets_its_own_fusion(root, tmp_path, monkeypatch):
+    """dev.<section>: a variant setting trials.ch6.fit_hypotheses reads the fusion chosen again
+    for it (variant_thresholds), once; a variant that does not, the support stage's."""
+    params = _tiny_with_models(root, tmp_path, monkeypatch)
+    write = _write_fusion
 
     monkeypatch.setattr(ch6_pull, "THRESHOLDS", write(tmp_path / "stage", 0.5))
     asked = []
@@ -289,3 +302,37 @@ def test_a_variant_that_changes_the_fits_gets_its_own_fusion(root, tmp_path, mon
         "four:multi_step_box_physics": 0.9,
         "four:bimanual_box_physics": 0.9,
     }
+
+
+def test_a_learned_contact_variant_reads_the_contact_chosen_for_it(root, tmp_path, monkeypatch):
+    """dev ch6_box_contact: the learned variant's fusion is chosen again with the learned
+    contact (its weights in the jobs); the head variant's jobs carry none; a fusion without
+    contact weights read for a learned contact is one line naming it."""
+    params = _tiny_with_models(root, tmp_path, monkeypatch)
+    monkeypatch.setattr(ch6_pull, "THRESHOLDS", _write_fusion(tmp_path / "stage", 0.5))
+    asked = []
+
+    def refit(params, variant, ch6, section):
+        asked.append((variant, ch6.box_contact))
+        learned = ch6.box_contact == "learned"
+        contact = [0.7, 1.3, -1.3, 0.0] if learned else None
+        return _write_fusion(tmp_path / variant, 0.9 if learned else 0.8, contact)
+
+    monkeypatch.setattr(ch6_pull, "variant_thresholds", refit)
+    dev = load_section(DevConfig, "dev", params)
+    got = {
+        j.condition.split("/")[0]: (j.box_fusion[0], j.box_contact)
+        for j in trial_jobs(dev, params, "ch6_box_contact")
+    }
+    # params.yaml's head variant sets box_contact too: chosen again (the stage's fusion, redone)
+    assert asked == [("head", "head"), ("learned", "learned")]
+    assert got == {
+        "head:multi_step_box_physics": (0.8, None),
+        "head:bimanual_box_physics": (0.8, None),
+        "learned:multi_step_box_physics": (0.9, (0.7, 1.3, -1.3, 0.0)),
+        "learned:bimanual_box_physics": (0.9, (0.7, 1.3, -1.3, 0.0)),
+    }
+    from clutterbench.trials.ch6.planners import box_fusion
+
+    with pytest.raises(ClutterbenchError, match="with the learned contact"):
+        box_fusion(tmp_path / "stage" / "thresholds.json", "collapse", "learned")

@@ -131,12 +131,29 @@ def test_the_support_stage_takes_the_share_of_the_fits_that_pulled_the_box(monke
     assert share["pull"][1].tolist() == [0.0, 0.0, 0.0]
 
 
+def _trials_fitted_pull(monkeypatch, fit_maps: type):
+    """The trials' fitted pull on two fits (`_two_scenes`), each fit's maps a `fit_maps`, and
+    an observation to ask it of."""
+    from clutterbench.sim import pull
+    from clutterbench.trials.ch6 import planners
+    from clutterbench.trials.config import Ch6TrialParams
+
+    monkeypatch.setattr(planners, "TruthCollapseMaps", fit_maps)
+    monkeypatch.setattr(pull, "SceneState", types.SimpleNamespace(start=lambda spec: None))
+    job = types.SimpleNamespace(
+        params=Ch6TrialParams(fit_hypotheses=2),
+        stream_cfg=types.SimpleNamespace(catalogue="various"),
+        camera=None,
+        physics=None,
+        collapse_free=None,
+    )
+    simulate = planners.fitted_pull(job, types.SimpleNamespace(shelf=None), "pull_collapse")
+    return simulate, types.SimpleNamespace(depth_m=np.ones((4, 4), np.float32))
+
+
 def test_the_trials_fitted_pull_takes_the_share_of_the_fits_that_hold_both_boxes(monkeypatch):
     """Fit A keeps boxes 0 and 1, fit B boxes 0, 1 and 2. The unheld pull of 0 marks 1 in A
     only (1/2); the pull of 0 holding 2 is asked of B alone; box 3 is in no fit (None)."""
-    from clutterbench.sim import pull
-    from clutterbench.trials.ch6 import planners
-
     scenes = _two_scenes(monkeypatch, [[0, 1], [0, 1, 2]])
     answers = {id(scenes[0].spec): [False, True], id(scenes[1].spec): [False, False, True]}
 
@@ -153,22 +170,43 @@ def test_the_trials_fitted_pull_takes_the_share_of_the_fits_that_hold_both_boxes
         def moved_by_held_pull(self, box, hold):
             return self.answer
 
-    monkeypatch.setattr(planners, "TruthCollapseMaps", Fit)
-    monkeypatch.setattr(pull, "SceneState", types.SimpleNamespace(start=lambda spec: None))
-    from clutterbench.trials.config import Ch6TrialParams
-
-    job = types.SimpleNamespace(
-        params=Ch6TrialParams(fit_hypotheses=2),
-        stream_cfg=types.SimpleNamespace(catalogue="various"),
-        camera=None,
-        physics=None,
-        collapse_free=None,
-    )
-    simulate = planners.fitted_pull(job, types.SimpleNamespace(shelf=None), "pull_collapse")
-    obs = types.SimpleNamespace(depth_m=np.ones((4, 4), np.float32))
+    simulate, obs = _trials_fitted_pull(monkeypatch, Fit)
     assert simulate(obs, [0, 1, 2, 3], 0).tolist() == [0.0, 0.5, 0.0, 0.0]
     assert simulate(obs, [0, 1, 2, 3], 0, 2).tolist() == [0.0, 0.0, 1.0, 0.0]
     assert simulate(obs, [0, 1, 2, 3], 3) is None
+
+
+def test_the_trials_fitted_contacts_are_the_share_of_the_fits_holding_both_boxes(monkeypatch):
+    """trials.ch6.box_contact learned: fit A keeps boxes 0 and 1, touching; fit B boxes 0, 1
+    and 2, 1 touching 2. Boxes 0 and 1 touch in one of the two fits that hold both (1/2),
+    1 and 2 in the one fit that holds both; box 3 is in no fit (NaN); the visible ids may
+    come in any order."""
+    from clutterbench.sim import labelling
+
+    scenes = _two_scenes(monkeypatch, [[0, 1], [0, 1, 2]])
+    touching = {id(scenes[0].spec): [(0, 1)], id(scenes[1].spec): [(1, 2)]}
+
+    class Fit:
+        def __init__(self, spec, *args):
+            self.spec = spec
+
+        def at(self, *args):
+            pass
+
+    asked = []
+
+    def settled(spec, physics):
+        asked.append(id(spec))
+        return touching[id(spec)]
+
+    monkeypatch.setattr(labelling, "settled_contacts", settled)
+    simulate, obs = _trials_fitted_pull(monkeypatch, Fit)
+    share = simulate.contacts(obs, [0, 1, 2, 3])
+    nan = np.nan
+    expected = [[0, 0.5, 0, nan], [0.5, 0, 1, nan], [0, 1, 0, nan], [nan, nan, nan, nan]]
+    np.testing.assert_array_equal(share, np.array(expected))
+    np.testing.assert_array_equal(simulate.contacts(obs, [2, 1]), [[0, 1], [1, 0]])
+    assert len(asked) == 2  # each fit settled once per observation
 
 
 @pytest.mark.parametrize("bad", [{"fit_hypotheses": 0}, {"fit_noise_mm": 0.0}])

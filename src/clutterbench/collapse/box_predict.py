@@ -46,6 +46,11 @@ box held during the pull, let go and settled at its end and judged as the trials
 released box; None where the estimate cannot answer (the network's row stays)."""
 
 
+FittedContactFn = Callable[[Observation, list[int]], np.ndarray]
+"""(observation, visible ids) -> (K, K) the share of the scenes fitted to the observation in
+which boxes ids[x] and ids[y] touch once settled (NaN where no fit holds both)."""
+
+
 class BoxMaps:
     """Per-box probabilities of one observation from the box head over the collapse
     predictor's maps; `head` (pull or pull_collapse) is the outcome the planner reads, an
@@ -132,13 +137,23 @@ class FusedBoxMaps(BoxMaps):
         simulate: SimulateFn,
         weights: Sequence[float],
         simulate_held: bool = False,
+        contact: FittedContactFn | None = None,
+        contact_weights: Sequence[float] | None = None,
         **kwargs,
     ):
         if len(weights) != FUSION_INPUTS + 1:
             raise ValueError(f"fusion weights {list(weights)}: not {FUSION_INPUTS} and a bias")
+        if (contact is None) != (contact_weights is None):
+            raise ValueError("the learned contact needs both the fitted contacts and weights")
         super().__init__(*args, **kwargs)
         self.simulate, self.weights = simulate, tuple(float(w) for w in weights)
         """The fusion's weights (head logit, simulated and marked, simulated and not, bias)."""
+        self.contact = contact
+        """The fitted scenes' contacts of an observation (trials.ch6.box_contact learned);
+        None: the edges take the box head's contact."""
+        self.contact_weights = contact_weights
+        """The learned contact's weights (head contact logit, fitted and touching, fitted and
+        not, bias; the support stage's fit on validation scenes)."""
         self.simulate_held = simulate_held
         """Answer a pull made holding a box (`held_row`) from that very held pull simulated
         on the fitted boxes (trials.ch6.box_hold simulate); False: `held_row` answers None
@@ -188,9 +203,13 @@ class FusedBoxMaps(BoxMaps):
         return self._rows[slot]
 
     def box_edges(self, obs: Observation, ids: list[int], masks: np.ndarray) -> list[Edge]:
-        """Edges of the fused outcome and the network's contact."""
+        """Edges of the fused outcome and the contact: the network's, or learned from it and
+        the fitted scenes' contacts (`contact_weights`)."""
         p = np.stack([self.box_row(obs, ids, masks, k) for k in range(len(ids))])
         contact = self.probs(obs.depth_m, masks)[..., OUTPUTS.index("contact")]
+        if self.contact is not None:
+            assert self.contact_weights is not None
+            contact = learned_contact_of(self.contact_weights, contact, self.contact(obs, ids))
         return _edges(ids, p * contact, self.edge_threshold)
 
 
@@ -212,6 +231,23 @@ def fuse(weights: Sequence[float], p: np.ndarray, simulated: np.ndarray, known: 
     """The fused probability of pairs (p, simulated, known broadcast together)."""
     w = np.asarray(weights, np.float64)
     return 1.0 / (1.0 + np.exp(-(features(p, simulated, known) @ w[:-1] + w[-1])))
+
+
+def contact_inputs(head: np.ndarray, fitted: np.ndarray) -> np.ndarray:
+    """(..., 3) float64 inputs of the learned contact of pairs: the box head's contact logit,
+    the share of the fitted scenes in which the two boxes touch and its complement (both 0
+    where no fit holds the pair: `fitted` NaN), as the pull fusion's `features`."""
+    known = np.isfinite(fitted)
+    return features(head, np.nan_to_num(fitted), known)
+
+
+def learned_contact_of(weights: Sequence[float], head: np.ndarray, fitted: np.ndarray):
+    """The learned contact probability of pairs (`contact_inputs` under `weights`; chosen on
+    validation scenes by the support stage under trials.ch6.box_contact learned)."""
+    w = np.asarray(weights, np.float64)
+    if len(w) != FUSION_INPUTS + 1:
+        raise ValueError(f"contact weights {list(weights)}: not {FUSION_INPUTS} and a bias")
+    return 1.0 / (1.0 + np.exp(-(contact_inputs(head, fitted) @ w[:-1] + w[-1])))
 
 
 def cp_probs_of(predictor: CollapsePredictor, depth_m: np.ndarray, masks: np.ndarray) -> np.ndarray:

@@ -18,7 +18,8 @@ the stage. On one fit, the fused graph is also scored with other contacts (CONTA
 fitted scene's own (its boxes touching once settled, the truth's rule, sim.labelling
 settled_contacts; the head's where a box was not fitted), the mean of the two, a learned
 contact (a logistic regression of the true contact on the head's contact logit and the fitted
-share of touching, `fit_contact`, fitted on the other half as the fusion is), and the true
+share of touching, support/box_fusion.py `fit_contact`: trials.ch6.box_contact learned, fitted
+on the other half as the fusion is), and the true
 contact (a ceiling no robot has): how much of the graph's error is the contact's.
 Physics from depth and the fusion are scored for each number of scenes fitted to the image in
 FITS (trials.ch6.fit_hypotheses: the fit, then fits of noisy copies of the depth image with
@@ -49,6 +50,8 @@ from clutterbench.support.box_fusion import (
     answer_scene,
     choose_edge_threshold,
     choose_fusion,
+    fit_contact,
+    fitted_contacts,
     fitted_pulls,
     graph_scores,
     method_probs,
@@ -64,35 +67,16 @@ CONTACTS = ("head", "fitted", "mean", "learned", "truth")
 """The contacts of the one-fit fused graph's edges (module docstring)."""
 
 
-def contact_inputs(sc: FusionScene, fitted: Mapping[int, np.ndarray]) -> np.ndarray:
-    """(K, K, 3) inputs of the learned contact: the head's contact logit, the fitted share
-    of touching, its complement (both 0 where no fit holds the pair), as the pull fusion's."""
-    from clutterbench.collapse.box_predict import features
-    from clutterbench.support.box_fusion import head_contact
+def contact_of(name: str, weights: Sequence[float] = ()):
+    """ContactFn of contact `name` over scenes whose fitted_contact is filled in (the share of
+    their fits in which x and y touch, NaN where a fit lacks either); `weights`: the learned
+    contact's (support/box_fusion.py fit_contact)."""
+    from clutterbench.support.box_fusion import head_contact, learned_contact
 
-    mine = fitted[sc.index]
-    known = np.isfinite(mine)
-    return features(head_contact(sc), np.nan_to_num(mine), known)
-
-
-def fit_contact(scenes: Sequence[FusionScene], fitted: Mapping[int, np.ndarray]) -> np.ndarray:
-    """(4,) weights of the learned contact (a logistic regression of the true contact on
-    `contact_inputs`, box_fusion.fit_logistic) over the scenes' off-diagonal pairs."""
-    from clutterbench.support.box_fusion import fit_logistic
-
-    x = np.concatenate([off_diagonal(contact_inputs(sc, fitted)) for sc in scenes])
-    y = np.concatenate([off_diagonal(sc.contact) for sc in scenes]).astype(np.float64)
-    return fit_logistic(x, y)
-
-
-def contact_of(name: str, fitted: Mapping[int, np.ndarray], weights: Sequence[float] = ()):
-    """ContactFn of contact `name`; `fitted`: scene index -> (K, K) share of its fits in which
-    x and y touch, NaN where a fit lacks either; `weights`: the learned contact's
-    (`fit_contact`)."""
-    from clutterbench.support.box_fusion import head_contact
-
-    if name == "learned" and len(weights) != 4:
-        raise ValueError("the learned contact needs its four weights (fit_contact)")
+    if name == "learned":
+        if len(weights) != 4:
+            raise ValueError("the learned contact needs its four weights (fit_contact)")
+        return learned_contact(weights)
 
     def contact(sc: FusionScene) -> np.ndarray:
         head = head_contact(sc)
@@ -100,46 +84,19 @@ def contact_of(name: str, fitted: Mapping[int, np.ndarray], weights: Sequence[fl
             return head
         if name == "truth":
             return sc.contact.astype(np.float64)
-        mine = fitted[sc.index]
+        mine = sc.fitted_contact
+        assert mine is not None, "the fitted contacts were not asked for"
         known = np.isfinite(mine)
         if name == "fitted":
             return np.where(known, mine, head)
         if name == "mean":
             return np.where(known, 0.5 * (np.nan_to_num(mine) + head), head)
-        if name == "learned":
-            a = contact_inputs(sc, fitted) @ np.asarray(weights[:-1]) + weights[-1]
-            return 1.0 / (1.0 + np.exp(-a))
         raise ValueError(f"unknown contact {name!r}")
 
     return contact
 
 
-def fitted_contacts(sim: Any, ch6: Any, catalogue: str, min_pixels: int):
-    """(depth_m, masks (K, H, W)) -> (K, K): the share of the scenes fitted to the image
-    (support/box_fusion.py scenes_fitted_to) in which boxes x and y touch, by the truth's own
-    rule (sim.labelling.settled_contacts); NaN where no fit holds both."""
-    from clutterbench.sim.labelling import settled_contacts
-    from clutterbench.support.box_fusion import scenes_fitted_to
-
-    fit = scenes_fitted_to(sim, ch6, catalogue, min_pixels)
-
-    def touching(depth: np.ndarray, masks: np.ndarray) -> np.ndarray:
-        k = len(masks)
-        touch, both = np.zeros((k, k)), np.zeros((k, k))
-        for scene in fit(depth, masks):
-            at = [int(b) for b in scene.spec.meta["ids"]]
-            both[np.ix_(at, at)] += 1.0
-            for a, b in settled_contacts(scene.spec, sim.physics):
-                touch[at[a], at[b]] += 1.0
-                touch[at[b], at[a]] += 1.0
-        return np.where(both > 0, touch / np.maximum(both, 1.0), np.nan)
-
-    return touching
-
-
-def contact_cross_fit(
-    scenes: Sequence[FusionScene], kind: str, fitted: Mapping[int, np.ndarray]
-) -> dict[str, Any]:
+def contact_cross_fit(scenes: Sequence[FusionScene], kind: str) -> dict[str, Any]:
     """The fused graph under `kind` with each of CONTACTS: per fold, the fusion's weights and
     the contact's edge threshold chosen on the other folds, scored on it."""
     folds = [list(scenes[f::FOLDS]) for f in range(FOLDS)]
@@ -148,9 +105,9 @@ def contact_cross_fit(
         graph, edge, learned, touch_p, touch_y = [], [], [], [], []
         for f, held in enumerate(folds):
             fit = [sc for g, part in enumerate(folds) if g != f for sc in part]
-            cw = fit_contact(fit, fitted) if name == "learned" else ()
+            cw = fit_contact(fit) if name == "learned" else ()
             learned.append([round(float(v), 4) for v in cw])
-            contact = contact_of(name, fitted, cw)
+            contact = contact_of(name, cw)
             w = np.array(choose_fusion(fit, kind)["weights"])
             prob = lambda sc, w=w: method_probs(sc, kind, "fused", w)  # noqa: E731
             t = choose_edge_threshold(fit, prob, kind, contact)
@@ -287,11 +244,10 @@ def recheck(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
                 sim, dataclasses.replace(ch6, fit_hypotheses=fits), catalogue, cfg.min_pixels
             )
             with progress_bar("box_physics_fusion: fitted contacts", total=len(scenes)) as tick:
-                fitted = {}
-                for sc in scenes:
-                    fitted[sc.index] = touching(sc.depth_m, sc.masks)
+                for sc, a in zip(scenes, answers, strict=True):
+                    a.fitted_contact = touching(sc.depth_m, sc.masks)
                     tick(1)
-            contacts = {kind: contact_cross_fit(answers, kind, fitted) for kind in EDGE_HEADS}
+            contacts = {kind: contact_cross_fit(answers, kind) for kind in EDGE_HEADS}
     one, most = by_fits[FITS[0]]["kinds"]["pull"], by_fits[FITS[-1]]["kinds"]["pull"]
     result = {
         "val_scenes": len(answers),

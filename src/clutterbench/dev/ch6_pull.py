@@ -14,6 +14,7 @@
     python -m clutterbench.dev.ch6_pull ch6_box_hold          # make dev-ch6-box-hold
     python -m clutterbench.dev.ch6_pull ch6_release           # make dev-ch6-release
     python -m clutterbench.dev.ch6_pull ch6_fit_hypotheses    # make dev-ch6-fit-hypotheses
+    python -m clutterbench.dev.ch6_pull ch6_box_contact       # make dev-ch6-box-contact
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
 rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull
@@ -48,7 +49,9 @@ ch6_box_hold (how that planner, bimanual, scores a pull made holding a box, tria
 ch6_release (how the executor lets go of an aborted pull's box and of a held box),
 ch6_fit_hypotheses (how many scenes the learned-plus-physics planners fit to one observation,
 trials.ch6.fit_hypotheses; a variant that changes them gets its fusion chosen again on the
-support stage's val scenes, variant_thresholds).
+support stage's val scenes, variant_thresholds), ch6_box_contact (the contact in their support
+edges, trials.ch6.box_contact: the box head's, or learned from it and the fitted scenes'
+contacts; its fusion chosen again likewise).
 """
 
 from __future__ import annotations
@@ -83,7 +86,7 @@ ORACLE_VARIANT = "-"
 """The oracles read no variant: they run once per stream under this name."""
 
 
-FUSION_FIELDS = frozenset({"fit_hypotheses", "fit_noise_mm"})
+FUSION_FIELDS = frozenset({"fit_hypotheses", "fit_noise_mm", "box_contact"})
 """Fields of trials.ch6 that change what the box-physics fusion sees: a variant that sets one
 gets that fusion chosen again for itself (variant_thresholds)."""
 
@@ -105,7 +108,7 @@ def variant_thresholds(params: Mapping[str, Any], variant: str, ch6: Any, sectio
     from clutterbench.sim.config import SimConfig
     from clutterbench.support.config import SupportEvalConfig
     from clutterbench.support.evaluate import split_scenes
-    from clutterbench.support.run import choose_box_fusion, fitted_pulls_of
+    from clutterbench.support.run import choose_box_fusion, fitted_contacts_of, fitted_pulls_of
 
     cfg = load_section(SupportEvalConfig, "support", params)
     sim = load_section(SimConfig, "sim", params)
@@ -124,7 +127,12 @@ def variant_thresholds(params: Mapping[str, Any], variant: str, ch6: Any, sectio
     model, head = Path(f"models/{cfg.model}/best.pt"), Path("models/box_head/best.pt")
     box_maps = BoxMaps.from_paths(model, head, sim.camera, "pull", 0.5)
     catalogue = load_section(GenerateConfig, "generate", params).datasets[cfg.val_dataset].catalogue
-    fusion = choose_box_fusion(val, box_maps, fitted_pulls_of(params, cfg, sim, ch6, catalogue))
+    fusion = choose_box_fusion(
+        val,
+        box_maps,
+        fitted_pulls_of(params, cfg, sim, ch6, catalogue),
+        fitted_contacts_of(cfg, sim, ch6, catalogue),
+    )
     out = OUT / section / variant
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "box_fusion.json", {"chosen": fusion, "val_scenes": len(val)})
@@ -301,6 +309,9 @@ TITLES = {
     "ch6_fit_hypotheses": "how many scenes the ch. 6 learned-plus-physics planners fit to one "
     "observation (the fit alone, or with fits of the depth image with noise; each variant's "
     "fusion chosen again on the val scenes)",
+    "ch6_box_contact": "the contact in the ch. 6 learned-plus-physics planners' support edges "
+    "(the box head's, or learned from it and the fitted scenes' contacts; each variant's fusion "
+    "chosen again on the val scenes)",
     "ch6_release": "how the ch. 6 executor lets go of an aborted pull's box and of a held box "
     "(every planner and both search oracles under each variant)",
 }

@@ -104,6 +104,7 @@ CH6_VARIED = (
     "box_hold",
     "fit_hypotheses",
     "fit_noise_mm",
+    "box_contact",
     "abort_release",
     "held_release",
 )
@@ -277,6 +278,16 @@ class DevConfig:
     """How many scenes the learned-plus-physics planners fit to one observation
     (trials.ch6.fit_hypotheses, fit_noise_mm); each variant's fusion chosen again on the
     support stage's val scenes (python -m clutterbench.dev.ch6_pull ch6_fit_hypotheses)."""
+    ch6_box_contact: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(
+            variants={"head": {}, "learned": {"box_contact": "learned"}},
+            planners=("multi_step_box_physics", "bimanual_box_physics"),
+            oracle=False,
+        )
+    )
+    """The contact in the learned-plus-physics planners' support edges (trials.ch6.box_contact);
+    each variant's fusion chosen again on the support stage's val scenes (python -m
+    clutterbench.dev.ch6_pull ch6_box_contact)."""
     ch6_release: Ch6PullConfig = dataclasses.field(
         default_factory=lambda: Ch6PullConfig(
             variants={"drop": {}, "lower": {"held_release": "lower"}},
@@ -310,6 +321,7 @@ class DevConfig:
             ("ch6_box_hold", self.ch6_box_hold.streams),
             ("ch6_release", self.ch6_release.streams),
             ("ch6_fit_hypotheses", self.ch6_fit_hypotheses.streams),
+            ("ch6_box_contact", self.ch6_box_contact.streams),
         ):
             for name in names:
                 if name not in self.streams:

@@ -17,7 +17,12 @@ from typing import Any
 import numpy as np
 
 from clutterbench.collapse.box_head import EDGE_HEADS, OUTPUTS, off_diagonal
-from clutterbench.collapse.box_predict import features, fuse
+from clutterbench.collapse.box_predict import (
+    contact_inputs,
+    features,
+    fuse,
+    learned_contact_of,
+)
 from clutterbench.planning.ch6.support import edge_precision_recall
 from clutterbench.support.box_train import THRESHOLDS, choose_threshold
 
@@ -48,6 +53,9 @@ class FusionScene:
     """label kind -> (K, K) bool: the physics truth of the trials' pull."""
     contact: np.ndarray
     """(K, K) bool: x and y touch in the settled scene."""
+    fitted_contact: np.ndarray | None = None
+    """(K, K) the share of the scenes fitted to the image in which x and y touch once settled
+    (NaN where no fit holds both); None where not asked for (`answer_scene`)."""
 
 
 def fit_logistic(x: np.ndarray, y: np.ndarray, ridge: float = RIDGE, steps: int = 50) -> np.ndarray:
@@ -103,8 +111,40 @@ ContactFn = Callable[[FusionScene], np.ndarray]
 
 
 def head_contact(sc: FusionScene) -> np.ndarray:
-    """The box head's contact probability: the edges' contact everywhere but in rechecks."""
+    """The box head's contact probability (trials.ch6.box_contact head, the default)."""
     return sc.probs[..., OUTPUTS.index("contact")]
+
+
+def fit_contact(scenes: Sequence[FusionScene]) -> np.ndarray:
+    """(4,) weights of the learned contact (trials.ch6.box_contact learned): a logistic
+    regression of the true contact on `contact_inputs` over the scenes' off-diagonal pairs
+    (their fitted_contact filled in by `answer_scene`)."""
+    assert all(sc.fitted_contact is not None for sc in scenes), "scenes without fitted contacts"
+    x = [off_diagonal(contact_inputs(head_contact(sc), sc.fitted_contact)) for sc in scenes]
+    y = [off_diagonal(sc.contact) for sc in scenes]
+    if not scenes:
+        return np.array(HEAD_ALONE)
+    y_all = np.concatenate(y).astype(np.float64)
+    if y_all.min() == y_all.max():  # one class only (a tiny profile's few scenes): the head
+        return np.array(HEAD_ALONE)
+    return fit_logistic(np.concatenate(x), y_all)
+
+
+def learned_contact(weights: Sequence[float]) -> ContactFn:
+    """ContactFn of the learned contact with `weights` (`fit_contact`)."""
+
+    def contact(sc: FusionScene) -> np.ndarray:
+        assert sc.fitted_contact is not None, "the learned contact needs the fitted contacts"
+        return learned_contact_of(weights, head_contact(sc), sc.fitted_contact)
+
+    return contact
+
+
+def contact_fn(chosen: Mapping[str, Any]) -> ContactFn:
+    """The edges' contact of a chosen fusion: learned where it carries contact weights (the
+    support stage's choice under trials.ch6.box_contact learned), else the head's."""
+    weights = chosen.get("contact_weights")
+    return head_contact if weights is None else learned_contact(weights)
 
 
 def edges(
@@ -157,16 +197,21 @@ def choose_edge_threshold(
     return best
 
 
-def choose_fusion(scenes: Sequence[FusionScene], kind: str) -> dict[str, Any]:
+def choose_fusion(
+    scenes: Sequence[FusionScene], kind: str, contact: ContactFn = head_contact
+) -> dict[str, Any]:
     """The fusion of label kind `kind` chosen on (validation) scenes: its weights (head
     logit, simulated and marked, simulated and not, bias), the outcome threshold of the best
-    f1 on their pairs and the edge threshold of the best graph f1."""
+    f1 on their pairs and the edge threshold of the best graph f1 with `contact` in the
+    edges (physics from depth alone: always with the head's)."""
     x, y = pairs(scenes, kind) if scenes else (np.zeros((0, 3)), np.zeros(0))
     # Pairs of one class only (a tiny profile's few scenes) teach no weights: the head alone.
     w = fit_logistic(x, y) if len(y) and y.min() < y.max() else np.array(HEAD_ALONE)
     p = 1.0 / (1.0 + np.exp(-(x @ w[:-1] + w[-1])))
     outcome = choose_threshold(p, y)
-    edge = choose_edge_threshold(scenes, lambda sc: method_probs(sc, kind, "fused", w), kind)
+    edge = choose_edge_threshold(
+        scenes, lambda sc: method_probs(sc, kind, "fused", w), kind, contact
+    )
     alone = choose_edge_threshold(
         scenes, lambda sc: method_probs(sc, kind, "physics_from_depth"), kind
     )
@@ -186,13 +231,13 @@ def fusion_rows(sc: FusionScene, chosen: Mapping[str, Mapping[str, Any]]) -> lis
     for kind in EDGE_HEADS:
         c = chosen[kind]
         truth = true_edges(sc, kind)
-        for method, weights, t, name in (
-            ("fused", c["weights"], c["edge"], f"{kind}_box_fused"),
-            ("physics_from_depth", None, c["physics_edge"], f"{kind}_physics_pull"),
+        for method, weights, t, name, contact in (
+            ("fused", c["weights"], c["edge"], f"{kind}_box_fused", contact_fn(c)),
+            ("physics_from_depth", None, c["physics_edge"], f"{kind}_physics_pull", head_contact),
         ):
             pred = set()
             if len(sc.ids) > 1:
-                pred = edges(sc, method_probs(sc, kind, method, weights), t)
+                pred = edges(sc, method_probs(sc, kind, method, weights), t, contact)
             precision, recall = edge_precision_recall(pred, truth)
             rows.append(
                 {
@@ -207,15 +252,28 @@ def fusion_rows(sc: FusionScene, chosen: Mapping[str, Mapping[str, Any]]) -> lis
     return rows
 
 
-def answer_scene(sc: Any, maps: Any, simulate: SimulatePulls) -> FusionScene:
+FittedContacts = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""(depth_m, masks (K, H, W)) -> (K, K) share of the fitted scenes in which x and y touch
+(NaN where no fit holds both): `fitted_contacts`."""
+
+
+def answer_scene(
+    sc: Any, maps: Any, simulate: SimulatePulls, contacts: FittedContacts | None = None
+) -> FusionScene:
     """The box head's and physics from depth's answers for one support scene
-    (support/evaluate.py Scene, read with the truth of every pull head); a scene with one
-    visible box has no pair, and nothing is simulated."""
+    (support/evaluate.py Scene, read with the truth of every pull head), with `contacts` the
+    fitted scenes' contacts too; a scene with one visible box has no pair, and nothing is
+    simulated."""
     k = len(sc.ids)
+    fitted_contact = None
     if k > 1:
         simulated, known = simulate(sc.depth_m, sc.masks)
+        if contacts is not None:
+            fitted_contact = contacts(sc.depth_m, sc.masks)
     else:
         simulated, known = {h: np.zeros((k, k), bool) for h in EDGE_HEADS}, np.zeros(k, bool)
+        if contacts is not None:
+            fitted_contact = np.full((k, k), np.nan)
     return FusionScene(
         index=sc.index,
         ids=list(sc.ids),
@@ -224,6 +282,7 @@ def answer_scene(sc: Any, maps: Any, simulate: SimulatePulls) -> FusionScene:
         known=known,
         truth={k: sc.moved_by[k].astype(bool) for k in EDGE_HEADS},
         contact=sc.contact.astype(bool),
+        fitted_contact=fitted_contact,
     )
 
 
@@ -259,6 +318,25 @@ def scenes_fitted_to(
         )
 
     return fit
+
+
+def fitted_contacts(sim: Any, ch6: Any, catalogue: str, min_pixels: int) -> FittedContacts:
+    """(depth_m, masks (K, H, W)) -> (K, K): the share of the scenes fitted to the image
+    (`scenes_fitted_to`) in which boxes x and y touch, by the truth's own rule
+    (sim.labelling.settled_contacts); NaN where no fit holds both."""
+    from clutterbench.sim.labelling import settled_contacts
+    from clutterbench.trials.ch6.physics_model import contact_share
+
+    fit = scenes_fitted_to(sim, ch6, catalogue, min_pixels)
+
+    def touching(depth: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        fits = [
+            ([int(b) for b in s.spec.meta["ids"]], settled_contacts(s.spec, sim.physics))
+            for s in fit(depth, masks)
+        ]
+        return contact_share(len(masks), fits)
+
+    return touching
 
 
 def fitted_pulls(

@@ -26,11 +26,15 @@ from clutterbench.precision import Precision, inference_from_params
 from clutterbench.progress import progress_bar
 from clutterbench.sim.config import SimConfig
 from clutterbench.support.box_fusion import (
+    FittedContacts,
     SimulatePulls,
     answer_scene,
     choose_fusion,
+    fit_contact,
+    fitted_contacts,
     fitted_pulls,
     fusion_rows,
+    learned_contact,
 )
 from clutterbench.support.box_run import box_rows, choose_edge_thresholds
 from clutterbench.support.config import SupportEvalConfig
@@ -111,7 +115,12 @@ def run_support(
     outcome = read_json(paths.box_metrics)["thresholds"]["box_head"]
     box_chosen = choose_edge_thresholds(val, box_maps, outcome)
     catalogue = load_section(GenerateConfig, "generate", params).datasets[cfg.val_dataset].catalogue
-    fusion = choose_box_fusion(val, box_maps, fitted_pulls_of(params, cfg, sim, ch6, catalogue))
+    fusion = choose_box_fusion(
+        val,
+        box_maps,
+        fitted_pulls_of(params, cfg, sim, ch6, catalogue),
+        fitted_contacts_of(cfg, sim, ch6, catalogue),
+    )
     write_json(paths.out / "box_fusion.json", {"chosen": fusion, "val_scenes": len(val)})
 
     # 2. test scenes from their own stream, with every removal simulated
@@ -131,7 +140,11 @@ def run_support(
         physics_depth,
         seed,
         (box_maps, box_chosen),
-        (fitted_pulls_of(params, cfg, sim, ch6, cfg.test.catalogue), fusion),
+        (
+            fitted_pulls_of(params, cfg, sim, ch6, cfg.test.catalogue),
+            fusion,
+            fitted_contacts_of(cfg, sim, ch6, cfg.test.catalogue),
+        ),
     )
     # edges: removing X moves Y, X and Y touch; <head>_edges: the trials' pull of X marks Y
     # under that head's label kind, X and Y touch
@@ -220,11 +233,11 @@ def score_test_scenes(
     physics_depth: PhysicsDepthSupport,
     seed: int,
     box: tuple[BoxMaps, dict[str, dict[str, float]]],
-    fusion: tuple[SimulatePulls, dict[str, dict[str, Any]]],
+    fusion: tuple[SimulatePulls, dict[str, dict[str, Any]], FittedContacts | None],
 ) -> tuple[list[dict], list[SupportPanel], dict[str, dict[str, list]]]:
     """Every method's rows on every test scene, the figure's panels and each head's true edges;
-    `box`: the box head and its chosen thresholds; `fusion`: physics from depth's pulls and
-    the fusion chosen on val scenes."""
+    `box`: the box head and its chosen thresholds; `fusion`: physics from depth's pulls, the
+    fusion chosen on val scenes and the fitted scenes' contacts (None: the head's contact)."""
     heads = models.heads
     chosen_of = {h: {m: p for m, p in chosen.items() if method_head(m)[0] == h} for h in heads}
     deletion = {m: p for m, p in chosen.items() if method_head(m)[0] == "deletion"}
@@ -242,7 +255,7 @@ def score_test_scenes(
                 rows += evaluate_scene(view, head_heat, chosen_of[head], None, rng)[0]
                 truth[head][str(sc.index)] = sorted(map(list, view.true_edges))
             rows += box_rows(sc, *box)
-            fused = fusion_rows(answer_scene(sc, box[0], fusion[0]), fusion[1])
+            fused = fusion_rows(answer_scene(sc, box[0], fusion[0], fusion[2]), fusion[1])
             where = {"scene": sc.index, "family": sc.family, "n_objects": sc.n_objects}
             rows += [where | {"visible": len(sc.ids)} | r for r in fused]
             if len(panels) < cfg.figure_scenes:
@@ -271,17 +284,37 @@ def fitted_pulls_of(
 
 
 def choose_box_fusion(
-    val: list[Scene], box_maps: BoxMaps, simulate: SimulatePulls
+    val: list[Scene],
+    box_maps: BoxMaps,
+    simulate: SimulatePulls,
+    contacts: FittedContacts | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Per pull head, the box head and physics from depth fused (support/box_fusion.py):
-    weights and thresholds chosen on the val scenes."""
+    weights and thresholds chosen on the val scenes; with the fitted scenes' `contacts`
+    (trials.ch6.box_contact learned), the learned contact's weights too (`contact_weights`),
+    fitted on the same scenes, and the edge threshold chosen with that contact."""
     answers = []
     with progress_bar("support: val pulls in the fitted boxes", total=len(val)) as advance:
         for sc in val:
             if len(sc.ids) > 1:
-                answers.append(answer_scene(sc, box_maps, simulate))
+                answers.append(answer_scene(sc, box_maps, simulate, contacts))
             advance(1)
-    return {kind: choose_fusion(answers, kind) for kind in EDGE_HEADS}
+    if contacts is None:
+        return {kind: choose_fusion(answers, kind) for kind in EDGE_HEADS}
+    w = fit_contact(answers)
+    weights = {"contact_weights": [round(float(v), 6) for v in w]}
+    contact = learned_contact(weights["contact_weights"])
+    return {kind: choose_fusion(answers, kind, contact) | weights for kind in EDGE_HEADS}
+
+
+def fitted_contacts_of(
+    cfg: SupportEvalConfig, sim: SimConfig, ch6: Ch6TrialParams, catalogue: str
+) -> FittedContacts | None:
+    """The fitted scenes' contacts where the edges learn their contact from them
+    (trials.ch6.box_contact learned), else None."""
+    if ch6.box_contact != "learned":
+        return None
+    return fitted_contacts(sim, ch6, catalogue, cfg.min_pixels)
 
 
 def write_thresholds(

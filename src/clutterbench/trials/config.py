@@ -235,6 +235,13 @@ class Ch6TrialParams:
     pull marks it (1: the fit alone, 0 or 1)."""
     fit_noise_mm: float = bounded(1.0, gt=0.0)
     """The depth noise (standard deviation, mm) of the fits after the first (fit_hypotheses)."""
+    box_contact: Literal["head", "learned"] = "head"
+    """The contact in the support edges of the learned-plus-physics planners (`*_box_physics`):
+    head, the box head's contact probability; learned, a logistic regression of the true
+    contact on the head's contact logit and the share of the fitted scenes in which the two
+    boxes touch once settled (the truth's own rule), its weights and the edge threshold chosen
+    on the support stage's val scenes (support/box_fusion.py). Chosen on dev streams (make
+    dev-ch6-box-contact)."""
     box_hold: Literal["leave_out", "simulate"] = "leave_out"
     """How the learned-plus-physics bimanual planner (`bimanual_box_physics`) scores a pull
     made holding a box: leave_out, the unheld pull's fused row with the held box left out

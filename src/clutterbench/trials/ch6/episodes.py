@@ -430,9 +430,11 @@ def box_fields(thresholds: Path, planner: str, ch6: Any) -> tuple[dict[str, Any]
     if not BOX_HEAD.exists():
         raise ClutterbenchError(f"{BOX_HEAD} missing (planner {planner} reads it); run box_head")
     if planner in BOX_PHYSICS_PLANNERS:
-        edge, outcome, weights = box_fusion(thresholds, ch6.pull_map_meaning)
+        edge, outcome, weights, contact = box_fusion(
+            thresholds, ch6.pull_map_meaning, ch6.box_contact
+        )
         fields = {"box_head_path": BOX_HEAD, "box_edge_threshold": edge, "box_fusion": weights}
-        return fields, outcome
+        return fields | {"box_contact": contact}, outcome
     edge, outcome = box_thresholds(thresholds, ch6.pull_map_meaning)
     return {"box_head_path": BOX_HEAD, "box_edge_threshold": edge}, outcome
 

@@ -48,3 +48,7 @@ class Ch6Job(ShelfJob):
     """The learned-plus-physics box planners' fusion weights (head logit, simulated and
     marked, simulated and not, bias; the support stage's fit on validation scenes; None:
     another planner)."""
+    box_contact: tuple[float, ...] | None = None
+    """Their learned contact's weights (trials.ch6.box_contact learned: head contact logit,
+    fitted and touching, fitted and not, bias; the support stage's fit on validation
+    scenes); None: the edges take the box head's contact."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import zlib
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -124,6 +125,23 @@ def fitted_scenes(
         except PerceptionError:
             continue
     return scenes
+
+
+def contact_share(k: int, fits: Sequence[tuple[Sequence[int], Sequence[tuple[int, int]]]]):
+    """(K, K) the share of the fitted scenes in which boxes x and y touch; `fits`: per fitted
+    scene, where its boxes are (fitted box a is box at[a]; a negative: none of the K) and its
+    touching pairs of fitted boxes (sim.labelling.settled_contacts). NaN where no fit holds
+    both boxes."""
+    touch, both = np.zeros((k, k)), np.zeros((k, k))
+    for at, pairs in fits:
+        held = [x for x in at if 0 <= x < k]
+        both[np.ix_(held, held)] += 1.0
+        for a, b in pairs:
+            x, y = at[a], at[b]
+            if 0 <= x < k and 0 <= y < k:
+                touch[x, y] += 1.0
+                touch[y, x] += 1.0
+    return np.where(both > 0, touch / np.maximum(both, 1.0), np.nan)
 
 
 def catalogue_of(stream_catalogue: str) -> np.ndarray:

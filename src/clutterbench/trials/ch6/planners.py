@@ -102,11 +102,14 @@ def box_thresholds(thresholds: Path, meaning: str) -> tuple[float, float]:
         ) from None
 
 
-def box_fusion(thresholds: Path, meaning: str) -> tuple[float, float, tuple[float, ...]]:
-    """(edge, outcome, weights) of the box head fused with physics from depth on the head of
-    pull_map_meaning `meaning`: its support-edge and outcome thresholds and its logistic
-    weights, chosen on validation scenes by the support stage, which writes them beside
-    `thresholds` (box_fusion.json)."""
+def box_fusion(
+    thresholds: Path, meaning: str, contact: str = "head"
+) -> tuple[float, float, tuple[float, ...], tuple[float, ...] | None]:
+    """(edge, outcome, weights, contact weights) of the box head fused with physics from
+    depth on the head of pull_map_meaning `meaning`: its support-edge and outcome thresholds,
+    its logistic weights and, for `contact` learned (trials.ch6.box_contact), the learned
+    contact's weights (None: the head's contact), chosen on validation scenes by the support
+    stage, which writes them beside `thresholds` (box_fusion.json)."""
     from clutterbench.io import read_json
 
     head = PULL_MAP_HEADS[meaning]
@@ -114,11 +117,14 @@ def box_fusion(thresholds: Path, meaning: str) -> tuple[float, float, tuple[floa
     try:
         chosen = read_json(path)["chosen"][head]
         weights = tuple(float(w) for w in chosen["weights"])
-        return float(chosen["edge"]), float(chosen["outcome"]), weights
+        learned = None
+        if contact == "learned":
+            learned = tuple(float(w) for w in chosen["contact_weights"])
+        return float(chosen["edge"]), float(chosen["outcome"]), weights, learned
     except (OSError, KeyError, TypeError, ValueError) as exc:
         raise ClutterbenchError(
-            f"{path}: no box-head fusion for the {head} head ({exc}); rerun the support stage "
-            "after box_head"
+            f"{path}: no box-head fusion for the {head} head with the {contact} contact "
+            f"({exc}); rerun the support stage after box_head"
         ) from None
 
 
@@ -275,11 +281,14 @@ def _box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = F
     if physics:
         assert job.box_fusion is not None, job.planner
         simulate = fitted_pull(job, spec, head)
+        learned = job.box_contact is not None  # trials.ch6.box_contact learned
         maps = FusedBoxMaps.from_paths(
             *args,
             simulate=simulate,
             weights=job.box_fusion,
             simulate_held=bimanual and params.box_hold == "simulate",
+            contact=simulate.contacts if learned else None,
+            contact_weights=job.box_contact,
         )
     else:
         maps = BoxMaps.from_paths(*args)
@@ -294,20 +303,28 @@ def fitted_pull(job: Ch6Job, spec: SceneSpec, head: str):
     physics_model.fitted_scenes), each box's outcome the share of those fits whose pull marks
     it by `head`; with a held box, the pull made holding it, the held box let go and judged
     as the trials judge a released box. Of the episode's spec it reads the shelf only; of
-    its stream the catalogue."""
+    its stream the catalogue. Its `contacts(obs, ids)` gives the same fits' contacts
+    (FittedContactFn: trials.ch6.box_contact learned)."""
+    from clutterbench.sim.labelling import settled_contacts
     from clutterbench.sim.pull import SceneState
-    from clutterbench.trials.ch6.physics_model import fitted_scenes, make_estimator
+    from clutterbench.trials.ch6.physics_model import (
+        contact_share,
+        fitted_scenes,
+        make_estimator,
+    )
 
     params: Ch6TrialParams = job.params
     estimate = make_estimator(job.stream_cfg.catalogue, params.min_pixels)
     action = (params.pull_increment_m, params.grasp_lift_m)
     falls = job.collapse_free if head == "pull_collapse" else None
     cache: dict[int, list[tuple[list[int], Any]]] = {}  # the last observation's fits and maps
+    touching: dict[int, list[list[tuple[int, int]]]] = {}  # and their settled contacts
 
     def fits_of(obs) -> list[tuple[list[int], Any]]:
         key = hash(obs.depth_m.tobytes())  # one estimate per observation
         if key not in cache:
             cache.clear()
+            touching.clear()
             fits = []
             for scene in fitted_scenes(
                 estimate,
@@ -347,6 +364,17 @@ def fitted_pull(job: Ch6Job, spec: SceneSpec, head: str):
                     share[ids.index(other)] += 1.0
         return share / n if n else None
 
+    def contacts(obs, ids: list[int]) -> np.ndarray:
+        """(K, K) the share of the fits in which boxes ids[x] and ids[y] touch once settled
+        (the truth's rule; NaN where no fit holds both)."""
+        fits = fits_of(obs)
+        key = hash(obs.depth_m.tobytes())
+        if key not in touching:
+            touching[key] = [settled_contacts(maps.spec, job.physics) for _, maps in fits]
+        where = [[ids.index(b) if b in ids else -1 for b in fitted] for fitted, _ in fits]
+        return contact_share(len(ids), list(zip(where, touching[key], strict=True)))
+
+    simulate.contacts = contacts  # type: ignore[attr-defined]
     return simulate
 
 
