@@ -100,15 +100,16 @@ def contact_cross_fit(scenes: Sequence[FusionScene], kind: str) -> dict[str, Any
     """The fused graph under `kind` with each of CONTACTS: per fold, the fusion's weights and
     the contact's edge threshold chosen on the other folds, scored on it."""
     folds = [list(scenes[f::FOLDS]) for f in range(FOLDS)]
+    rest = [[sc for g, part in enumerate(folds) if g != f for sc in part] for f in range(FOLDS)]
+    # the fusion's weights do not depend on the contact: once per fold
+    weights = [np.array(choose_fusion(fit, kind)["weights"]) for fit in rest]
     rows = {}
     for name in CONTACTS:
         graph, edge, learned, touch_p, touch_y = [], [], [], [], []
-        for f, held in enumerate(folds):
-            fit = [sc for g, part in enumerate(folds) if g != f for sc in part]
+        for held, fit, w in zip(folds, rest, weights, strict=True):
             cw = fit_contact(fit) if name == "learned" else ()
             learned.append([round(float(v), 4) for v in cw])
             contact = contact_of(name, cw)
-            w = np.array(choose_fusion(fit, kind)["weights"])
             prob = lambda sc, w=w: method_probs(sc, kind, "fused", w)  # noqa: E731
             t = choose_edge_threshold(fit, prob, kind, contact)
             edge.append(t)
