@@ -52,8 +52,10 @@ lint: setup
 	ruff check src stages tests
 	ruff format --check src stages tests
 
+# Two workers (pytest-xdist), a file each at a time: the tiny end-to-end repro (collected
+# first) on one, every other file on the other.
 test: lint
-	python -m pytest -q --durations=25 tests
+	python -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder --durations=25 tests
 
 bench: setup
 	python -m clutterbench.bench

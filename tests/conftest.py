@@ -11,6 +11,13 @@ from clutterbench.sim.config import CameraConfig, PhysicsConfig
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The slow end-to-end tests first: `make test` runs two workers, one file each at a
+    time (pytest-xdist, --dist loadfile, in collection order), so the tiny repro starts at
+    once on one worker while the other works through every other file."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 @pytest.fixture(scope="session")
 def root() -> Path:
     return ROOT
