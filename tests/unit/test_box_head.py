@@ -28,6 +28,7 @@ from clutterbench.report.table_6_1_boxes import box_table
 from clutterbench.support.box_train import (
     Pairs,
     auroc,
+    average_ranks,
     binary_scores,
     choose_threshold,
     score_methods,
@@ -84,6 +85,22 @@ def test_auroc_and_scores_match_their_definitions():
     assert (s["precision"], s["recall"]) == (0.5, 0.5)
     # a threshold that separates the classes is chosen over one that does not
     assert choose_threshold(np.array([0.9, 0.7, 0.3, 0.2]), np.array([1, 1, 0, 0])) <= 0.65
+
+
+@pytest.mark.parametrize("levels", [None, 3, 100])
+def test_average_ranks_are_pandas_ranks_value_for_value(levels):
+    rng = np.random.default_rng(levels or 0)
+    p = rng.random(500) if levels is None else rng.integers(0, levels, 500) / levels
+    p[::7] = -0.0 if levels else p[::7]  # -0.0 ties with 0.0
+    expected = pd.Series(p).rank(method="average").to_numpy()
+    assert np.array_equal(average_ranks(p), expected)
+    y = rng.random(500) < 0.4
+    assert auroc(p, y) == float(
+        (expected[y].sum() - y.sum() * (y.sum() + 1) / 2) / (y.sum() * (~y).sum())
+    )
+    p[3] = np.nan  # a NaN among the predictions: pandas' answer, NaN where it is a positive
+    y[3] = True
+    assert np.isnan(auroc(p, y))
 
 
 def _pairs(n: int, seed: int) -> Pairs:

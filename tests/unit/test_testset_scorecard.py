@@ -14,7 +14,7 @@ import pytest
 from clutterbench.data.testset_load import SCHEMA_VERSION, labels, load, pairs
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import save_npz
-from clutterbench.support.scorecard import leaderboard, per_box, score, write_row
+from clutterbench.support.scorecard import leaderboard, per_box, scene_rows, score, write_row
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -57,6 +57,13 @@ def _write_testset(root: Path, scenes: int = 4) -> Path:
         (ROOT / "src/clutterbench/data/testset_load.py").read_text()
     )
     return root
+
+
+def test_scene_rows_are_each_drawn_scene_s_rows_in_draw_order():
+    first, sizes = np.array([0, 3, 4, 9]), np.array([3, 1, 5, 2])
+    pick = np.array([2, 0, 2, 3, 1])
+    expected = np.concatenate([np.arange(first[i], first[i] + sizes[i]) for i in pick])
+    assert np.array_equal(scene_rows(first[pick], sizes[pick]), expected)
 
 
 def test_the_loader_needs_numpy_alone_and_refuses_a_changed_file(tmp_path):

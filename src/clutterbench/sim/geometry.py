@@ -99,8 +99,10 @@ def obb_penetration_m(
     Ra, Rb = quat_to_matrix(quat_a), quat_to_matrix(quat_b)
     ha, hb = 0.5 * np.asarray(size_a, float), 0.5 * np.asarray(size_b, float)
     d = np.asarray(centre_b, float) - np.asarray(centre_a, float)
-    axes = [Ra[:, i] for i in range(3)] + [Rb[:, i] for i in range(3)]
-    axes += [np.cross(Ra[:, i], Rb[:, j]) for i in range(3) for j in range(3)]
+    # the 9 edge axes in one call (row k: column k // 3 of Ra x column k % 3 of Rb): the
+    # same products and differences as 9 calls, value for value, at a ninth of the overhead
+    edges = np.cross(np.repeat(Ra.T, 3, axis=0), np.tile(Rb.T, (3, 1)))
+    axes = [Ra[:, i] for i in range(3)] + [Rb[:, i] for i in range(3)] + list(edges)
     depth = np.inf
     for axis in axes:
         norm = np.linalg.norm(axis)

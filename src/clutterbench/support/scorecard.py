@@ -108,11 +108,11 @@ def _interval(rows: pd.DataFrame, kind: str, rng: np.random.Generator) -> dict[s
     p = rows["p"].to_numpy()[order]
     y = rows[kind].to_numpy().astype(bool)[order]
     _, starts = np.unique(rows["scene"].to_numpy()[order], return_index=True)
-    bounds = np.append(starts, len(p))
+    sizes = np.diff(np.append(starts, len(p)))
     draws: dict[str, list[float]] = {"auroc": [], "precision": [], "recall": []}
     for _ in range(BOOTSTRAP):
         pick = rng.integers(0, len(starts), len(starts))
-        idx = np.concatenate([np.arange(bounds[i], bounds[i + 1]) for i in pick])
+        idx = scene_rows(starts[pick], sizes[pick])
         pp, yy = p[idx], y[idx]
         pred = pp > THRESHOLD
         tp = int((pred & yy).sum())
@@ -120,6 +120,13 @@ def _interval(rows: pd.DataFrame, kind: str, rng: np.random.Generator) -> dict[s
         draws["precision"].append(tp / int(pred.sum()) if pred.any() else np.nan)
         draws["recall"].append(tp / int(yy.sum()) if yy.any() else np.nan)
     return {k: _percentiles(np.asarray(v, dtype=np.float64)) for k, v in draws.items()}
+
+
+def scene_rows(first: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """The row indices of the drawn scenes, in draw order: first[k], first[k] + 1, ...,
+    first[k] + sizes[k] - 1 for each draw k, concatenated."""
+    offsets = np.cumsum(sizes) - sizes
+    return np.arange(int(sizes.sum())) + np.repeat(first - offsets, sizes)
 
 
 def _percentiles(v: np.ndarray) -> list[float | None]:
