@@ -92,13 +92,18 @@ class BaseConfig:
         )
 
 
+YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+"""PyYAML's safe loader, libyaml's C parser where the wheel has it: the same values as
+yaml.safe_load, ~10x sooner (every stage reads params.yaml)."""
+
+
 def load_params(path: Path | str = "params.yaml") -> dict[str, Any]:
     """Read params.yaml; a missing or unparsable file is a one-line error."""
     path = Path(path)
     if not path.exists():
         raise ClutterbenchError(f"params file not found: {path}")
     try:
-        raw = yaml.safe_load(path.read_text()) or {}
+        raw = yaml.load(path.read_text(), Loader=YAML_LOADER) or {}
     except yaml.YAMLError as exc:
         raise ClutterbenchError(f"params file {path} is not valid YAML: {exc}") from None
     if not isinstance(raw, dict):
