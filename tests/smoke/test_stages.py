@@ -64,13 +64,23 @@ def digest_tree(path: Path) -> dict[str, str]:
     }
 
 
+def one_core(repo: Path) -> Path:
+    """base.cores: 1 in a copy's params: every `auto` worker count and torch's threads are one,
+    so a stage runs its jobs in its own process instead of spawning workers that import
+    everything again and wait for a core the other copy holds."""
+    params = yaml.safe_load((repo / "params.yaml").read_text())
+    params["base"]["cores"] = 1
+    (repo / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
+    return repo
+
+
 @pytest.fixture(scope="module")
 def repro_twice(root, tmp_path_factory):
-    """Two tiny copies reproduced at the same time (most of a tiny stage is one process
-    starting up and compiling its renderer's shaders, so two at once use both cores): `a` in
-    two goes (generate + split, then the rest), `b` in one."""
-    a = tiny_copy(root, tmp_path_factory.mktemp("a") / "repo")
-    b = tiny_copy(root, tmp_path_factory.mktemp("b") / "repo")
+    """Two tiny copies reproduced at the same time, a core each (most of a tiny stage is one
+    process starting up and compiling its renderer's shaders, so two at once use both cores):
+    `a` in two goes (generate + split, then the rest), `b` in one."""
+    a = one_core(tiny_copy(root, tmp_path_factory.mktemp("a") / "repo"))
+    b = one_core(tiny_copy(root, tmp_path_factory.mktemp("b") / "repo"))
     with ThreadPoolExecutor(1) as pool:
         whole = pool.submit(run, ["dvc", "repro"], b)
         run(["dvc", "repro", "generate", "split"], a)
