@@ -17,7 +17,7 @@ from typing import Any, Literal, TypeVar, get_args, get_origin
 
 import yaml
 
-from clutterbench.errors import ClutterbenchError
+from clutterbench.errors import ClutterbenchError, yaml_problem
 
 SCALES = ("tiny", "default", "paper")
 T = TypeVar("T")
@@ -105,7 +105,9 @@ def load_params(path: Path | str = "params.yaml") -> dict[str, Any]:
     try:
         raw = yaml.load(path.read_text(), Loader=YAML_LOADER) or {}
     except yaml.YAMLError as exc:
-        raise ClutterbenchError(f"params file {path} is not valid YAML: {exc}") from None
+        raise ClutterbenchError(
+            f"params file {path} is not valid YAML: {yaml_problem(exc)}"
+        ) from None
     if not isinstance(raw, dict):
         raise ClutterbenchError(f"params file {path} must be a mapping of sections")
     return raw

@@ -17,3 +17,12 @@ class PerceptionError(ClutterbenchError):
     """What one observation could not give (say, a fit of the boxes that no scene can hold):
     recorded in the episode or scene it belongs to and counted in its table, never the end of
     a stage."""
+
+
+def yaml_problem(exc: Exception) -> str:
+    """A YAML parser's error as one line: what it did not find, and where (PyYAML's own
+    message spans four lines)."""
+    mark = getattr(exc, "problem_mark", None)
+    problem = getattr(exc, "problem", None) or str(exc)
+    where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+    return " ".join(f"{problem}{where}".split())

@@ -79,6 +79,18 @@ def test_unknown_scale_is_rejected():
         load_section(ReportConfig, "report", {"base": {"scale": "huge"}, "report": {}})
 
 
+def test_a_params_file_that_is_not_yaml_is_one_line_naming_file_and_line(tmp_path):
+    path = tmp_path / "params.yaml"
+    path.write_text("base:\n  seed: [1\n")
+    with pytest.raises(ClutterbenchError) as err:
+        load_params(path)
+    message = str(err.value)
+    assert "\n" not in message and message.startswith(f"params file {path} is not valid YAML")
+    assert "(line 3, column 1)" in message
+    path.write_text("base:\n  seed: 0\n  cores: auto\n")
+    assert load_params(path) == {"base": {"seed": 0, "cores": "auto"}}
+
+
 def test_configs_are_frozen():
     cfg = parse(Fractions, {}, "f")
     with pytest.raises(dataclasses.FrozenInstanceError):

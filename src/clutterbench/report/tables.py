@@ -15,7 +15,7 @@ from typing import Any
 import pandas as pd
 import yaml
 
-from clutterbench.errors import ClutterbenchError
+from clutterbench.errors import ClutterbenchError, yaml_problem
 from clutterbench.io import write_text
 from clutterbench.trials.core.stats import Rate
 
@@ -27,7 +27,9 @@ def load_thesis_figures(path: Path) -> dict[str, Any]:
     try:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
-        raise ClutterbenchError(f"thesis figures file {path} is not valid YAML: {exc}") from None
+        raise ClutterbenchError(
+            f"thesis figures file {path} is not valid YAML: {yaml_problem(exc)}"
+        ) from None
     if not isinstance(data, dict):
         raise ClutterbenchError(f"thesis figures file {path} must map table ids to tables")
     return data
