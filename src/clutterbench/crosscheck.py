@@ -177,10 +177,10 @@ def _env() -> dict[str, str]:
     }
 
 
-def copy_pipeline(root: Path, dst: Path, scale: str = "tiny") -> Path:
+def copy_pipeline(root: Path, dst: Path, scale: str = "tiny", cores: int | None = None) -> Path:
     """A copy of the repository's pipeline (dvc.yaml, params.yaml, stages, src, the thesis
-    figures) at base.scale=`scale`, dvc-initialised without git: what the smoke test and the
-    crosscheck reproduce."""
+    figures) at base.scale=`scale` (and base.cores=`cores` unless None), dvc-initialised
+    without git: what the smoke test and the crosscheck reproduce."""
     dst.mkdir(parents=True)
     for item in COPY:
         src = root / item
@@ -193,6 +193,8 @@ def copy_pipeline(root: Path, dst: Path, scale: str = "tiny") -> Path:
             shutil.copy(src, dst / item)
     params = yaml.safe_load((dst / "params.yaml").read_text())
     params["base"]["scale"] = scale
+    if cores is not None:
+        params["base"]["cores"] = cores
     (dst / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
     subprocess.run(["dvc", "init", "--no-scm", "-q"], cwd=dst, env=_env(), check=True)
     return dst

@@ -40,8 +40,8 @@ from clutterbench.trials.core.records import read_records
 pytestmark = pytest.mark.slow
 
 
-def tiny_copy(root: Path, dst: Path) -> Path:
-    return copy_pipeline(root, dst, "tiny")
+def tiny_copy(root: Path, dst: Path, cores: int | None = None) -> Path:
+    return copy_pipeline(root, dst, "tiny", cores)
 
 
 def run(cmd: list[str], cwd: Path, check: bool = True) -> subprocess.CompletedProcess:
@@ -64,23 +64,15 @@ def digest_tree(path: Path) -> dict[str, str]:
     }
 
 
-def one_core(repo: Path) -> Path:
-    """base.cores: 1 in a copy's params: every `auto` worker count and torch's threads are one,
-    so a stage runs its jobs in its own process instead of spawning workers that import
-    everything again and wait for a core the other copy holds."""
-    params = yaml.safe_load((repo / "params.yaml").read_text())
-    params["base"]["cores"] = 1
-    (repo / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
-    return repo
-
-
 @pytest.fixture(scope="module")
 def repro_twice(root, tmp_path_factory):
-    """Two tiny copies reproduced at the same time, a core each (most of a tiny stage is one
-    process starting up and compiling its renderer's shaders, so two at once use both cores):
-    `a` in two goes (generate + split, then the rest), `b` in one."""
-    a = one_core(tiny_copy(root, tmp_path_factory.mktemp("a") / "repo"))
-    b = one_core(tiny_copy(root, tmp_path_factory.mktemp("b") / "repo"))
+    """Two tiny copies reproduced at the same time (most of a tiny stage is one process
+    starting up and compiling its renderer's shaders, so two at once use both cores): `a` in
+    two goes (generate + split, then the rest), `b` in one. Each at base.cores 1: every `auto`
+    worker count and torch's threads are one, so no stage spawns workers that import
+    everything again and wait for the core the other copy holds."""
+    a = tiny_copy(root, tmp_path_factory.mktemp("a") / "repo", cores=1)
+    b = tiny_copy(root, tmp_path_factory.mktemp("b") / "repo", cores=1)
     with ThreadPoolExecutor(1) as pool:
         whole = pool.submit(run, ["dvc", "repro"], b)
         run(["dvc", "repro", "generate", "split"], a)
