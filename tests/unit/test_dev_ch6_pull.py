@@ -336,3 +336,28 @@ def test_a_learned_contact_variant_reads_the_contact_chosen_for_it(root, tmp_pat
 
     with pytest.raises(ClutterbenchError, match="with the learned contact"):
         box_fusion(tmp_path / "stage" / "thresholds.json", "collapse", "learned")
+
+
+def test_a_box_cp_max_variant_sets_the_box_planners_cp_max_and_no_other(
+    root, tmp_path, monkeypatch
+):
+    """dev ch6_box_cp_max: trials.ch6.box_cp_max is the box planners' cp_max (null: the
+    fusion's val-chosen outcome threshold, 0.4 here); it does not refit the fusion, and a
+    planner that is not a box planner keeps its own cp_max."""
+    params = _tiny_with_models(root, tmp_path, monkeypatch)
+    monkeypatch.setattr(ch6_pull, "THRESHOLDS", _write_fusion(tmp_path / "stage", 0.5))
+
+    def refit(*args):
+        raise AssertionError("box_cp_max is no fusion field")
+
+    monkeypatch.setattr(ch6_pull, "variant_thresholds", refit)
+    params["dev"]["ch6_box_cp_max"]["variants"] = {"support": {}, "low": {"box_cp_max": 0.15}}
+    params["dev"]["ch6_box_cp_max"]["planners"] = ["multi_step_box_physics", "multi_step_pull"]
+    dev = load_section(DevConfig, "dev", params)
+    got = {j.condition.split("/")[0]: j.cp_max for j in trial_jobs(dev, params, "ch6_box_cp_max")}
+    assert got == {
+        "support:multi_step_box_physics": 0.4,
+        "support:multi_step_pull": 0.3,
+        "low:multi_step_box_physics": 0.15,
+        "low:multi_step_pull": 0.3,
+    }

@@ -15,6 +15,7 @@
     python -m clutterbench.dev.ch6_pull ch6_release           # make dev-ch6-release
     python -m clutterbench.dev.ch6_pull ch6_fit_hypotheses    # make dev-ch6-fit-hypotheses
     python -m clutterbench.dev.ch6_pull ch6_box_contact       # make dev-ch6-box-contact
+    python -m clutterbench.dev.ch6_pull ch6_box_cp_max        # make dev-ch6-box-cp-max
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
 rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull
@@ -51,7 +52,8 @@ ch6_fit_hypotheses (how many scenes the learned-plus-physics planners fit to one
 trials.ch6.fit_hypotheses; a variant that changes them gets its fusion chosen again on the
 support stage's val scenes, variant_thresholds), ch6_box_contact (the contact in their support
 edges, trials.ch6.box_contact: the box head's, or learned from it and the fitted scenes'
-contacts; its fusion chosen again likewise).
+contacts; its fusion chosen again likewise), ch6_box_cp_max (the box planners' cp_max,
+trials.ch6.box_cp_max: the support stage's outcome threshold or a lower one).
 """
 
 from __future__ import annotations
@@ -312,6 +314,8 @@ TITLES = {
     "ch6_box_contact": "the contact in the ch. 6 learned-plus-physics planners' support edges "
     "(the box head's, or learned from it and the fitted scenes' contacts; each variant's fusion "
     "chosen again on the val scenes)",
+    "ch6_box_cp_max": "the collapse score over which the ch. 6 learned-plus-physics planners "
+    "reject a pull or stop it (the support stage's outcome threshold, or lower)",
     "ch6_release": "how the ch. 6 executor lets go of an aborted pull's box and of a held box "
     "(every planner and both search oracles under each variant)",
 }

@@ -105,6 +105,7 @@ CH6_VARIED = (
     "fit_hypotheses",
     "fit_noise_mm",
     "box_contact",
+    "box_cp_max",
     "abort_release",
     "held_release",
 )
@@ -288,6 +289,15 @@ class DevConfig:
     """The contact in the learned-plus-physics planners' support edges (trials.ch6.box_contact);
     each variant's fusion chosen again on the support stage's val scenes (python -m
     clutterbench.dev.ch6_pull ch6_box_contact)."""
+    ch6_box_cp_max: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(
+            variants={"support": {}, "lower": {"box_cp_max": 0.3}},
+            planners=("multi_step_box_physics", "bimanual_box_physics"),
+            oracle=False,
+        )
+    )
+    """The box planners' cp_max (trials.ch6.box_cp_max): the support stage's outcome
+    threshold or lower (python -m clutterbench.dev.ch6_pull ch6_box_cp_max)."""
     ch6_release: Ch6PullConfig = dataclasses.field(
         default_factory=lambda: Ch6PullConfig(
             variants={"drop": {}, "lower": {"held_release": "lower"}},
@@ -322,6 +332,7 @@ class DevConfig:
             ("ch6_release", self.ch6_release.streams),
             ("ch6_fit_hypotheses", self.ch6_fit_hypotheses.streams),
             ("ch6_box_contact", self.ch6_box_contact.streams),
+            ("ch6_box_cp_max", self.ch6_box_cp_max.streams),
         ):
             for name in names:
                 if name not in self.streams:

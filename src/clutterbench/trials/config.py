@@ -242,6 +242,12 @@ class Ch6TrialParams:
     boxes touch once settled (the truth's own rule), its weights and the edge threshold chosen
     on the support stage's val scenes (support/box_fusion.py). Chosen on dev streams (make
     dev-ch6-box-contact)."""
+    box_cp_max: float | None = bounded(None, gt=0.0, le=1.0)
+    """The box planners' (`*_box`, `*_box_physics`) cp_max: the collapse score (a box's
+    predicted probability) over which a candidate is rejected at a decision and a pull is
+    stopped; null: the outcome threshold the support stage chose on val pairs (the best F1 of
+    the per-box outcome, what draws the graph's edges). Chosen on dev streams (make
+    dev-ch6-box-cp-max)."""
     box_hold: Literal["leave_out", "simulate"] = "leave_out"
     """How the learned-plus-physics bimanual planner (`bimanual_box_physics`) scores a pull
     made holding a box: leave_out, the unheld pull's fused row with the held box left out

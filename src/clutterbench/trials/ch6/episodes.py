@@ -423,8 +423,9 @@ def planner_support(
 def box_fields(thresholds: Path, planner: str, ch6: Any) -> tuple[dict[str, Any], float | None]:
     """A box planner's job fields (its head's checkpoint, edge threshold and, learned plus
     physics, its fusion's weights) and its cp_max (the outcome threshold), all chosen on
-    validation scenes by the support stage; ({}, None) for any other planner. One line when
-    the box head is missing."""
+    validation scenes by the support stage, cp_max overridden by trials.ch6.box_cp_max where
+    set (chosen on dev streams); ({}, None) for any other planner. One line when the box
+    head is missing."""
     if planner not in BOX_PLANNERS:
         return {}, None
     if not BOX_HEAD.exists():
@@ -434,9 +435,11 @@ def box_fields(thresholds: Path, planner: str, ch6: Any) -> tuple[dict[str, Any]
             thresholds, ch6.pull_map_meaning, ch6.box_contact
         )
         fields = {"box_head_path": BOX_HEAD, "box_edge_threshold": edge, "box_fusion": weights}
-        return fields | {"box_contact": contact}, outcome
-    edge, outcome = box_thresholds(thresholds, ch6.pull_map_meaning)
-    return {"box_head_path": BOX_HEAD, "box_edge_threshold": edge}, outcome
+        fields |= {"box_contact": contact}
+    else:
+        edge, outcome = box_thresholds(thresholds, ch6.pull_map_meaning)
+        fields = {"box_head_path": BOX_HEAD, "box_edge_threshold": edge}
+    return fields, outcome if ch6.box_cp_max is None else ch6.box_cp_max
 
 
 def condition_jobs(
