@@ -281,3 +281,16 @@ def test_the_support_stage_learns_the_contact_only_when_asked(monkeypatch):
         again = bf.choose_fusion(scenes, kind, bf.learned_contact(learned[kind]["contact_weights"]))
         assert learned[kind]["edge"] == again["edge"]
     assert learned["pull"]["edge"] != head["pull"]["edge"]  # here the contact moves it
+
+
+def test_the_precision_first_point_is_the_most_recall_at_the_precision_asked():
+    """dev box_physics_fusion's precision-first operating point: of the thresholds whose mean
+    precision reaches PRECISION_FIRST, the one of the highest recall; where none does, the
+    highest precision; NaN never qualifies."""
+    from clutterbench.dev.box_physics_fusion import PRECISION_FIRST, precision_first
+
+    hi = PRECISION_FIRST + 0.01
+    curve = [(0.80, 0.99), (hi + 0.02, 0.86), (hi, 0.90), (float("nan"), 0.95), (0.99, 0.10)]
+    assert precision_first(curve) == 2
+    below = [(0.80, 0.99), (0.85, 0.90), (float("nan"), 0.5), (0.84, 0.95)]
+    assert precision_first(below) == 1

@@ -29,8 +29,12 @@ every threshold fitted on one half and scored on the other, both ways, so each s
 score comes from choices made without it. Scored per pair (AUROC, precision and recall at
 1/2, ECE) and as Table 6.2's support graph (an edge where outcome x contact exceeds a
 threshold chosen on the other half by the f1 of mean precision and recall; mean precision
-and recall over scenes, against that label kind's truth). Never the test dataset.
-Writes reports/dev/box_physics_fusion.{json,md}; not a dvc stage.
+and recall over scenes, against that label kind's truth). The contacts' graphs are also
+scored at the precision-first operating point (PRECISION_FIRST: the edge threshold of the
+highest recall among those whose precision reaches it on the other half) and over every
+threshold (the JSON's `curve`, out of fold). Never the test dataset.
+Writes reports/dev/box_physics_fusion.{json,md,png} (the png: precision against recall of
+the contacts' graphs); not a dvc stage.
 """
 
 from __future__ import annotations
@@ -56,7 +60,7 @@ from clutterbench.support.box_fusion import (
     graph_scores,
     method_probs,
 )
-from clutterbench.support.box_train import binary_scores
+from clutterbench.support.box_train import THRESHOLDS, binary_scores
 
 NAME = "box_physics_fusion"
 METHODS = ("box_head", "physics_from_depth", "fused")
@@ -65,6 +69,19 @@ FITS = (1, 4)
 """The numbers of scenes fitted to one image that the recheck scores (trials.ch6.fit_hypotheses)."""
 CONTACTS = ("head", "fitted", "mean", "learned", "truth")
 """The contacts of the one-fit fused graph's edges (module docstring)."""
+PRECISION_FIRST = 0.90
+"""The precision-first operating point: the edge threshold of the highest mean recall among
+those whose mean precision reaches this on the other half (the highest precision where none
+does), the precision the project aims Table 6.2's per-box graph at."""
+
+
+def precision_first(curve: Sequence[tuple[float, float]]) -> int:
+    """The index into THRESHOLDS of the precision-first operating point of `curve` ((mean
+    precision, mean recall) at each threshold; NaN never qualifies)."""
+    ok = [i for i, (pr, _) in enumerate(curve) if np.isfinite(pr) and pr >= PRECISION_FIRST]
+    if ok:
+        return max(ok, key=lambda i: (np.nan_to_num(curve[i][1], nan=-1.0), -i))
+    return max(range(len(curve)), key=lambda i: (np.nan_to_num(curve[i][0], nan=-1.0), -i))
 
 
 def contact_of(name: str, weights: Sequence[float] = ()):
@@ -106,6 +123,7 @@ def contact_cross_fit(scenes: Sequence[FusionScene], kind: str) -> dict[str, Any
     rows = {}
     for name in CONTACTS:
         graph, edge, learned, touch_p, touch_y = [], [], [], [], []
+        first, first_edge, curves = [], [], []
         for held, fit, w in zip(folds, rest, weights, strict=True):
             cw = fit_contact(fit) if name == "learned" else ()
             learned.append([round(float(v), 4) for v in cw])
@@ -116,6 +134,14 @@ def contact_cross_fit(scenes: Sequence[FusionScene], kind: str) -> dict[str, Any
             graph.append((graph_scores(held, prob, kind, t, contact), len(held)))
             touch_p.append(np.concatenate([off_diagonal(contact(sc)) for sc in held]))
             touch_y.append(np.concatenate([off_diagonal(sc.contact) for sc in held]))
+            # every threshold, on the other half (to choose) and out of fold (to score)
+            chosen = precision_first(
+                [graph_scores(fit, prob, kind, float(u), contact) for u in THRESHOLDS]
+            )
+            curve = [graph_scores(held, prob, kind, float(u), contact) for u in THRESHOLDS]
+            first_edge.append(float(THRESHOLDS[chosen]))
+            first.append((curve[chosen], len(held)))
+            curves.append((curve, len(held)))
         n = sum(k for _, k in graph)
         rows[name] = {
             "contact_auroc": binary_scores(
@@ -124,6 +150,19 @@ def contact_cross_fit(scenes: Sequence[FusionScene], kind: str) -> dict[str, Any
             "graph_precision": sum(pr[0] * k for pr, k in graph) / n,
             "graph_recall": sum(pr[1] * k for pr, k in graph) / n,
             "edge_thresholds": edge,
+            "precision_first": {
+                "graph_precision": sum(pr[0] * k for pr, k in first) / n,
+                "graph_recall": sum(pr[1] * k for pr, k in first) / n,
+                "edge_thresholds": first_edge,
+            },
+            "curve": [
+                {
+                    "edge": float(u),
+                    "graph_precision": sum(c[i][0] * k for c, k in curves) / n,
+                    "graph_recall": sum(c[i][1] * k for c, k in curves) / n,
+                }
+                for i, u in enumerate(THRESHOLDS)
+            ],
         }
         if name == "learned":
             rows[name]["weights"] = learned
@@ -271,7 +310,56 @@ def recheck(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
             f"{contacts['pull']['learned']['graph_recall']:.3f}"
         ),
     }
+    figure(result, out_dir / f"{NAME}.png")
     return save(result, started, out_dir, NAME, markdown)
+
+
+def figure(result: Mapping[str, Any], path: Path) -> None:
+    """The fused graph's mean precision against mean recall over every edge threshold (out
+    of fold), one curve per contact and a panel per label kind; the best-F1 and the
+    precision-first operating points marked, and the precision PRECISION_FIRST asks for."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from clutterbench.io import atomic_path
+
+    kinds = list(result["contacts"])
+    fig, axes = plt.subplots(1, len(kinds), figsize=(5.2 * len(kinds), 4.6), squeeze=False)
+    for ax, kind in zip(axes[0], kinds, strict=True):
+        for name, r in result["contacts"][kind].items():
+            curve = r["curve"]
+            line = ax.plot(
+                [c["graph_recall"] for c in curve],
+                [c["graph_precision"] for c in curve],
+                marker=".",
+                label=name,
+            )[0]
+            pf = r["precision_first"]
+            ax.plot(r["graph_recall"], r["graph_precision"], "o", color=line.get_color())
+            ax.plot(pf["graph_recall"], pf["graph_precision"], "*", ms=12, color=line.get_color())
+        ax.axhline(PRECISION_FIRST, color="0.5", lw=0.8, ls="--")
+        ax.set(
+            title=f"{kind}: the fused support graph on val (out of fold)",
+            xlabel="mean recall",
+            ylabel="mean precision",
+            xlim=(0.6, 1.0),
+            ylim=(0.75, 1.0),
+        )
+        ax.grid(alpha=0.3)
+        ax.legend(title="contact", fontsize=8, loc="lower left")
+    fig.text(
+        0.01,
+        0.01,
+        "dots: edge thresholds 0.05-0.95; o: best F1 (the support stage's rule); "
+        f"*: precision-first ({PRECISION_FIRST:g}, dashed)",
+        fontsize=8,
+    )
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110, metadata={"Software": None})
+    plt.close(fig)
 
 
 def markdown(result: Mapping[str, Any]) -> str:
@@ -334,6 +422,27 @@ def markdown(result: Mapping[str, Any]) -> str:
             lines.append(
                 f"| {kind} | {name} | {r['contact_auroc']:.4f} | {r['graph_precision']:.3f} | "
                 f"{r['graph_recall']:.3f} | {', '.join(f'{t:g}' for t in r['edge_thresholds'])} |"
+            )
+    lines += [
+        "",
+        f"### The precision-first operating point (precision {PRECISION_FIRST:g})",
+        "",
+        "The same fused graphs at another edge threshold: per half, the threshold of the "
+        f"highest mean recall among those whose mean precision reaches {PRECISION_FIRST:g} on "
+        "the other half (the highest precision where none does), scored on this half. Beside "
+        "it, the threshold of the best F1 (the support stage's rule, the table above).",
+        "",
+        "| label kind | contact | best F1: precision / recall | precision-first: precision / "
+        "recall | precision-first edge thresholds (per half) |",
+        "|---|---|---|---|---|",
+    ]
+    for kind, rows in result["contacts"].items():
+        for name, r in rows.items():
+            pf = r["precision_first"]
+            lines.append(
+                f"| {kind} | {name} | {r['graph_precision']:.3f} / {r['graph_recall']:.3f} | "
+                f"{pf['graph_precision']:.3f} / {pf['graph_recall']:.3f} | "
+                f"{', '.join(f'{t:g}' for t in pf['edge_thresholds'])} |"
             )
     learned = result["contacts"]["pull"]["learned"]["weights"]
     lines += [
