@@ -19,7 +19,7 @@ TORCH_PIP_ARGS := $(if $(TORCH_INDEX_URL),--index-url $(TORCH_INDEX_URL))
 TORCH_CHOICE := $(if $(filter-out torch==2.13.0,$(TORCH_SPEC))$(TORCH_INDEX_URL),echo '$(TORCH_SPEC) $(TORCH_INDEX_URL)';)
 STAMP := $(VENV)/.installed-$(shell ($(TORCH_CHOICE) cat requirements.lock pyproject.toml) 2>/dev/null | sha1sum | cut -c1-12)
 
-.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner dev-perturbed-fit dev-ch6-pull dev-ch6-pull-thresholds dev-ch6-pull-watch dev-ch6-no-plan dev-ch6-no-plan-thresholds dev-ch6-idle-hold dev-ch6-clear dev-ch6-hold dev-ch6-vs-pfd dev-ch6-box dev-ch6-box-physics dev-ch6-box-hold dev-ch6-fit-hypotheses dev-ch6-box-contact dev-ch6-box-cp-max dev-ch6-release dev-box-head-data dev-box-physics-fusion benchmark-scenes clean-venv shell
+.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner dev-perturbed-fit dev-ch6-pull dev-ch6-pull-thresholds dev-ch6-pull-watch dev-ch6-no-plan dev-ch6-no-plan-thresholds dev-ch6-idle-hold dev-ch6-clear dev-ch6-hold dev-ch6-vs-pfd dev-ch6-box dev-ch6-box-physics dev-ch6-box-hold dev-ch6-fit-hypotheses dev-ch6-box-contact dev-ch6-box-cp-max dev-ch6-box-edge dev-ch6-release dev-box-head-data dev-box-physics-fusion benchmark-scenes clean-venv shell
 
 setup: system venv .dvc/config
 
@@ -202,6 +202,12 @@ dev-ch6-box-contact: setup
 # -> reports/dev/ch6_box_cp_max.{json,md}
 dev-ch6-box-cp-max: setup
 	python -m clutterbench.dev.ch6_pull ch6_box_cp_max
+
+# The learned-plus-physics planners' support graph (trials.ch6.box_contact, box_edge_precision):
+# the support stage's, or the learned contact at the most recall for 0.90 precision on val
+# -> reports/dev/ch6_box_edge.{json,md}
+dev-ch6-box-edge: setup
+	python -m clutterbench.dev.ch6_pull ch6_box_edge
 
 # How the ch. 6 executor lets go of an aborted pull's box and of a held box (trials.ch6
 # abort_release, held_release), the oracles under each variant too: reports/dev/ch6_release.md

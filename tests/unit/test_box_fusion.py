@@ -284,13 +284,39 @@ def test_the_support_stage_learns_the_contact_only_when_asked(monkeypatch):
 
 
 def test_the_precision_first_point_is_the_most_recall_at_the_precision_asked():
-    """dev box_physics_fusion's precision-first operating point: of the thresholds whose mean
-    precision reaches PRECISION_FIRST, the one of the highest recall; where none does, the
-    highest precision; NaN never qualifies."""
-    from clutterbench.dev.box_physics_fusion import PRECISION_FIRST, precision_first
+    """The precision-first operating point (trials.ch6.box_edge_precision, dev
+    box_physics_fusion): of the thresholds whose mean precision reaches the precision asked,
+    the one of the highest recall; where none does, the highest precision; NaN never
+    qualifies."""
+    from clutterbench.support.box_fusion import precision_first
 
-    hi = PRECISION_FIRST + 0.01
-    curve = [(0.80, 0.99), (hi + 0.02, 0.86), (hi, 0.90), (float("nan"), 0.95), (0.99, 0.10)]
-    assert precision_first(curve) == 2
+    curve = [(0.80, 0.99), (0.93, 0.86), (0.91, 0.90), (float("nan"), 0.95), (0.99, 0.10)]
+    assert precision_first(curve, 0.90) == 2
     below = [(0.80, 0.99), (0.85, 0.90), (float("nan"), 0.5), (0.84, 0.95)]
-    assert precision_first(below) == 1
+    assert precision_first(below, 0.90) == 1
+    # ties in recall: the more precise threshold
+    assert precision_first([(0.91, 0.80), (0.95, 0.80), (0.97, 0.70)], 0.90) == 1
+
+
+def test_a_precision_asked_of_the_fused_graph_moves_only_its_edge_threshold():
+    """choose_fusion with `precision` (trials.ch6.box_edge_precision): the same weights and
+    outcome threshold; the edge threshold of the most recall at that precision on the scenes,
+    so a lower precision asked gives more recall and a higher one more precision."""
+    rng = np.random.default_rng(5)
+    scenes = []
+    for _ in range(30):
+        sc = _scene(rng, k=6, informative=False)
+        truth = sc.truth["pull"]
+        weak = np.clip(truth * 0.35 + rng.random(truth.shape) * 0.6, 0.01, 0.99)
+        sc.probs[..., OUTPUTS.index("pull")] = weak
+        scenes.append(sc)
+    f1 = bf.choose_fusion(scenes, "pull")
+    scores = {}
+    for asked in (0.6, 0.8, 1.0):
+        chosen = bf.choose_fusion(scenes, "pull", precision=asked)
+        assert chosen["weights"] == f1["weights"] and chosen["outcome"] == f1["outcome"]
+        prob = lambda s, w=chosen["weights"]: bf.method_probs(s, "pull", "fused", w)  # noqa: E731
+        scores[asked] = bf.graph_scores(scenes, prob, "pull", chosen["edge"])
+        assert scores[asked][0] >= asked
+    assert scores[0.6][1] > scores[0.8][1] > scores[1.0][1]
+    assert scores[0.6][0] < scores[0.8][0] < scores[1.0][0]

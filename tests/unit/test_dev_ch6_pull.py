@@ -361,3 +361,28 @@ def test_a_box_cp_max_variant_sets_the_box_planners_cp_max_and_no_other(
         "low:multi_step_box_physics": 0.15,
         "low:multi_step_pull": 0.3,
     }
+
+
+def test_a_precise_graph_variant_gets_its_fusion_chosen_again_with_that_precision(
+    root, tmp_path, monkeypatch
+):
+    """dev ch6_box_edge: a variant setting trials.ch6.box_edge_precision has its fusion chosen
+    again (the edge threshold depends on it); the support variant reads the stage's."""
+    params = _tiny_with_models(root, tmp_path, monkeypatch)
+    monkeypatch.setattr(ch6_pull, "THRESHOLDS", _write_fusion(tmp_path / "stage", 0.5))
+    asked = []
+
+    def refit(params, variant, ch6, section):
+        asked.append((variant, ch6.box_contact, ch6.box_edge_precision))
+        return _write_fusion(tmp_path / variant, 0.9)
+
+    monkeypatch.setattr(ch6_pull, "variant_thresholds", refit)
+    variants = {"support": {}, "precise": {"box_edge_precision": 0.9}}
+    params["dev"]["ch6_box_edge"]["variants"] = variants
+    dev = load_section(DevConfig, "dev", params)
+    got = {
+        j.condition.split("/")[0]: j.box_fusion[0] for j in trial_jobs(dev, params, "ch6_box_edge")
+    }
+    assert asked == [("precise", "head", 0.9)]
+    assert got["support:multi_step_box_physics"] == 0.5
+    assert got["precise:bimanual_box_physics"] == 0.9

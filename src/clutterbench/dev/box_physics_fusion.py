@@ -59,6 +59,7 @@ from clutterbench.support.box_fusion import (
     fitted_pulls,
     graph_scores,
     method_probs,
+    precision_first,
 )
 from clutterbench.support.box_train import THRESHOLDS, binary_scores
 
@@ -73,15 +74,6 @@ PRECISION_FIRST = 0.90
 """The precision-first operating point: the edge threshold of the highest mean recall among
 those whose mean precision reaches this on the other half (the highest precision where none
 does), the precision the project aims Table 6.2's per-box graph at."""
-
-
-def precision_first(curve: Sequence[tuple[float, float]]) -> int:
-    """The index into THRESHOLDS of the precision-first operating point of `curve` ((mean
-    precision, mean recall) at each threshold; NaN never qualifies)."""
-    ok = [i for i, (pr, _) in enumerate(curve) if np.isfinite(pr) and pr >= PRECISION_FIRST]
-    if ok:
-        return max(ok, key=lambda i: (np.nan_to_num(curve[i][1], nan=-1.0), -i))
-    return max(range(len(curve)), key=lambda i: (np.nan_to_num(curve[i][0], nan=-1.0), -i))
 
 
 def contact_of(name: str, weights: Sequence[float] = ()):
@@ -136,7 +128,8 @@ def contact_cross_fit(scenes: Sequence[FusionScene], kind: str) -> dict[str, Any
             touch_y.append(np.concatenate([off_diagonal(sc.contact) for sc in held]))
             # every threshold, on the other half (to choose) and out of fold (to score)
             chosen = precision_first(
-                [graph_scores(fit, prob, kind, float(u), contact) for u in THRESHOLDS]
+                [graph_scores(fit, prob, kind, float(u), contact) for u in THRESHOLDS],
+                PRECISION_FIRST,
             )
             curve = [graph_scores(held, prob, kind, float(u), contact) for u in THRESHOLDS]
             first_edge.append(float(THRESHOLDS[chosen]))

@@ -16,6 +16,7 @@
     python -m clutterbench.dev.ch6_pull ch6_fit_hypotheses    # make dev-ch6-fit-hypotheses
     python -m clutterbench.dev.ch6_pull ch6_box_contact       # make dev-ch6-box-contact
     python -m clutterbench.dev.ch6_pull ch6_box_cp_max        # make dev-ch6-box-cp-max
+    python -m clutterbench.dev.ch6_pull ch6_box_edge          # make dev-ch6-box-edge
 
 A collapse score over cp_max stops a pull (Algorithm 1, lines 7-18) or, at a decision,
 rejects the box. `trials.ch6.abort_response` says what the planners on maps of the pull
@@ -53,7 +54,9 @@ trials.ch6.fit_hypotheses; a variant that changes them gets its fusion chosen ag
 support stage's val scenes, variant_thresholds), ch6_box_contact (the contact in their support
 edges, trials.ch6.box_contact: the box head's, or learned from it and the fitted scenes'
 contacts; its fusion chosen again likewise), ch6_box_cp_max (the box planners' cp_max,
-trials.ch6.box_cp_max: the support stage's outcome threshold or a lower one).
+trials.ch6.box_cp_max: the support stage's outcome threshold or a lower one), ch6_box_edge (their
+support graph at the best F1 with the head's contact, or precision-first with the learned
+contact, trials.ch6.box_edge_precision; its fusion chosen again likewise).
 """
 
 from __future__ import annotations
@@ -88,7 +91,7 @@ ORACLE_VARIANT = "-"
 """The oracles read no variant: they run once per stream under this name."""
 
 
-FUSION_FIELDS = frozenset({"fit_hypotheses", "fit_noise_mm", "box_contact"})
+FUSION_FIELDS = frozenset({"fit_hypotheses", "fit_noise_mm", "box_contact", "box_edge_precision"})
 """Fields of trials.ch6 that change what the box-physics fusion sees: a variant that sets one
 gets that fusion chosen again for itself (variant_thresholds)."""
 
@@ -134,6 +137,7 @@ def variant_thresholds(params: Mapping[str, Any], variant: str, ch6: Any, sectio
         box_maps,
         fitted_pulls_of(params, cfg, sim, ch6, catalogue),
         fitted_contacts_of(cfg, sim, ch6, catalogue),
+        ch6.box_edge_precision,
     )
     out = OUT / section / variant
     out.mkdir(parents=True, exist_ok=True)
@@ -316,6 +320,9 @@ TITLES = {
     "chosen again on the val scenes)",
     "ch6_box_cp_max": "the collapse score over which the ch. 6 learned-plus-physics planners "
     "reject a pull or stop it (the support stage's outcome threshold, or lower)",
+    "ch6_box_edge": "the support graph of the ch. 6 learned-plus-physics planners (the best F1 "
+    "with the head's contact, or precision-first with the learned contact; each variant's "
+    "fusion chosen again on the val scenes)",
     "ch6_release": "how the ch. 6 executor lets go of an aborted pull's box and of a held box "
     "(every planner and both search oracles under each variant)",
 }

@@ -106,6 +106,7 @@ CH6_VARIED = (
     "fit_noise_mm",
     "box_contact",
     "box_cp_max",
+    "box_edge_precision",
     "abort_release",
     "held_release",
 )
@@ -298,6 +299,16 @@ class DevConfig:
     )
     """The box planners' cp_max (trials.ch6.box_cp_max): the support stage's outcome
     threshold or lower (python -m clutterbench.dev.ch6_pull ch6_box_cp_max)."""
+    ch6_box_edge: Ch6PullConfig = dataclasses.field(
+        default_factory=lambda: Ch6PullConfig(
+            variants={"support": {}, "precise": {"box_edge_precision": 0.9}},
+            planners=("multi_step_box_physics", "bimanual_box_physics"),
+            oracle=False,
+        )
+    )
+    """The learned-plus-physics planners' support graph (trials.ch6.box_edge_precision,
+    box_contact); each variant's fusion chosen again on the support stage's val scenes
+    (python -m clutterbench.dev.ch6_pull ch6_box_edge)."""
     ch6_release: Ch6PullConfig = dataclasses.field(
         default_factory=lambda: Ch6PullConfig(
             variants={"drop": {}, "lower": {"held_release": "lower"}},
@@ -333,6 +344,7 @@ class DevConfig:
             ("ch6_fit_hypotheses", self.ch6_fit_hypotheses.streams),
             ("ch6_box_contact", self.ch6_box_contact.streams),
             ("ch6_box_cp_max", self.ch6_box_cp_max.streams),
+            ("ch6_box_edge", self.ch6_box_edge.streams),
         ):
             for name in names:
                 if name not in self.streams:

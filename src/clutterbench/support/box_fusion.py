@@ -180,14 +180,30 @@ def graph_scores(
     return mean[0], mean[1]
 
 
+def precision_first(curve: Sequence[tuple[float, float]], precision: float) -> int:
+    """The index of the precision-first operating point of `curve` ((mean precision, mean
+    recall) at each threshold): of the thresholds whose precision reaches `precision`, the
+    one of the highest recall (ties: the higher precision, then the first); where none does,
+    the highest precision. NaN never qualifies."""
+    ok = [i for i, (pr, _) in enumerate(curve) if np.isfinite(pr) and pr >= precision]
+    if ok:
+        return max(ok, key=lambda i: (np.nan_to_num(curve[i][1], nan=-1.0), curve[i][0], -i))
+    return max(range(len(curve)), key=lambda i: (np.nan_to_num(curve[i][0], nan=-1.0), -i))
+
+
 def choose_edge_threshold(
     scenes: Sequence[FusionScene],
     prob: Callable[[FusionScene], np.ndarray],
     kind: str,
     contact: ContactFn = head_contact,
+    precision: float | None = None,
 ) -> float:
     """The threshold of THRESHOLDS with the best f1 of mean precision and recall (Table
-    6.2's criterion, as the box head's edge threshold is chosen)."""
+    6.2's criterion, as the box head's edge threshold is chosen); with `precision`, the
+    precision-first one (precision_first: the most recall at that mean precision)."""
+    if precision is not None:
+        curve = [graph_scores(scenes, prob, kind, float(t), contact) for t in THRESHOLDS]
+        return float(THRESHOLDS[precision_first(curve, precision)])
     best, best_f1 = float(THRESHOLDS[len(THRESHOLDS) // 2]), -1.0
     for t in THRESHOLDS:
         precision, recall = graph_scores(scenes, prob, kind, float(t), contact)
@@ -198,19 +214,23 @@ def choose_edge_threshold(
 
 
 def choose_fusion(
-    scenes: Sequence[FusionScene], kind: str, contact: ContactFn = head_contact
+    scenes: Sequence[FusionScene],
+    kind: str,
+    contact: ContactFn = head_contact,
+    precision: float | None = None,
 ) -> dict[str, Any]:
     """The fusion of label kind `kind` chosen on (validation) scenes: its weights (head
     logit, simulated and marked, simulated and not, bias), the outcome threshold of the best
     f1 on their pairs and the edge threshold of the best graph f1 with `contact` in the
-    edges (physics from depth alone: always with the head's)."""
+    edges, or with `precision` the precision-first one (trials.ch6.box_edge_precision;
+    physics from depth alone: always the best f1 with the head's contact)."""
     x, y = pairs(scenes, kind) if scenes else (np.zeros((0, 3)), np.zeros(0))
     # Pairs of one class only (a tiny profile's few scenes) teach no weights: the head alone.
     w = fit_logistic(x, y) if len(y) and y.min() < y.max() else np.array(HEAD_ALONE)
     p = 1.0 / (1.0 + np.exp(-(x @ w[:-1] + w[-1])))
     outcome = choose_threshold(p, y)
     edge = choose_edge_threshold(
-        scenes, lambda sc: method_probs(sc, kind, "fused", w), kind, contact
+        scenes, lambda sc: method_probs(sc, kind, "fused", w), kind, contact, precision
     )
     alone = choose_edge_threshold(
         scenes, lambda sc: method_probs(sc, kind, "physics_from_depth"), kind

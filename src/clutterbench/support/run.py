@@ -120,6 +120,7 @@ def run_support(
         box_maps,
         fitted_pulls_of(params, cfg, sim, ch6, catalogue),
         fitted_contacts_of(cfg, sim, ch6, catalogue),
+        ch6.box_edge_precision,
     )
     write_json(paths.out / "box_fusion.json", {"chosen": fusion, "val_scenes": len(val)})
 
@@ -288,11 +289,14 @@ def choose_box_fusion(
     box_maps: BoxMaps,
     simulate: SimulatePulls,
     contacts: FittedContacts | None = None,
+    precision: float | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Per pull head, the box head and physics from depth fused (support/box_fusion.py):
     weights and thresholds chosen on the val scenes; with the fitted scenes' `contacts`
     (trials.ch6.box_contact learned), the learned contact's weights too (`contact_weights`),
-    fitted on the same scenes, and the edge threshold chosen with that contact."""
+    fitted on the same scenes, and the edge threshold chosen with that contact; with
+    `precision` (trials.ch6.box_edge_precision), the edge threshold of the most recall at that
+    mean precision instead of the best f1."""
     answers = []
     with progress_bar("support: val pulls in the fitted boxes", total=len(val)) as advance:
         for sc in val:
@@ -300,11 +304,11 @@ def choose_box_fusion(
                 answers.append(answer_scene(sc, box_maps, simulate, contacts))
             advance(1)
     if contacts is None:
-        return {kind: choose_fusion(answers, kind) for kind in EDGE_HEADS}
+        return {kind: choose_fusion(answers, kind, precision=precision) for kind in EDGE_HEADS}
     w = fit_contact(answers)
     weights = {"contact_weights": [round(float(v), 6) for v in w]}
     contact = learned_contact(weights["contact_weights"])
-    return {kind: choose_fusion(answers, kind, contact) | weights for kind in EDGE_HEADS}
+    return {kind: choose_fusion(answers, kind, contact, precision) | weights for kind in EDGE_HEADS}
 
 
 def fitted_contacts_of(

@@ -242,6 +242,12 @@ class Ch6TrialParams:
     boxes touch once settled (the truth's own rule), its weights and the edge threshold chosen
     on the support stage's val scenes (support/box_fusion.py). Chosen on dev streams (make
     dev-ch6-box-contact)."""
+    box_edge_precision: float | None = bounded(None, gt=0.0, le=1.0)
+    """The edge threshold of the box head fused with physics from depth (the support graph
+    of the learned-plus-physics planners and of Table 6.2's fused rows), chosen by the support
+    stage on its val scenes: null, the best F1 of mean precision and recall (Table 6.2's
+    criterion); a number, the highest mean recall among the thresholds whose mean precision
+    reaches it (a precision-first graph). Rechecked on val: make dev-box-physics-fusion."""
     box_cp_max: float | None = bounded(None, gt=0.0, le=1.0)
     """The box planners' (`*_box`, `*_box_physics`) cp_max: the collapse score (a box's
     predicted probability) over which a candidate is rejected at a decision and a pull is
