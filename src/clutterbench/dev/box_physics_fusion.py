@@ -395,6 +395,21 @@ def markdown(result: Mapping[str, Any]) -> str:
             f"- {k} fit(s): "
             + "; ".join(f"{kind}: {rows['fused']['weights']}" for kind, rows in v["kinds"].items())
         )
+    lines += contact_lines(result["contacts"])
+    learned = result["contacts"]["pull"]["learned"]["weights"]
+    lines += [
+        "",
+        "Learned contact weights per half (head contact logit, fitted and touching, fitted and "
+        f"not, bias): {learned}",
+    ]
+    lines += ["", result["shows"]]
+    return "\n".join(lines) + "\n"
+
+
+def contact_lines(contacts: Mapping[str, Any]) -> list[str]:
+    """The markdown of the contacts' graphs: at the best F1, then at the precision-first
+    operating point."""
+    lines: list[str] = []
     lines += [
         "",
         f"## The edges' contact (fused, {FITS[0]} fit, cross-fitted)",
@@ -410,7 +425,7 @@ def markdown(result: Mapping[str, Any]) -> str:
         "edge thresholds (per half) |",
         "|---|---|---|---|---|---|",
     ]
-    for kind, rows in result["contacts"].items():
+    for kind, rows in contacts.items():
         for name, r in rows.items():
             lines.append(
                 f"| {kind} | {name} | {r['contact_auroc']:.4f} | {r['graph_precision']:.3f} | "
@@ -429,7 +444,7 @@ def markdown(result: Mapping[str, Any]) -> str:
         "recall | precision-first edge thresholds (per half) |",
         "|---|---|---|---|---|",
     ]
-    for kind, rows in result["contacts"].items():
+    for kind, rows in contacts.items():
         for name, r in rows.items():
             pf = r["precision_first"]
             lines.append(
@@ -437,14 +452,7 @@ def markdown(result: Mapping[str, Any]) -> str:
                 f"{pf['graph_precision']:.3f} / {pf['graph_recall']:.3f} | "
                 f"{', '.join(f'{t:g}' for t in pf['edge_thresholds'])} |"
             )
-    learned = result["contacts"]["pull"]["learned"]["weights"]
-    lines += [
-        "",
-        "Learned contact weights per half (head contact logit, fitted and touching, fitted and "
-        f"not, bias): {learned}",
-    ]
-    lines += ["", result["shows"]]
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 if __name__ == "__main__":
