@@ -41,6 +41,9 @@ TOWER6 = Path(__file__).resolve().parents[1] / "data" / "tower6.json"
 # Trial scene 17 of stream ch6_3_10 at default scale (9 boxes, target 7), where only holding a
 # box that the target's unheld pull leaves in place keeps the pile still.
 HOLD_QUIET = Path(__file__).resolve().parents[1] / "data" / "hold_quiet_box.json"
+EPISODE121 = Path(__file__).resolve().parents[1] / "data" / "ch6_3_10_episode121.json"
+EPISODE151 = Path(__file__).resolve().parents[1] / "data" / "ch6_3_10_episode151.json"
+EPISODE39 = Path(__file__).resolve().parents[1] / "data" / "ch6_3_5_episode39.json"
 CAM = CameraConfig(image_size=64)
 THR = 0.005
 PARAMS = TrialsConfig().ch6
@@ -137,40 +140,92 @@ def test_an_episode_ends_at_its_first_collapse(stack3):
     assert rec["steps"][0]["executed"] and not rec["steps"][0]["others_still"]
 
 
-def _clean_sequence_exists(oracle: SearchOracle, state: SceneState, target: int) -> bool:
-    """Brute force over every order of clean pulls (the oracle's actions, no memo)."""
-    for x in oracle.candidates(state, target):
-        holds = [None] + (
-            [h for h in oracle.candidates(state, target) if h != x]
-            if oracle.holding and (x == target or oracle.hold_any_pull)
-            else []
+def _clean_sequence_exists(
+    oracle: SearchOracle, state: SceneState, target: int, key: str, memo: dict | None = None
+) -> bool:
+    """Brute force over every sequence of clean steps under the criterion `key` (the oracle's
+    actions, every hold of every pull; pulls cut short as the search's are). Memoized on the
+    exact state only (the boxes out and every pose to the bit): the simulation is
+    deterministic, so that prunes nothing a sequence could reach."""
+    memo = {} if memo is None else memo
+    at = (state.removed, np.asarray(state.poses).tobytes())
+    if at not in memo:
+        memo[at] = False  # on the path: a cycle is no sequence
+        memo[at] = any(
+            _clean_from(oracle, state, target, key, action, memo)
+            for action in _every_action(oracle, state, target)
         )
-        for h in holds:
-            step, after, _ = oracle.simulate(state, (x, h))
-            if step["strict_success"] and (
-                x == target or _clean_sequence_exists(oracle, after, target)
-            ):
-                return True
-    return False
+    return memo[at]
 
 
+def _every_action(oracle: SearchOracle, state: SceneState, target: int) -> list:
+    boxes = oracle.candidates(state, target)
+    return [
+        (x, h)
+        for x in boxes
+        for h in [None, *(b for b in boxes if b != x)]
+        if h is None or (oracle.holding and (x == target or oracle.hold_any_pull))
+    ]
+
+
+def _clean_from(oracle, state, target, key, action, memo) -> bool:
+    cut = key == "strict_success" and action != (target, None)
+    step, after, _ = oracle.simulate(state, action, cut_short=cut)
+    if not step[key]:
+        return False
+    return action[0] == target or _clean_sequence_exists(oracle, after, target, key, memo)
+
+
+# (scene, targets, camera): two hand-built stacks, every target, and two trial starts of the
+# default scale (benchmark scenes, the default camera) where a clean sequence exists that a
+# search which remembered a state by the boxes out alone, or a state within 1 mm of another,
+# did not find: scene 151 of ch6_3_10 (6 boxes, one arm, strict) and scene 39 of ch6_3_5 (5
+# boxes, holding during any pull, collapse-free).
+BRUTE_FORCE_CASES = {
+    "stack3": (STACK3, None, CAM),
+    "tower6": (TOWER6, None, CAM),
+    "ch6_3_10_151": (EPISODE151, [2], CameraConfig()),
+    "ch6_3_5_39": (EPISODE39, [2], CameraConfig()),
+}
+
+
+@pytest.mark.parametrize("key", ["strict_success", "success"])
 @pytest.mark.parametrize(
     ("holding", "any_pull"),
     [(False, False), (True, False), (True, True)],
     ids=["one_arm", "holding", "holding_any_pull"],
 )
-@pytest.mark.parametrize("spec_path", [STACK3, TOWER6])
+@pytest.mark.parametrize("case", list(BRUTE_FORCE_CASES))
 def test_the_search_oracle_finds_a_clean_sequence_whenever_one_exists(
-    spec_path, holding, any_pull, physics
+    case, holding, any_pull, key, physics
 ):
+    spec_path, targets, camera = BRUTE_FORCE_CASES[case]
     spec = SceneSpec.load(spec_path)
-    for target in range(spec.n):
-        oracle = SearchOracle(spec, physics, CAM, PARAMS, holding, CF, hold_any_pull=any_pull)
-        plan, _, exhausted = oracle.search(SceneState.start(spec), target)
+    for target in range(spec.n) if targets is None else targets:
+        oracle = SearchOracle(spec, physics, camera, PARAMS, holding, CF, hold_any_pull=any_pull)
+        plan, _, exhausted = oracle.search(SceneState.start(spec), target, key)
         assert not exhausted
         assert (plan is not None) == _clean_sequence_exists(
-            oracle, SceneState.start(spec), target
-        ), (spec_path.name, target)
+            oracle, SceneState.start(spec), target, key
+        ), (case, target)
+
+
+def test_the_one_arm_oracle_finds_the_sequence_another_order_of_the_same_boxes_hid(physics):
+    """Trial scene 121 of stream ch6_3_10 at default scale (8 boxes, target 1): taking out
+    boxes 4, 6, 3, 2, 5, 0 and 7, in that order, leaves the target free, every pull
+    collapse-free. A search that remembered a state by the boxes out alone met those sets
+    first by other orders, whose boxes stood elsewhere, and proved no sequence in 24 nodes."""
+    spec = SceneSpec.load(EPISODE121)
+    camera = CameraConfig()  # the default scale's camera: what the planners see there
+    oracle = SearchOracle(spec, physics, camera, PARAMS, False, CF)
+    plan, found, info = oracle.plan_from(SceneState.start(spec), 1)
+    assert plan is not None and found["success"], info
+    assert not info.get("success_exhausted") and not info.get("strict_success_exhausted")
+    state = SceneState.start(spec)
+    for (box, hold), after in plan:  # every step replays clean: the plan is real
+        step, state, _ = oracle.simulate(state, (box, hold), cut_short=False)
+        assert step["success"] and np.array_equal(state.poses, after.poses)
+    assert plan[-1][0] == (1, None)
 
 
 def test_the_holding_oracle_may_hold_a_box_the_pull_leaves_in_place(physics):

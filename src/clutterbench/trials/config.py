@@ -146,6 +146,14 @@ class Ch6TrialParams:
     search_node_budget: int = bounded(40, ge=1)
     """The search oracles expand at most this many states per search (each simulates every
     candidate pull from it); an episode whose search ran out is counted in Table 6.3."""
+    search_same_m: float = bounded(1e-6, gt=0.0)
+    """The search oracles take two states for one when the same boxes are out and every box
+    still in stands within this distance (m) of where it stands in the other (and within
+    search_same_deg of its orientation): the next step depends on nothing else. A pile is
+    chaotic: states 1 mm apart were seen to differ in whether a clean sequence exists, so
+    the tolerance is at the level of float noise, not of what a camera resolves."""
+    search_same_deg: float = bounded(1e-3, gt=0.0)
+    """The orientation half of that tolerance (degrees, the rotation between the two)."""
     search_cut_m: float = bounded(0.02, gt=0.0)
     """A search oracle's simulated pull stops, judged failed, once another box moved more than
     this (m) mid-pull (well past moved_threshold_m: it does not come back); most pulls in a

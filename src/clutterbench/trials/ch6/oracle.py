@@ -29,8 +29,12 @@ Action = tuple[int, "int | None"]
 class SearchOracle:
     """The ceiling: a depth-first search over sequences of pulls, each simulated from the
     present state with the trials' own step (`protocol.execute_pull` in a world built by
-    `protocol.world_at`, released and judged as an executed step is), memoized over the set
-    of removed boxes, for a sequence of clean steps that ends with the target out.
+    `protocol.world_at`, released and judged as an executed step is), for a sequence of
+    clean steps that ends with the target out. A state is what the next step depends on:
+    the boxes out and where the rest stand, two states within `search_same_m` and
+    `search_same_deg` of each other taken for one (`SeenStates`); every clean action from a
+    state is searched, every clean hold of a pull included, so up to the node budget and
+    that tolerance the search finds a clean sequence whenever one exists.
 
     Actions: every visible box (planners see no other) and the target; with `holding`, the
     target may also be pulled while any one visible box is held (the bimanual and ch. 4
@@ -111,14 +115,19 @@ class SearchOracle:
         """(plan: [(action, state after it)] or None, nodes expanded, budget exhausted): a
         sequence of steps each clean under the criterion `key` ("strict_success", pulls cut
         short once another box moved `search_cut_m`; or "success", collapse-free, pulls never
-        cut short: a box that slid far may still be collapse-free)."""
+        cut short: a box that slid far may still be collapse-free).
+
+        Complete up to the node budget and the state tolerance: every clean action from a
+        state is a child (every clean hold of a pull, not only the first), tried in order,
+        and a state is skipped only when one seen before has the same boxes out and every
+        other box within `search_same_m` / `search_same_deg` of where it stands here
+        (`SeenStates`): two orders that take out the same boxes may leave the rest standing
+        differently, and the next step depends on that."""
         cut = key == "strict_success"
-        visited: set[frozenset[int]] = {state.removed}
+        seen = SeenStates(self.params.search_same_m, self.params.search_same_deg)
+        seen.add(state)
         nodes = 0
         budget = self.params.search_node_budget
-
-        class _Budget(Exception):
-            pass
 
         def visit(now: SceneState) -> list | None:
             nonlocal nodes
@@ -138,21 +147,11 @@ class SearchOracle:
                     step, after, _ = self.simulate(now, (target, h), cut_short=cut)
                     if step[key]:
                         return [((target, h), after)]
-            children: list[tuple[Action, SceneState]] = []
-            holds = boxes if self.hold_any_pull else []
-            for x in boxes:
-                if x == target:
+            for action in self._pulls_before(boxes, target, in_way):
+                step, after, _ = self.simulate(now, action, cut_short=cut)
+                if not step[key] or seen.contains(after):
                     continue
-                for h in [None, *(b for b in holds if b != x)]:
-                    step, after, _ = self.simulate(now, (x, h), cut_short=cut)
-                    if step[key]:
-                        children.append(((x, h), after))
-                        break
-            children.sort(key=lambda c: (not in_way[c[0][0]], c[0][0]))
-            for action, after in children:
-                if after.removed in visited:
-                    continue
-                visited.add(after.removed)
+                seen.add(after)
                 rest = visit(after)
                 if rest is not None:
                     return [(action, after), *rest]
@@ -162,6 +161,14 @@ class SearchOracle:
             return visit(state), nodes, False
         except _Budget:
             return None, nodes, True
+
+    def _pulls_before(self, boxes: list[int], target: int, in_way: np.ndarray) -> list[Action]:
+        """Every pull of a box other than the target a search may take before the target's,
+        the boxes in the target's way first: unheld, then (with `hold_any_pull`) while each
+        other visible box is held."""
+        holds = boxes if self.hold_any_pull else []
+        order = sorted((b for b in boxes if b != target), key=lambda b: (not in_way[b], b))
+        return [(x, h) for x in order for h in [None, *(b for b in holds if b != x)]]
 
     def plan_from(
         self, state: SceneState, target: int
@@ -203,6 +210,44 @@ class SearchOracle:
         (pull, hold), self._expected = self._plan.pop(0)
         info["plan"] = [[pull, hold], *[list(a) for a, _ in self._plan]]
         return Decision(pull, hold, info)
+
+
+class _Budget(Exception):
+    """A search expanded its node budget."""
+
+
+class SeenStates:
+    """The states a search has expanded, and whether a new one is one of them: the same boxes
+    out, and every box still in within `same_m` of its position and `same_deg` of its
+    orientation there."""
+
+    def __init__(self, same_m: float, same_deg: float):
+        self.same_m = same_m
+        # Unit quaternions of rotations theta apart lie 2 sin(theta / 4) apart (q or -q):
+        # a chord, not an angle from acos, so a pose stored in float32 matches itself.
+        self.max_chord = 2.0 * np.sin(np.radians(same_deg) / 4.0)
+        self._by_removed: dict[frozenset[int], list[np.ndarray]] = {}
+
+    def add(self, state: SceneState) -> None:
+        self._by_removed.setdefault(state.removed, []).append(self._standing(state))
+
+    def contains(self, state: SceneState) -> bool:
+        now = self._standing(state)
+        return any(self._same(now, other) for other in self._by_removed.get(state.removed, []))
+
+    @staticmethod
+    def _standing(state: SceneState) -> np.ndarray:
+        keep = [k for k in range(len(state.poses)) if k not in state.removed]
+        return np.asarray(state.poses, dtype=np.float64)[keep]
+
+    def _same(self, a: np.ndarray, b: np.ndarray) -> bool:
+        if not len(a):
+            return True
+        if np.max(np.linalg.norm(a[:, :3] - b[:, :3], axis=1)) > self.same_m:
+            return False
+        qa, qb = a[:, 3:], b[:, 3:]
+        chord = np.minimum(np.linalg.norm(qa - qb, axis=1), np.linalg.norm(qa + qb, axis=1))
+        return bool(np.max(chord) <= self.max_chord)
 
 
 class _CutShort(Exception):
