@@ -52,9 +52,12 @@ lint: setup
 	ruff check src stages tests
 	ruff format --check src stages tests
 
-# Two workers (pytest-xdist), a file each at a time: the tiny end-to-end repro (collected
-# first) on one, every other file on the other.
+# params.yaml checked first (clutterbench check: every section at every scale, in a second or
+# two, no data), so a typo fails here rather than in the stage that reads it. Then two
+# workers (pytest-xdist), a file each at a time: the tiny end-to-end repro (collected first)
+# on one, every other file on the other.
 test: lint
+	clutterbench check
 	python -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder --durations=25 tests
 
 bench: setup

@@ -20,7 +20,8 @@ LAYERS: tuple[frozenset[str], ...] = tuple(
     frozenset(names.split())
     for names in (
         # the ground floor: plumbing every layer may use
-        "errors io config progress platform_info precision denormals stage observation shogi_piece",
+        "errors io config checks progress platform_info precision denormals stage observation"
+        " shogi_piece",
         "sim",  # the SAPIEN world, scene families, rendering, actions
         "criteria parallel logs maniskill",  # judged motion, workers, logs, the arm level
         "data",  # datasets, labels, splits

@@ -10,6 +10,7 @@
     clutterbench replenish SPEC.json --box W,D,H [--execute] [--mcap out.mcap]
     clutterbench evaluate-agent MODULE:FACTORY [--stream S] [--episodes N] [--out DIR]
     clutterbench evaluate-predictor MODULE[:FUNCTION] [--name N] [--testset DIR] [--out DIR]
+    clutterbench check [PARAMS] [--spec FILE ...]
 
 User-facing problems (ClutterbenchError) end a command with one red line on stderr,
 "error: <message>", and exit code 2. Heavy imports (SAPIEN, matplotlib) happen inside the
@@ -21,12 +22,14 @@ repository this package was installed from (`pip install -e`), so the commands w
 any directory. A path given on the command line is taken as it is.
 
 One module per command group: `scene` (show, act, make, get), `plan`, `replenish`,
-`yamakuzushi`, `agents` (evaluate-agent), `predictors` (evaluate-predictor); `common` holds
-the app, the error handling and the project paths they share.
+`yamakuzushi`, `agents` (evaluate-agent), `predictors` (evaluate-predictor), `check` (params.yaml
+and scene specs checked without data); `common` holds the app, the error handling and the
+project paths they share.
 """
 
 from clutterbench.cli import (  # noqa: F401  (commands)
     agents,
+    check,
     plan,
     predictors,
     replenish,
