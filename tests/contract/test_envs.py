@@ -1,8 +1,11 @@
 """Every registered environment, made with defaults (ManiSkill's checks on its own tasks):
 make by id, reset(seed) deterministic and equal to the pipeline's episode, 5 random steps,
-every obs mode and the four standard control modes, get/set_state (across episodes with
-other box counts), rgb_array / sensors rendering and a recorded video, success and fail,
-gym.make_vec (async), gymnasium's check_env, NaN refused, dense reward; the planning env
+the same bits from the same seed and varied actions whatever ran before, every obs mode and
+the four standard control modes, get/set_state (across episodes with other box counts),
+rgb_array / sensors rendering and a recorded video, success and fail, gym.make_vec (async;
+refused in one line when it would fork a process that holds the renderer), gymnasium's
+check_env, NaN, a box count out of range and a spec of the wrong type refused in one line,
+dense reward; the planning env
 replays committed trial episodes step for step and, fed the multi-step planner, writes the
 trials' records."""
 
@@ -114,27 +117,82 @@ def test_a_ch5_streams_episode_starts_from_table_5_2s_start(env, stream):
     assert (info["scene"], info["scene_source"]) == (want["scene"], "benchmark")
 
 
-def test_a_seed_steps_alike_whether_its_scene_was_rebuilt_or_reused(env):
-    """reset(seed=i) then the same actions give the same bits whether the reset rebuilt the
-    scene (another episode before) or reused it (the same episode before)."""
-    if env.unwrapped.spec.id == PLAN_ENV_ID:
-        pytest.skip("no ManiSkill scene")
+def _run_actions(env, seed: int, steps: int) -> list:
+    """reset(seed) then `steps` varied actions (the action space's draws from seed 0, the
+    planning env's within its action mask, so each run draws the same sequence while it sees
+    the same observations) -> every observation and, on an arm id, the final state."""
     u = env.unwrapped
-    env.action_space.seed(1)
-    a, b = env.action_space.sample(), env.action_space.sample()
+    env.action_space.seed(0)
+    obs, info = env.reset(seed=seed)
+    seen = [obs]
+    for _ in range(steps):
+        obs, _, terminated, truncated, info = env.step(_random_action(env, info))
+        seen.append(obs)
+        if terminated or truncated:
+            break
+    return seen if u.spec.id == PLAN_ENV_ID else [*seen, u.get_state()]
 
-    def run(seed, action):
-        env.reset(seed=seed)
-        for _ in range(10):
-            obs = env.step(action)[0]
-        return obs, u.get_state()
 
-    first = run(123, a)  # rebuilt
-    again = run(123, a)  # reused
-    run(7, b)
-    rebuilt = run(123, a)
+def test_a_seed_and_varied_actions_give_the_same_bits_after_a_rebuild(env):
+    """reset(seed=i) then the same varied actions (30 of them; a few pulls on the planning
+    env) give the same observations and state, bit for bit, on the first run, on a second
+    run straight after it (the same episode again) and after another episode. Constant
+    actions never showed it: a bimanual run whose tool met two shelf boards at once ended
+    with arm 1's joints elsewhere in a scene that had been stepped before."""
+    steps = 3 if env.unwrapped.spec.id == PLAN_ENV_ID else 30
+    first = _run_actions(env, 123, steps)
+    again = _run_actions(env, 123, steps)
+    _run_actions(env, 7, 2)
+    rebuilt = _run_actions(env, 123, steps)
     for other in (again, rebuilt):
+        assert len(other) == len(first)
         assert all(_equal(x, y) for x, y in zip(first, other, strict=True))
+
+
+def test_reset_options_naming_the_scene_rebuild_it(stack3):
+    """reset(options={"target": k}) takes effect whether or not the env stepped before (the
+    scene options rebuild the scene; they were once dropped by a reset that reused it)."""
+    e = gym.make("ClutterShelfExtract-v1", spec=stack3, target=2)
+    e.reset(seed=0)
+    _, info = e.reset(options={"target": 1})
+    assert e.unwrapped.target == 1 and bool(info["reconfigure"])
+    e.close()
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+@pytest.mark.parametrize("n_objects", [[0, 5], 0, (6, 3), (1, 31), "five"])
+def test_a_box_count_out_of_range_is_refused_at_make(env_id, n_objects):
+    """n_objects of no box (or low > high, over 30, not integers) is refused when the env is
+    made, in one line naming it and the allowed range, not by numpy deep in the scene draw."""
+    with pytest.raises(ClutterbenchError, match=r"n_objects=.*1 <= low <= high <= 30") as exc:
+        gym.make(env_id, n_objects=n_objects)
+    assert "\n" not in str(exc.value)
+
+
+def test_a_box_count_out_of_range_is_refused_as_a_reset_option_and_by_the_draw(env):
+    from clutterbench.sim.labelling import draw_scene_setup
+
+    with pytest.raises(ClutterbenchError, match=r"reset options n_objects=\[0, 5\]: .*<= 30"):
+        env.reset(seed=0, options={"n_objects": [0, 5]})
+    with pytest.raises(ClutterbenchError, match=r"^n_objects=\(0, 5\): .*<= 30$"):
+        draw_scene_setup(0, "env", 0, {"shelved": 1.0}, (0, 5))
+
+
+@pytest.mark.parametrize("env_id", MANISKILL_IDS)
+@pytest.mark.parametrize("spec", [{"n": 3}, str(STACK3), STACK3], ids=["dict", "str", "path"])
+def test_a_spec_of_the_wrong_type_is_refused_in_one_line(stack3, env_id, spec):
+    """spec= takes a SceneSpec (SceneSpec.load(path) reads one): a dict or a path is refused
+    in one line naming spec and the type expected (a TypeError too), at make and at reset."""
+    from clutterbench.maniskill.tasks import SpecTypeError
+
+    kind = type(spec).__name__
+    with pytest.raises(SpecTypeError, match=rf"^spec=.* \(a {kind}\): expected a .*SceneSpec"):
+        gym.make(env_id, spec=spec, target=0)
+    assert issubclass(SpecTypeError, ClutterbenchError) and issubclass(SpecTypeError, TypeError)
+    e = gym.make(env_id, spec=stack3, target=2)
+    with pytest.raises(SpecTypeError, match=rf"^reset options spec=.* \(a {kind}\)"):
+        e.reset(options={"spec": spec})
+    e.close()
 
 
 def test_nan_actions_are_refused(env):
@@ -401,6 +459,74 @@ def test_a_worker_forked_after_rendering_is_refused_in_one_line():
     _, status = os.waitpid(pid, 0)
     assert os.waitstatus_to_exitcode(status) == 7
     ensure_renderer()  # the parent renders on
+
+
+FORK_AFTER_RENDER_SCRIPT = """
+import sys
+import gymnasium as gym
+import clutterbench.envs
+from clutterbench.sim.renderer import ensure_renderer
+from clutterbench.sim.spec import SceneSpec
+
+if sys.argv[1] == "rendered":  # the parent rendered, then forks (gymnasium's default)
+    ensure_renderer()
+    gym.make_vec("ClutterShelfPlan-v1", num_envs=2, vectorization_mode="async", scale="tiny")
+else:  # the env gymnasium makes in the parent opens a camera, then forks
+    spec = SceneSpec.load(sys.argv[2])
+    gym.make_vec("ClutterShelfExtract-v1", num_envs=2, vectorization_mode="async",
+                 spec=spec, target=2, obs_mode="depth")
+print("workers started")
+"""
+
+
+def test_a_vector_env_forking_after_rendering_is_refused_in_one_line():
+    """gym.make_vec(..., "async") forks its workers by default; from a process that holds the
+    renderer (it rendered, or the env made in the parent opened a camera) it is refused in
+    the parent before any worker starts: the user sees our one line (naming spawn and
+    forkserver) as the error, and no worker's trace (gymnasium printed each worker's, some
+    40 lines, or, when a worker refused while being made, only a broken pipe)."""
+    import subprocess
+    import sys
+
+    runs = [
+        subprocess.Popen(
+            [sys.executable, "-c", FORK_AFTER_RENDER_SCRIPT, case, str(STACK3)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for case in ("rendered", "camera")
+    ]
+    for run in runs:
+        out, err = run.communicate(timeout=300)
+        lines = err.strip().splitlines()
+        assert run.returncode == 1 and "workers started" not in out, err[-2000:]
+        assert lines[-1].startswith("clutterbench.errors.ClutterbenchError: "), err[-2000:]
+        assert "spawn or forkserver" in lines[-1]
+        assert err.count("Traceback") == 1 and "Worker" not in err, err[-2000:]
+        assert sum("forkserver" in line for line in lines) == 1  # the message: one line
+
+
+def test_the_fork_refusal_reads_how_the_vector_env_starts_its_workers():
+    """The refusal applies only to workers started by fork (a spawned or forkserver worker
+    imports afresh and makes its own renderer), and to nothing made outside a vector env;
+    reading multiprocessing's default does not fix it."""
+    import multiprocessing
+
+    from gymnasium.vector import AsyncVectorEnv
+
+    from clutterbench.maniskill.tasks import _start_method_of_vector_env
+
+    class Probe(AsyncVectorEnv):
+        def __init__(self, context):  # the frame gymnasium's own __init__ is read from
+            self.method = _start_method_of_vector_env()
+
+    for context in ("fork", "forkserver", "spawn"):
+        assert Probe(context).method == context
+    default = multiprocessing.get_start_method(allow_none=True)
+    assert Probe(None).method == (default or multiprocessing.get_all_start_methods()[0])
+    assert multiprocessing.get_start_method(allow_none=True) == default
+    assert _start_method_of_vector_env() is None
 
 
 def test_dense_reward_is_target_progress_minus_the_others_displacement(physics):

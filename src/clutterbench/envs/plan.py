@@ -54,9 +54,11 @@ import numpy as np
 from gymnasium import spaces
 
 from clutterbench.errors import ActionError, ClutterbenchError
+from clutterbench.maniskill.tasks import refuse_fork_after_render
 from clutterbench.observation import CameraModel, Observation
 from clutterbench.planning.ch6.extraction import Decision
 from clutterbench.sim import benchmark
+from clutterbench.sim.labelling import check_n_objects
 from clutterbench.trials.core.harness import EpisodeResult
 from clutterbench.trials.core.protocol import STEP_FIELDS, STEP_NOTES, judge_episode
 from clutterbench.trials.core.streams import StreamSource
@@ -133,6 +135,8 @@ class ClutterShelfPlanEnv(gym.Env):
                 f"render_mode={render_mode!r}: one of {self.metadata['render_modes']} or None"
             )
         self.render_mode = render_mode
+        if n_objects is not None:
+            check_n_objects(n_objects)
         self.source: StreamSource = stream_source(stream, family, n_objects, catalogue, scale)
         self.name, self.record_images = name, record_images
         size = self.source.camera.image_size
@@ -155,6 +159,7 @@ class ClutterShelfPlanEnv(gym.Env):
         self.episode_index: int | None = None
         self._next_episode = 0
         self._obs: dict[str, Any] | None = None
+        refuse_fork_after_render("ClutterShelfPlan")  # every reset renders the observation
 
     # -- the policy's optional pull monitor ----------------------------------------------------
     def set_monitor(
@@ -220,6 +225,8 @@ class ClutterShelfPlanEnv(gym.Env):
             raise ClutterbenchError(
                 f"reset options: unknown {', '.join(sorted(unknown))} (known: {', '.join(keys)})"
             )
+        if options.get("n_objects") is not None:
+            check_n_objects(options["n_objects"], "reset options n_objects")
         if options:
             self.source = stream_source(*(options.get(k) for k in keys), scale=self.source.scale)
         if seed is None:

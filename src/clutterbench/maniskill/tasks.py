@@ -43,6 +43,8 @@ from __future__ import annotations
 import hashlib
 import importlib
 import os
+import reprlib
+import sys
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -62,6 +64,7 @@ from clutterbench.maniskill.config import ArmConfig
 from clutterbench.maniskill.motion import base_quat, make_planner, solve_ik, tool_quat
 from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.geometry import box_aabb_half_extents
+from clutterbench.sim.labelling import check_n_objects
 from clutterbench.sim.physics import ROOM_FLOOR_BELOW_SHELF_M
 from clutterbench.sim.pull import moved_others
 from clutterbench.sim.spec import SceneSpec
@@ -185,6 +188,69 @@ def _sapien_physx_defaults() -> SceneConfig:
     )
 
 
+SCENE_OPTIONS = ("spec", "target", "hold", "poses", "removed")
+"""Reset options that set the scene (its boxes, target and held box): a reset naming any of
+them rebuilds the scene."""
+
+
+class SpecTypeError(ClutterbenchError, TypeError):
+    """A `spec` that is not a SceneSpec: one line naming it (a TypeError too, as Python's own
+    refusals of a wrong type are)."""
+
+
+def check_spec(spec: Any, key: str = "spec") -> SceneSpec:
+    """`spec` if it is a SceneSpec; anything else (a dict, a path) is refused in one line
+    naming `key`, instead of failing later on a missing attribute."""
+    if not isinstance(spec, SceneSpec):
+        raise SpecTypeError(
+            f"{key}={reprlib.repr(spec)} (a {type(spec).__name__}): expected a "
+            "clutterbench.sim.spec.SceneSpec (SceneSpec.load(path) reads a spec file)"
+        )
+    return spec
+
+
+def refuse_fork_after_render(env_name: str) -> None:
+    """Refuse, in the parent and in one line, to be made as the env gymnasium's
+    AsyncVectorEnv builds before it forks its workers, when this process has a renderer and
+    the workers would render: SAPIEN's renderer does not survive a fork, so each forked
+    worker would refuse (sim/renderer.py) and gymnasium would print every worker's trace, or
+    lose a worker that refused while it was being made and report only a broken pipe."""
+    from clutterbench.sim import renderer
+
+    if renderer._RENDERER is None or renderer._RENDERER_PID != os.getpid():
+        return  # nothing rendered here: a forked worker makes its own renderer
+    if _start_method_of_vector_env() != "fork":
+        return
+    raise ClutterbenchError(
+        f"{env_name}: this process holds SAPIEN's renderer (it has rendered, or a camera made "
+        "it), which does not survive the fork that would start the vector env's workers: "
+        'start them with spawn or forkserver (gym.make_vec: vector_kwargs={"context": '
+        '"forkserver"}; docs/environments.md)'
+    )
+
+
+def _start_method_of_vector_env() -> str | None:
+    """How the gymnasium AsyncVectorEnv making this env starts its workers (None: no
+    AsyncVectorEnv is making it). Read off its __init__'s frame: gymnasium makes one env in
+    the parent for the spaces before it starts the workers, and says nothing to that env."""
+    import multiprocessing
+
+    from gymnasium.vector import AsyncVectorEnv
+
+    frame = sys._getframe(1)
+    while frame is not None:
+        if frame.f_code.co_name == "__init__" and isinstance(
+            frame.f_locals.get("self"), AsyncVectorEnv
+        ):
+            context = frame.f_locals.get("context")
+            if context is None:  # multiprocessing's default, without fixing it as a side effect
+                default = multiprocessing.get_start_method(allow_none=True)
+                return default or multiprocessing.get_all_start_methods()[0]
+            return context
+        frame = frame.f_back
+    return None
+
+
 DEFAULT_SCENE_SOURCE = "clutterbench.trials.sources:stream_source"
 """What draws a spec-less env's scenes: a factory `(stream, family, n_objects, catalogue,
 scale) -> source`, the source giving `.episode(i) -> (spec, target)`, `.physics` and `.trials`
@@ -214,9 +280,9 @@ class ClutterShelfEnv(BaseEnv):
     `target` (the box to take out), `hold` (the box a second arm holds, or None), `poses`
     ((N, 7) start poses, default the spec's) and `removed` (boxes already out), `physics`
     (PhysicsConfig), `arm` (ArmConfig), `moved_threshold_m`; with no spec also `stream`,
-    `family`, `n_objects`, `catalogue`, `scale`. `reset(options=...)` takes the same keys
-    (with `reconfigure=True` when the boxes change) to start another scene or step in the
-    same env."""
+    `family`, `n_objects`, `catalogue`, `scale`. `reset(options=...)` takes the same keys to
+    start another scene or step in the same env (naming any of SCENE_OPTIONS rebuilds the
+    scene)."""
 
     SUPPORTED_OBS_MODES = ("state", *STATE_OBS_MODES[1:], *SENSOR_OBS_MODES)
     N_ARMS = 1
@@ -244,7 +310,10 @@ class ClutterShelfEnv(BaseEnv):
         self._source_factory = scene_source
         self._streams_live = False  # BaseEnv.__init__ resets once with its own seed
         self._next_episode = 0
+        self._simulated = False  # stepped since the scene was built: reset rebuilds it
         if spec is None:
+            if n_objects is not None:
+                check_n_objects(n_objects)
             stream_source = resolve_scene_source(scene_source)
             self.stream_source = stream_source(stream, family, n_objects, catalogue, scale)
             # Episode 0's settled start only: its target is drawn from a rendered view, and
@@ -274,6 +343,25 @@ class ClutterShelfEnv(BaseEnv):
             )
         self.attached: dict[int, tuple[int, sapien.Pose]] = {}
         """arm index -> (box, box pose in the tool frame): boxes a tool holds."""
+        uids = self._robot_uids(arm, kwargs)
+        kwargs.setdefault("sim_backend", "physx_cpu")
+        renders = (
+            kwargs.get("obs_mode", "state") not in STATE_OBS_MODES
+            or kwargs.get("render_mode") is not None
+        )
+        kwargs.setdefault("render_backend", "cpu" if renders else "none")
+        kwargs.setdefault("obs_mode", "state")
+        kwargs.setdefault("control_mode", "pd_joint_pos")
+        super().__init__(*args, robot_uids=uids, **kwargs)
+        self._streams_live = True
+        # A worker renders if its env has a render backend, or draws its episodes' targets
+        # from rendered views (a stream-drawn env's reset).
+        if kwargs["render_backend"] != "none" or self.stream_source is not None:
+            refuse_fork_after_render(type(self).__name__.removesuffix("Env"))
+
+    def _robot_uids(self, arm: ArmConfig, kwargs: dict[str, Any]) -> Any:
+        """The task's robot uid(s) (one per arm); a `robot_uids` of kwargs other than these,
+        or a `num_envs` other than 1, is refused in one line."""
         robot = rod_robot(arm.rod_length_m)
         uids = robot if self.N_ARMS == 1 else (robot,) * self.N_ARMS
         self.SUPPORTED_ROBOTS = [uids]
@@ -288,16 +376,7 @@ class ClutterShelfEnv(BaseEnv):
                 f"num_envs={kwargs['num_envs']}: the CPU backend runs one env per process; use "
                 'gym.make_vec(id, num_envs=N, vectorization_mode="async") (docs/environments.md)'
             )
-        kwargs.setdefault("sim_backend", "physx_cpu")
-        renders = (
-            kwargs.get("obs_mode", "state") not in STATE_OBS_MODES
-            or kwargs.get("render_mode") is not None
-        )
-        kwargs.setdefault("render_backend", "cpu" if renders else "none")
-        kwargs.setdefault("obs_mode", "state")
-        kwargs.setdefault("control_mode", "pd_joint_pos")
-        super().__init__(*args, robot_uids=uids, **kwargs)
-        self._streams_live = True
+        return uids
 
     def _reconfigure(self, options: dict | None = None) -> None:
         # ManiSkill sets the camera shader directory process-wide for its sensors; every
@@ -307,6 +386,10 @@ class ClutterShelfEnv(BaseEnv):
             super()._reconfigure(options if options is not None else {})
         finally:
             sapien.render.set_camera_shader_dir(shader_dir)
+        self._simulated = False
+
+    def _after_simulation_step(self) -> None:
+        self._simulated = True  # every physics step of the scene passes here
 
     def _setup_scene(self) -> None:
         # One renderer per process: SAPIEN renders on one device only, and ManiSkill's "cpu"
@@ -323,10 +406,16 @@ class ClutterShelfEnv(BaseEnv):
 
     def reset(self, seed: Any = None, options: dict | None = None):
         """ManiSkill's reset; with no spec, `seed` (an int >= 0) is the episode index of the
-        stream (None: the next one) and the options may name another stream."""
+        stream (None: the next one) and the options may name another stream. The scene is
+        rebuilt whenever it has been simulated since it was built, or the options name its
+        boxes (SCENE_OPTIONS)."""
         options = dict(options or {})
+        if "spec" in options:
+            check_spec(options["spec"], "reset options spec")
         if self.stream_source is not None and self._streams_live and "spec" not in options:
             keys = ("stream", "family", "n_objects", "catalogue", "scale")
+            if options.get("n_objects") is not None:
+                check_n_objects(options["n_objects"], "reset options n_objects")
             if any(k in options for k in keys):
                 stream_source = resolve_scene_source(self._source_factory)
                 self.stream_source = stream_source(*(options.pop(k, None) for k in keys))
@@ -340,6 +429,13 @@ class ClutterShelfEnv(BaseEnv):
             self.episode_index, self._next_episode = index, index + 1
             if spec is not self.scene_spec or target != self.target:
                 options |= {"spec": spec, "target": target, "reconfigure": True}
+        # PhysX repeats a simulation bit for bit only in a scene built afresh: a scene that
+        # has been stepped keeps its contact pairs' internal state, so the same start and
+        # actions in it split the impulses of a new contact otherwise (a tool meeting two
+        # shelf boards at once took the bimanual task's arm 1 elsewhere within 30 steps). A
+        # rebuild costs 0.2-0.5 s (2 CPU cores); a reset with no step since reuses the scene.
+        if self._simulated or any(k in options for k in SCENE_OPTIONS):
+            options["reconfigure"] = True
         obs, info = super().reset(seed=seed, options=options)
         if self.stream_source is not None and self._streams_live:
             from clutterbench.sim import benchmark
@@ -355,6 +451,7 @@ class ClutterShelfEnv(BaseEnv):
         return super().step(action)
 
     def _set_scene(self, spec, target, hold, poses, removed) -> None:
+        check_spec(spec)
         if not 0 <= target < spec.n or (hold is not None and not 0 <= hold < spec.n):
             raise ClutterbenchError(
                 f"target {target} / hold {hold}: the spec has boxes 0..{spec.n - 1}"
@@ -413,7 +510,7 @@ class ClutterShelfEnv(BaseEnv):
         super()._load_agent(options, [sapien.Pose(b[:3], b[3:]) for b in self.arm_bases()])
 
     def _load_scene(self, options: dict) -> None:
-        for key in ("spec", "target", "hold", "poses", "removed"):
+        for key in SCENE_OPTIONS:
             if key in options:
                 self._set_scene(
                     options.get("spec", self.scene_spec),

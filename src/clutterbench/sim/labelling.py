@@ -13,9 +13,10 @@ before it, and `act_on_spec` (the CLI's replay) reproduces it bit for bit.
 from __future__ import annotations
 
 import dataclasses
+import numbers
 import zlib
 from collections.abc import Callable, Mapping, Sequence
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -79,6 +80,30 @@ def scene_rng(seed: int, dataset: str, index: int, attempt: int) -> np.random.Ge
     return np.random.default_rng([seed, zlib.crc32(dataset.encode()), index, attempt])
 
 
+MAX_OBJECTS = 30
+"""The most boxes a scene may hold (the params' n_objects bound; the environments pad their
+observations to this many)."""
+
+
+def check_n_objects(n_objects: Any, key: str = "n_objects") -> tuple[int, int]:
+    """(low, high) of a box count or an inclusive range [low, high] of them, with
+    1 <= low <= high <= MAX_OBJECTS; anything else is refused in one line naming `key` (a
+    scene of no box has no target, and its first reduction over the boxes would fail deep in
+    numpy instead)."""
+    pair = [n_objects] * 2 if isinstance(n_objects, numbers.Integral) else n_objects
+    try:
+        lo, hi = pair
+        ok = all(isinstance(v, numbers.Integral) and not isinstance(v, bool) for v in (lo, hi))
+    except (TypeError, ValueError):  # not a pair: a string, a dict, three numbers
+        ok = False
+    if not ok or isinstance(n_objects, bool) or not 1 <= lo <= hi <= MAX_OBJECTS:
+        raise ClutterbenchError(
+            f"{key}={n_objects!r}: a number of boxes or a range [low, high] of them, integers "
+            f"with 1 <= low <= high <= {MAX_OBJECTS}"
+        )
+    return int(lo), int(hi)
+
+
 def draw_scene_setup(
     seed: int,
     dataset: str,
@@ -89,6 +114,7 @@ def draw_scene_setup(
     """(family, number of boxes) of scene `index`, drawn once from its own stream: a rejected
     attempt redraws only the placement, so hard families are not under-represented. The
     number is capped at the family's `max_objects`."""
+    check_n_objects(n_objects)  # (draws nothing: the stream is the same for a valid range)
     rng = np.random.default_rng([seed, zlib.crc32(f"{dataset}/setup".encode()), index])
     names = sorted(family_weights)
     weights = np.array([family_weights[k] for k in names], dtype=np.float64)
