@@ -74,10 +74,12 @@ run-times: setup
 # pulled)) on the test set, the run's own or the published copy: set up, then
 # clutterbench evaluate-predictor. One command on a fresh clone:
 #   make score PREDICTOR=path/to/my_predictor.py
+# Published-set scores are on trust (its labels are public); a trusted score draws new scenes
+# from an unpublished seed and labels them on the spot: make score PREDICTOR=... FRESH=200
 .PHONY: score
 score: setup
 	@test -n "$(PREDICTOR)" || { echo "make score: name the predictor: make score PREDICTOR=path/to/file.py" >&2; exit 2; }
-	clutterbench evaluate-predictor "$(PREDICTOR)"
+	clutterbench evaluate-predictor "$(PREDICTOR)" $(if $(FRESH),--fresh $(FRESH))
 
 # The README's generated blocks (results at a glance, the leaderboard, run times) rewritten from
 # the committed files they quote (clutterbench.readme; a unit test fails while one is stale)

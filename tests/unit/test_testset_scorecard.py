@@ -33,6 +33,7 @@ def _write_testset(root: Path, scenes: int = 4) -> Path:
         "n_objects": np.full(scenes, n),
         "family": np.array(["random"] * scenes),
         "scene_index": np.arange(scenes),
+        "source": np.array(["ds"] * scenes),
         "contact": np.zeros((scenes, n, n), bool),
         "pull_displacement_m": np.where(drop > 0, 0.05, 0.0),
         "pull_drop_m": drop,
@@ -139,7 +140,35 @@ def test_evaluate_predictor_scores_the_example_and_refuses_a_broken_module(tmp_p
     broken.write_text("def predict(depth_m, masks, camera_K, pulled):\n    return 'no'\n")
     out = subprocess.run([*cli, str(broken), *args], capture_output=True, text=True)
     assert out.returncode == 2 and out.stderr.strip().count("\n") == 0, out.stderr
-    assert "not numbers" in out.stderr
+    assert "not numbers" in out.stderr and "scene 0 (ds scene 0), pulled box 0" in out.stderr
+
+
+def test_a_predictor_s_error_names_the_scene_and_the_pulled_box(tmp_path):
+    """Whatever a predictor raises or returns wrong: one line naming the scene (its index, its
+    source and index there) and the pulled box (its id, its position among the masks)."""
+    ts = load(_write_testset(tmp_path / "ts"))
+
+    def fails_late(depth, masks, cam, i):
+        if float(depth[0, 0]) == 3.0 and i == 1:  # scene 2, its second box
+            raise ZeroDivisionError("no\nroom")
+        return np.zeros(len(masks))
+
+    with pytest.raises(ClutterbenchError) as err:
+        score(ts, fails_late, "late", "")
+    assert str(err.value) == (
+        "predictor late, scene 2 (ds scene 2), pulled box 1 (pulled=1 of 3 masks): "
+        "raised ZeroDivisionError: no room"
+    )
+
+    def wrong_shape(depth, masks, cam, i):
+        return np.zeros(2) if float(depth[0, 0]) == 2.0 and i == 2 else np.zeros(len(masks))
+
+    with pytest.raises(ClutterbenchError) as err:
+        score(ts, wrong_shape, "shape", "")
+    assert str(err.value).startswith(
+        "predictor shape, scene 1 (ds scene 1), pulled box 2 (pulled=2 of 3 masks): "
+        "returned shape (2,)"
+    )
 
 
 def test_parts_of_different_box_counts_are_padded_as_a_shard_is():
@@ -197,7 +226,9 @@ def test_the_run_s_own_test_set_comes_first_then_the_published_copy(tmp_path, mo
 
 
 def test_publish_testset_copies_a_set_that_loads_and_refuses_a_broken_one(tmp_path):
+    from clutterbench.cli.predictors import load_testset
     from clutterbench.data.testset_load import load
+    from clutterbench.data.testset_pins import pin_problems
 
     src = _write_testset(tmp_path / "ts")
     dst = tmp_path / "published" / "testset"
@@ -209,6 +240,14 @@ def test_publish_testset_copies_a_set_that_loads_and_refuses_a_broken_one(tmp_pa
         assert out.returncode == 0, out.stderr
     assert load(dst)["manifest"]["sha256"] == load(src)["manifest"]["sha256"]
     assert sorted(p.name for p in dst.parent.iterdir()) == ["testset"]
+    # the published manifest pins every file of the set, its loader included
+    assert sorted(load(dst)["manifest"]["files"]) == ["load_testset.py", "scenes.npz"]
+    assert pin_problems(dst) == []
+    loader = dst / "load_testset.py"
+    loader.write_text(loader.read_text() + "# changed\n")
+    with pytest.raises(ClutterbenchError, match="load_testset.py: sha256 .* pinned"):
+        load_testset(dst)
+    loader.write_text(loader.read_text().removesuffix("# changed\n"))
     (src / "scenes.npz").write_bytes(b"not the manifest's")
     out = subprocess.run(
         [*cli, "--testset", str(src), "--to", str(dst)], capture_output=True, text=True

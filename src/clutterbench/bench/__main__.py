@@ -12,6 +12,7 @@ from clutterbench.bench.arm import bench_arm
 from clutterbench.bench.box_planners import bench_box_planners
 from clutterbench.bench.dvc_overhead import bench_dvc
 from clutterbench.bench.envs import bench_envs
+from clutterbench.bench.fresh import bench_fresh
 from clutterbench.bench.grouped import bench_grouped
 from clutterbench.bench.models import bench_models
 from clutterbench.bench.physics_depth import bench_physics_depth
@@ -47,6 +48,7 @@ PARTS: list[tuple[str, Callable[[], object]]] = [
     ("train_rate", bench_train_rate),  # train_rate.json, .md (training FLOP/s vs matmul; no data)
     ("train_profile", bench_train_profile),  # train_profile.json, .md (a cp_focal epoch's slice)
     ("dvc", bench_dvc),  # dvc.json, dvc.md (dvc's own YAML work per stage; no data needed)
+    ("fresh", bench_fresh),  # fresh.json, .md (200 fresh scenes labelled and scored; no data)
 ]
 
 

@@ -9,7 +9,9 @@
     clutterbench plan SPEC.json --target K [--execute] [--mcap out.mcap]
     clutterbench replenish SPEC.json --box W,D,H [--execute] [--mcap out.mcap]
     clutterbench evaluate-agent MODULE:FACTORY [--stream S] [--episodes N] [--out DIR]
+        [--fresh N [--seed S]]
     clutterbench evaluate-predictor MODULE[:FUNCTION] [--name N] [--testset DIR] [--out DIR]
+        [--fresh N [--seed S]]
     clutterbench check [PARAMS] [--spec FILE ...]
 
 User-facing problems (ClutterbenchError) end a command with one red line on stderr,

@@ -13,6 +13,26 @@ import typer
 from clutterbench.cli.common import app, default_path, user_errors
 from clutterbench.errors import ClutterbenchError
 
+FreshEpisodes = Annotated[
+    int | None,
+    typer.Option(
+        "--fresh",
+        min=1,
+        help="Run N fresh episodes instead (0..N-1 of an unpublished stream of the stream's "
+        "kind, drawn from a new seed): a score no lookup of the published episodes can have "
+        "made. Replaces --episodes and --first.",
+    ),
+]
+FreshSeed = Annotated[
+    int | None,
+    typer.Option(
+        "--seed",
+        min=0,
+        help="With --fresh: the seed (default: drawn from os.urandom; give one only to "
+        "reproduce a fresh run).",
+    ),
+]
+
 
 @app.command("evaluate-agent")
 def evaluate_agent(
@@ -51,10 +71,14 @@ def evaluate_agent(
         bool,
         typer.Option("--traceback", help="When the agent raises: its whole trace, then the line."),
     ] = False,
+    fresh: FreshEpisodes = None,
+    seed: FreshSeed = None,
 ) -> None:
     """Run an agent through ClutterShelfPlan-v1 on episodes of a stream (the trials' scenes
     and targets, the episode protocol, judged from physics) and write the trials' records,
-    summary (both success criteria) and MCAP; print the summary's headline."""
+    summary (both success criteria) and MCAP; print the summary's headline. The published
+    episodes' starts and the trials' outcomes are public, so a score on them is on trust;
+    --fresh N scores on N episodes drawn from an unpublished seed (printed and recorded)."""
     with user_errors():
         from clutterbench.envs.evaluate import AgentError
         from clutterbench.envs.evaluate import evaluate_agent as run
@@ -62,6 +86,9 @@ def evaluate_agent(
         out_dir = default_path(out, "reports/agents")
         if out_dir.exists() and not out_dir.is_dir():
             raise ClutterbenchError(f"--out {out_dir}: is a file, not a directory")
+        drawn = fresh_seed(fresh, seed, stream)
+        if fresh is not None:
+            episodes, first = fresh, 0
         try:
             summary = run(
                 agent,
@@ -72,6 +99,7 @@ def evaluate_agent(
                 first=first,
                 scale=scale,
                 board=default_path(None, "reports/leaderboard") if board else None,
+                fresh=drawn,
             )
         except AgentError as exc:
             if show_traceback and exc.__cause__ is not None:
@@ -85,3 +113,17 @@ def evaluate_agent(
             f"wrote {out_dir / cond}/records.jsonl, summary.json"
             + (f", {summary['leaderboard_row']}" if "leaderboard_row" in summary else "")
         )
+
+
+def fresh_seed(fresh: int | None, seed: int | None, stream: str) -> tuple[int, str] | None:
+    """(seed, where it came from) of a --fresh run, printed before any episode runs; None
+    without --fresh."""
+    from clutterbench.data.testset_fresh import draw_seed
+
+    if fresh is None:
+        if seed is not None:
+            raise ClutterbenchError("--seed: only with --fresh N")
+        return None
+    drawn = draw_seed(seed)
+    typer.echo(f"fresh: {fresh} episodes of {stream}'s kind, seed {drawn[0]} ({drawn[1]})")
+    return drawn

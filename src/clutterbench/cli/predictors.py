@@ -5,7 +5,9 @@ run's test set as the published one, so a fresh clone scores without running the
 Which test set: --testset; else data/testset where stage testset has written one (this
 checkout's run, which the baselines in reports/leaderboard/baselines were scored on); else the
 published copy in git, data/published/testset (the run that published it scored the committed
-baselines on the same bytes)."""
+baselines on the same bytes). Their labels are public, so a score on them is on trust; with
+--fresh N the predictor is scored on N scenes drawn from an unpublished seed and labelled now
+(data/testset_fresh.py), the set written to data/fresh/<seed>/ and the row saying so."""
 
 from __future__ import annotations
 
@@ -18,12 +20,14 @@ from typing import Annotated
 
 import typer
 
-from clutterbench.cli.common import app, default_path, user_errors
+from clutterbench.cli.common import app, default_path, project_params, user_errors
 from clutterbench.errors import ClutterbenchError
 
 TESTSET = "data/testset"
 PUBLISHED = "data/published/testset"
 TESTSET_FILES = ("scenes.npz", "manifest.json", "load_testset.py")
+FRESH = "data/fresh"
+"""Where `--fresh` writes each fresh set (FRESH/<seed>/, a test set like any other)."""
 
 
 def testset_dir(given: Path | None) -> Path:
@@ -76,6 +80,30 @@ def first_sentence(doc: str) -> str:
     return paragraph.split(". ")[0].removesuffix(".") + "." if paragraph else ""
 
 
+FreshScenes = Annotated[
+    int | None,
+    typer.Option(
+        "--fresh",
+        min=1,
+        help="Score on N fresh scenes instead, drawn from an unpublished seed and labelled "
+        "now by simulation: a score that cannot have read its labels.",
+    ),
+]
+FreshSeed = Annotated[
+    int | None,
+    typer.Option(
+        "--seed",
+        min=0,
+        help="With --fresh: the seed (default: drawn from os.urandom; give one only to "
+        "reproduce a fresh score).",
+    ),
+]
+FreshDir = Annotated[
+    Path | None,
+    typer.Option("--fresh-dir", help=f"With --fresh: where its sets go (default {FRESH})."),
+]
+
+
 @app.command("evaluate-predictor")
 def evaluate_predictor(
     predictor: Annotated[
@@ -94,25 +122,37 @@ def evaluate_predictor(
         Path | None,
         typer.Option(
             "--testset",
-            help=f"Default: {TESTSET} where stage testset wrote one, else {PUBLISHED}.",
+            help=f"Default: {TESTSET} where stage testset wrote one, else {PUBLISHED}. With "
+            "--fresh: the set whose sources, thresholds and camera the fresh scenes follow.",
         ),
     ] = None,
     out: Annotated[Path | None, typer.Option("--out", help="Default: reports/leaderboard.")] = None,
+    fresh: FreshScenes = None,
+    seed: FreshSeed = None,
+    fresh_dir: FreshDir = None,
 ) -> None:
-    """Score a predictor on every (scene, pulled box) of the test set, write its scorecard
-    (OUT/submitted/NAME.json) and the leaderboard with it (OUT/leaderboard.md)."""
+    """Score a predictor on every (scene, pulled box) of the test set (or of N fresh scenes),
+    write its scorecard (OUT/submitted/NAME.json; fresh: OUT/fresh/predictor-NAME.json) and the
+    leaderboard with it (OUT/leaderboard.md)."""
     with user_errors():
-        from clutterbench.data.testset_load import load
-        from clutterbench.support.scorecard import check_name, leaderboard, score, write_row
+        from clutterbench.support.scorecard import (
+            check_name,
+            leaderboard,
+            score,
+            scored_on_text,
+            write_row,
+        )
 
+        if seed is not None and fresh is None:
+            raise ClutterbenchError("--seed: only with --fresh N")
         ts_dir = testset_dir(testset)
-        try:
-            ts = load(ts_dir)
-        except (ValueError, OSError) as exc:
-            raise ClutterbenchError(f"{ts_dir}: {exc}") from None
-        predict, about = load_predict(predictor)
+        reference = load_testset(ts_dir)
+        predict, about = load_predict(predictor)  # before any labelling: a broken module fails now
         label = check_name(name or Path(predictor.partition(":")[0]).stem.split(".")[-1])
         board = default_path(out, "reports/leaderboard")
+        ts, scored_on = reference, None
+        if fresh is not None:
+            ts, scored_on = fresh_set(ts_dir, fresh, seed, default_path(fresh_dir, FRESH))
         try:
             card = score(ts, predict, label, about)
         except ClutterbenchError:
@@ -121,13 +161,59 @@ def evaluate_predictor(
             raise ClutterbenchError(
                 f"predictor {label} raised {type(exc).__name__}: {exc}"
             ) from None
-        path = write_row(card, board / "submitted")
-        leaderboard(board, board, ts["manifest"]["sha256"])
+        if scored_on is not None:
+            card["scored_on"] = scored_on
+            path = write_row(card, board / "fresh", f"predictor-{label}")
+        else:
+            path = write_row(card, board / "submitted")
+        leaderboard(board, board, reference["manifest"]["sha256"])
         pc = card["pull_collapse"]
         typer.echo(
-            f"{label}: pull_collapse AUROC {pc['auroc']} precision {pc['precision']} recall "
-            f"{pc['recall']} ({card['pairs']} pairs) -> {path}, {board / 'leaderboard.md'}"
+            f"{label} ({scored_on_text(card)}): pull_collapse AUROC {pc['auroc']} "
+            f"precision {pc['precision']} recall {pc['recall']} ({card['pairs']} pairs) "
+            f"-> {path}, {board / 'leaderboard.md'}"
         )
+
+
+def load_testset(ts_dir: Path) -> dict:
+    """A test set loaded (hash, schema) with its manifest's pins checked, each problem one
+    line."""
+    from clutterbench.data.testset_load import load
+    from clutterbench.data.testset_pins import check_pins
+
+    try:
+        check_pins(ts_dir)
+        return load(ts_dir)
+    except (ValueError, OSError) as exc:
+        raise ClutterbenchError(f"{ts_dir}: {exc}") from None
+
+
+def fresh_set(reference: Path, n: int, seed: int | None, root: Path) -> tuple[dict, dict]:
+    """N fresh scenes labelled now (support/testset_fresh.py) in root/<seed>/ -> (the set, the
+    card's `scored_on`); the seed is printed before the labelling starts."""
+    from clutterbench.config import load_base
+    from clutterbench.data.testset_fresh import draw_seed
+    from clutterbench.platform_info import cpu_model
+    from clutterbench.support.testset_fresh import fresh_testset
+
+    params = project_params()
+    if not params:
+        raise ClutterbenchError("--fresh: no params.yaml in this project to draw scenes with")
+    seed, seed_from = draw_seed(seed)
+    out = root / str(seed)
+    typer.echo(f"fresh: {n} scenes, seed {seed} ({seed_from}) -> {out}")
+    manifest = fresh_testset(params, reference, n, seed, out, load_base(params).cores)
+    scored_on = {
+        "set": "fresh",
+        "scenes": n,
+        "seed": seed,
+        "seed_from": seed_from,
+        "stream_seed": manifest["fresh"]["stream_seed"],
+        "sha256": manifest["sha256"],
+        "reference_sha256": manifest["fresh"]["reference_sha256"],
+        "cpu_model": cpu_model(),  # the labels are this CPU's physics
+    }
+    return load_testset(out), scored_on
 
 
 @app.command("publish-testset")
@@ -139,6 +225,7 @@ def publish_testset(
     keeps, after checking it loads (hash and schema); the copy replaces the old one whole."""
     with user_errors():
         from clutterbench.data.testset_load import load
+        from clutterbench.data.testset_pins import pin_files
 
         src = default_path(testset, TESTSET)
         dst = default_path(to, PUBLISHED)
@@ -153,6 +240,7 @@ def publish_testset(
         tmp = Path(tempfile.mkdtemp(prefix=".publish-", dir=dst.parent))
         for name in TESTSET_FILES:
             shutil.copy2(src / name, tmp / name)
+        pin_files(tmp)  # the published manifest pins every file of the set, its loader included
         old = dst.with_name(dst.name + ".old")
         if dst.exists():
             dst.rename(old)

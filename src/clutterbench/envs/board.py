@@ -2,8 +2,14 @@
 criteria with 95% intervals, and paired against every trials condition that ran the same
 episodes of the same stream (reports/trials/<condition>/records.jsonl): episodes won only by
 the agent and only by that planner, the difference in points and McNemar's exact p. Written
-to reports/leaderboard/agents/<name>.json; the leaderboard's planner section lists them
-(support.scorecard.leaderboard)."""
+to reports/leaderboard/agents/<name>.json (fresh episodes: fresh/agent-<name>.json, paired
+with nothing: no planner ran them); the leaderboard's planner section lists them
+(support.scorecard.leaderboard).
+
+A row keeps the episodes the agent won (`episodes_won`), so its pairings can be recomputed
+from the records alone: when the trials are rerun, `python -m clutterbench.envs.board`
+re-pairs every agent row with the committed records and rewrites the leaderboard (a unit test
+fails while a row and the records disagree)."""
 
 from __future__ import annotations
 
@@ -72,6 +78,9 @@ def agent_card(
     stream = str(records[0]["stream"])
     base = baselines_on(stream, trials_dir)
     card: dict[str, Any] = dict(about) | {"stream": stream, "episodes": len(records)}
+    card["episodes_won"] = {
+        key: sorted(int(r["episode"]) for r in records if r[key]) for key in CRITERIA
+    }
     for key in CRITERIA:
         card[key] = rate(records, key)
         card[f"{key}_paired"] = {
@@ -80,15 +89,83 @@ def agent_card(
     return card
 
 
+def card_records(card: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """The per-episode outcomes a row keeps (episodes_won over its episodes), as records."""
+    first, n = int(card["first_episode"]), int(card["episodes"])
+    won = {key: set(card["episodes_won"][key]) for key in CRITERIA}
+    return [
+        {"stream": card["stream"], "episode": e} | {key: e in won[key] for key in CRITERIA}
+        for e in range(first, first + n)
+    ]
+
+
+def repaired(card: Mapping[str, Any], trials_dir: Path) -> dict[str, Any]:
+    """The row recomputed from its own outcomes and the trials records now in trials_dir."""
+    if "episodes_won" not in card:
+        raise ClutterbenchError(
+            f"agent row {card.get('name')}: keeps no episodes_won (made before rows kept "
+            "them): rerun `clutterbench evaluate-agent ... --leaderboard`"
+        )
+    keep = {k: v for k, v in card.items() if k not in CRITERIA and not k.endswith("_paired")}
+    about = {k: v for k, v in keep.items() if k not in ("stream", "episodes", "episodes_won")}
+    return agent_card(card_records(card), about, trials_dir)
+
+
+def benchmark_pin(root: Path) -> str | None:
+    """The benchmark scenes' manifest sha256 that root's params.yaml pins (the published
+    starts a stream's episodes are read from), or None."""
+    from clutterbench.config import load_params
+
+    path = root / "params.yaml"
+    if not path.is_file():
+        return None
+    return (load_params(path).get("benchmark") or {}).get("manifest_sha256")
+
+
 def write_agent_row(card: Mapping[str, Any], board: Path = BOARD) -> Path:
-    """agents/<name>.json, then the leaderboard rewritten with it (and with the predictor
-    rows of the project's test set, the first of TESTSET_DIRS beside reports/ that holds
-    one)."""
+    """agents/<name>.json (fresh episodes: fresh/agent-<name>.json), then the leaderboard
+    rewritten with it."""
+    from clutterbench.support.scorecard import is_fresh
+
+    fresh = is_fresh(dict(card))
+    path = (
+        board / ("fresh" if fresh else "agents") / f"{'agent-' if fresh else ''}{card['name']}.json"
+    )
+    write_json(path, dict(card))
+    rewrite_leaderboard(board)
+    return path
+
+
+def rewrite_leaderboard(board: Path = BOARD) -> None:
+    """The leaderboard rewritten from every row under `board`, with the predictor rows of the
+    project's test set (the first of TESTSET_DIRS beside reports/ that holds one)."""
     from clutterbench.support.scorecard import leaderboard
 
-    path = board / "agents" / f"{card['name']}.json"
-    write_json(path, dict(card))
     manifests = [board.parent.parent / d / "manifest.json" for d in TESTSET_DIRS]
     found = [m for m in manifests if m.is_file()]
     leaderboard(board, board, read_json(found[0]).get("sha256") if found else None)
-    return path
+
+
+def repair_rows(board: Path = BOARD) -> list[str]:
+    """Every agent row under `board` re-paired with the trials records beside it
+    (board/../trials) and rewritten where that changed it, then the leaderboard; returns the
+    rows that changed."""
+    changed = []
+    for path in sorted(board.glob("*/*.json")):
+        card = read_json(path)
+        if card.get("kind") != "agent":
+            continue
+        new = repaired(card, board.parent / "trials")
+        if new != card:
+            write_json(path, new)
+            changed.append(str(path))
+    rewrite_leaderboard(board)
+    return changed
+
+
+if __name__ == "__main__":
+    try:
+        for row in repair_rows() or ["every agent row already matches the trials records"]:
+            print(row)
+    except ClutterbenchError as exc:
+        raise SystemExit(f"error: {exc}") from None

@@ -6,7 +6,9 @@ the same scenes and targets (episode i of the stream), the same episode protocol
 (trials.ch6.Extraction), one process with one torch thread (the trials workers' setting), and
 the records, summary and MCAP are written by the trials' own writer (harness.write_condition),
 both success criteria (`success`: collapse-free; `strict_success`) included, so a row is
-comparable with Table 6.3's row on that stream.
+comparable with Table 6.3's row on that stream. Those episodes and the trials' outcomes on them
+are public, so such a row is on trust; with `fresh` the agent runs episodes of a fresh stream of
+the same kind instead, drawn from a seed nobody has seen (fresh_source).
 """
 
 from __future__ import annotations
@@ -112,11 +114,14 @@ def evaluate_agent(
     scale: str | None = None,
     record_images: bool = False,
     board: Path | None = None,
+    fresh: tuple[int, str] | None = None,
 ) -> dict[str, Any]:
     """Agent `ref` (MODULE:FACTORY) on episodes first..first+episodes-1 of `stream` ->
     out_dir/<name>/records.jsonl, summary.json and episodes.mcap; returns the summary. With
     `board`: also its leaderboard row, paired with the trials' conditions on the same episodes
-    (envs/board.py), written to board/agents/<name>.json and board/leaderboard.md."""
+    (envs/board.py), written to board/agents/<name>.json and board/leaderboard.md. With
+    `fresh` (seed, where it came from): episodes 0..episodes-1 of a fresh stream of the
+    stream's kind instead (fresh_source), the row in board/fresh/agent-<name>.json."""
     import gymnasium as gym
 
     import clutterbench.envs  # noqa: F401  (registers the envs)
@@ -130,6 +135,7 @@ def evaluate_agent(
     name = name or ref.rpartition(":")[2]
     worker_init(1)  # one renderer, torch on one thread: the trials workers' setting
     env = gym.make(PLAN_ENV_ID, stream=stream, scale=scale, name=name, record_images=record_images)
+    scored_on = fresh_source(env.unwrapped, fresh, episodes) if fresh is not None else None
     agent = factory(env)
     results = run_agent(env, agent, range(first, first + episodes), label=name)
     source = env.unwrapped.source
@@ -140,17 +146,45 @@ def evaluate_agent(
         "stream": source.name,
         "first_episode": first,
         "scale": source.scale,
-    }
+    } | ({"scored_on": scored_on} if scored_on else {})
     env.close()
     summary = write_condition(name, results, about, out_dir, out_dir)
     if board is not None:
-        from clutterbench.envs.board import agent_card, write_agent_row
+        from clutterbench.envs.board import agent_card, benchmark_pin, write_agent_row
+        from clutterbench.platform_info import cpu_model
 
+        pin = None if scored_on else benchmark_pin(board.parent.parent)
         card = agent_card(
             [r.record for r in results],
             {"kind": "agent", "name": name, "agent": ref, "first_episode": first}
-            | {"scale": source.scale},
+            | {"scale": source.scale, "cpu_model": cpu_model()}
+            | ({"scored_on": scored_on} if scored_on else {})
+            | ({"benchmark_sha256": pin} if pin else {}),
             board.parent / "trials",
         )
         summary["leaderboard_row"] = str(write_agent_row(card, board))
     return summary
+
+
+def fresh_source(env: Any, fresh: tuple[int, str], episodes: int) -> dict[str, Any]:
+    """Point the planning env at a fresh stream of its stream's kind (the same families, box
+    counts and catalogue): named fresh/<stream>, drawn with the fresh stream seed of user seed
+    `fresh[0]`, kept apart from every project stream as a fresh test set is
+    (data/testset_fresh.py). Returns the row's `scored_on`."""
+    import dataclasses
+
+    from clutterbench.config import load_params, project_params_path
+    from clutterbench.data.testset_fresh import check_apart, fresh_name, stream_seed
+
+    seed, seed_from = fresh
+    src = env.source
+    check_apart(load_params(project_params_path()), src.seed, seed, [src.name])
+    env.source = dataclasses.replace(src, name=fresh_name(src.name), seed=stream_seed(seed))
+    return {
+        "set": "fresh",
+        "scenes": episodes,
+        "seed": seed,
+        "seed_from": seed_from,
+        "stream_seed": stream_seed(seed),
+        "stream": src.name,
+    }

@@ -68,10 +68,38 @@ def predict_all(ts: dict, predict: PredictFn, name: str) -> pd.DataFrame:
             if len(ids) >= 2:
                 masks = np.stack([ts["instance"][s] == k + 1 for k in ids])
                 for i, x in enumerate(ids):
-                    out = predict(ts["depth_m"][s].astype(np.float32), masks, cam, i)
-                    rows += _pair_rows(ts, s, ids, i, x, masks, per_box(out, masks), truth)
+                    answer = _answer(ts, predict, name, (s, i, x), masks, cam)
+                    rows += _pair_rows(ts, s, ids, i, x, masks, answer, truth)
             advance(1)
     return pd.DataFrame(rows)
+
+
+def _answer(ts, predict, name, where, masks, cam) -> tuple[np.ndarray, np.ndarray | None]:
+    """The predictor's answer for pulling box x (position i among the masks) of scene s,
+    read per box; whatever it raises or returns wrong is one line naming the scene and the
+    box, so the user can replay that very call."""
+    s, i, x = where
+    try:
+        return per_box(predict(ts["depth_m"][s].astype(np.float32), masks, cam, i), masks)
+    except Exception as exc:  # noqa: BLE001 - the user's code: whatever it raised, one line
+        if isinstance(exc, ClutterbenchError):
+            what = str(exc).removeprefix("predictor ")
+        else:
+            what = f"raised {type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+        raise ClutterbenchError(
+            " ".join(
+                f"predictor {name}, {scene_name(ts, s)}, pulled box {x} (pulled={i} of "
+                f"{len(masks)} masks): {what}".split()
+            )
+        ) from exc
+
+
+def scene_name(ts: dict, s: int) -> str:
+    """'scene 212 (ch6_test scene 12)': a scene's index in the test set and where it comes
+    from (its source and its index there), as an error names it."""
+    named = "source" in ts and "scene_index" in ts
+    src = f"{ts['source'][s]} scene {int(ts['scene_index'][s])}" if named else ""
+    return f"scene {s}" + (f" ({src})" if src else "")
 
 
 def _pair_rows(ts, s, ids, i, x, masks, answer, truth) -> list[dict[str, Any]]:
@@ -173,38 +201,92 @@ def _round(obj: Any) -> Any:
     return obj
 
 
-def write_row(card: dict[str, Any], rows_dir: Path) -> Path:
-    path = rows_dir / f"{card['name']}.json"
+def write_row(card: dict[str, Any], rows_dir: Path, stem: str | None = None) -> Path:
+    """rows_dir/<stem or the card's name>.json."""
+    path = rows_dir / f"{stem or card['name']}.json"
     write_json(path, card)
     return path
 
 
 def leaderboard(rows_dir: Path, out: Path, testset_sha256: str | None) -> pd.DataFrame:
     """out/leaderboard.{md,csv}: every predictor row under rows_dir's folders (baselines/, the
-    stage's; submitted/, evaluate-predictor's) scored on this test set (its hash; None: no
-    test set, no predictor rows), ranked by AUROC of what the pull collapses; then the
-    planners' rows (agents/, evaluate-agent's)."""
+    stage's; submitted/, evaluate-predictor's; fresh/, evaluate-predictor --fresh's) scored on
+    this test set (its hash; None: no test set, no published rows) or on fresh scenes, ranked
+    by AUROC of what the pull collapses, each saying which set it was scored on; then the
+    planners' rows (agents/ and fresh/, evaluate-agent's)."""
     cards = [read_json(p) for p in sorted(rows_dir.glob("*/*.json"))]
     agents = [c for c in cards if c.get("kind") == "agent"]
-    cards = [c for c in cards if testset_sha256 and c.get("testset_sha256") == testset_sha256]
+    cards = [c for c in cards if c.get("kind") != "agent"]
+    published = [c for c in cards if testset_sha256 and c.get("testset_sha256") == testset_sha256]
+    cards = published + [c for c in cards if is_fresh(c)]
     if not cards and not agents:
         raise ClutterbenchError(f"{rows_dir}: no scorecard of this test set")
-    lines = ["# Pull-consequence leaderboard", ""]
+    lines = ["# Pull-consequence leaderboard", "", *TRUST_NOTE, ""]
     table = pd.DataFrame([_board_row(c) for c in cards])
     if cards:
         table = table.sort_values(["pull_collapse AUROC", "predictor"], ascending=[False, True])
-        lines += [
-            f"Test set sha256 {testset_sha256[:12]}: {cards[0]['scenes']} scenes, "
-            f"{cards[0]['pairs']} (pulled, other) pairs. Ranked by AUROC of what the pull "
-            f"collapses; precision and recall at {THRESHOLD}; [95% bootstrap over scenes]. "
-            "`clutterbench evaluate-predictor` adds a row.",
-            "",
-            *_markdown(table),
-        ]
+        lines += [*_predictor_intro(published, testset_sha256), "", *_markdown(table)]
     lines += planner_section(agents)
     write_text(out / "leaderboard.md", "\n".join(lines) + "\n")
     write_text(out / "leaderboard.csv", table.to_csv(index=False))
     return table
+
+
+TRUST_NOTE = [
+    "- **Published rows are on trust.** The published test set holds its own labels "
+    "(data/published/testset), and the benchmark episodes' starts (data/benchmark) and the "
+    "trials' outcomes are public too, so a predictor or planner could look them up: a number "
+    "scored on them says how a row did on those scenes, not that it was blind to them.",
+    "- **Fresh rows are the trusted ones.** `--fresh N` (evaluate-predictor, evaluate-agent) "
+    "draws N new scenes or episodes from a seed drawn at scoring time, labels them there by "
+    "simulation and scores on them; `scored on` names the seed, and `--seed S` reproduces "
+    "the score (a row whose seed was chosen says `(--seed)`: whoever chose it could have "
+    "labelled its scenes first).",
+    "- **What the numbers are.** pull_collapse AUROC: how well a predictor's probabilities "
+    "rank the boxes a pull collapses above the ones it leaves standing, over every (pulled, "
+    "other) pair of the set; [95%]: a bootstrap over that set's scenes; precision and recall "
+    f"at {THRESHOLD}; ECE: how far its probabilities are from the observed frequencies; "
+    "pull_moved and deletion_moved AUROC: the same for what the pull moves and for what "
+    "deleting the box moves (the thesis' labels). Planners: success per episode, "
+    "collapse-free and strict, with Wilson 95% intervals.",
+    "- **What they are not.** Simulated physics on this project's scene generator, not a "
+    "real robot; two rows on different sets (published and fresh, or two seeds) differ by the "
+    "scenes drawn as well, so compare them through their intervals; a fresh set's labels are "
+    "the physics of the CPU that scored it.",
+]
+"""The leaderboard's header: what its numbers mean and what they do not (docs/
+pull-consequence-testset.md says more)."""
+
+
+def _predictor_intro(published: Sequence[dict[str, Any]], sha: str | None) -> list[str]:
+    head = ""
+    if published:
+        head = (
+            f"Test set sha256 {str(sha)[:12]}: {published[0]['scenes']} scenes, "
+            f"{published[0]['pairs']} (pulled, other) pairs. "
+        )
+    return [
+        head + "Ranked by AUROC of what the pull collapses; precision and recall at "
+        f"{THRESHOLD}; [95% bootstrap over scenes]; `scored on` names the set. "
+        "`clutterbench evaluate-predictor` adds a row on the published set, "
+        "`clutterbench evaluate-predictor --fresh N` one on N fresh scenes."
+    ]
+
+
+def is_fresh(card: dict[str, Any]) -> bool:
+    """A row scored on fresh scenes (`--fresh`): its card says so."""
+    return (card.get("scored_on") or {}).get("set") == "fresh"
+
+
+def scored_on_text(card: dict[str, Any]) -> str:
+    """'published (sha b50dcdf6a723)' or 'fresh 200 scenes, seed 123' (with '(--seed)' when
+    the seed was chosen, not drawn): which set a row was scored on."""
+    on = card.get("scored_on") or {}
+    if on.get("set") == "fresh":
+        given = " (--seed)" if on.get("seed_from") == "given" else ""
+        return f"fresh {on['scenes']} scenes, seed {on['seed']}{given}"
+    sha = on.get("sha256") or card.get("testset_sha256") or card.get("benchmark_sha256")
+    return f"published (sha {sha[:12]})" if sha else "published"
 
 
 def _markdown(table: pd.DataFrame) -> list[str]:
@@ -237,14 +319,16 @@ def planner_section(agents: Sequence[dict[str, Any]]) -> list[str]:
             "--leaderboard` adds one.",
         ]
     lines += [
-        "Episodes of a trials stream (the same scenes and targets as Table 6.3), judged from "
-        "physics; success per episode with [Wilson 95%]. `clutterbench evaluate-agent "
-        "--leaderboard` adds a row.",
+        "Episodes of a trials stream (published: the same scenes and targets as Table 6.3) or "
+        "fresh episodes of its kind, judged from physics; success per episode with [Wilson "
+        "95%]. `clutterbench evaluate-agent --leaderboard` adds a row, with `--fresh N` one "
+        "on N fresh episodes (paired with no planner: none ran them).",
         "",
     ]
     rows = [
         {
             "agent": a["name"],
+            "scored on": scored_on_text(a),
             "stream": a["stream"],
             "episodes": f"{a['first_episode']}..{a['first_episode'] + a['episodes'] - 1}",
             "collapse-free success": _rate_cell(a["success"]),
@@ -287,6 +371,7 @@ def _board_row(card: dict[str, Any]) -> dict[str, Any]:
     lo, hi = pc["interval_95"]["auroc"]
     return {
         "predictor": card["name"],
+        "scored on": scored_on_text(card),
         "pull_collapse AUROC": pc["auroc"],
         "[95%]": f"[{lo:.3f}, {hi:.3f}]" if lo is not None and hi is not None else "—",
         "precision": pc["precision"],

@@ -15,27 +15,29 @@ from clutterbench.sim.render import ensure_renderer, observe
 def benchmark_starts(trials: Any, sim: Any, seed: int, streams: dict[str, int]) -> list[tuple]:
     """(LabelledScene, "benchmark:<stream>", episode index, target) for episodes 0..n-1 of
     each stream of `streams` (stream -> n)."""
-    from clutterbench.trials.core.scenes import draw_target, draw_trial_spec
-
     ensure_renderer()
-    pull = (trials.ch6.pull_increment_m, trials.ch6.grasp_lift_m)
     out = []
     with progress_bar("testset: benchmark starts", total=sum(streams.values())) as advance:
         for stream, n in streams.items():
-            cfg = trials.streams[stream]
             for i in range(n):
-                spec = draw_trial_spec(
-                    stream, cfg, seed, i, sim.physics, sim.camera, trials.max_attempts
+                scene, target = benchmark_start(
+                    stream, trials.streams[stream], trials, sim, seed, i
                 )
-                obs = observe(world_at(spec, SceneState.start(spec), sim.physics, True), sim.camera)
-                target = draw_target(seed, stream, i, obs, trials.ch6.min_target_pixels, spec)
-                out.append(
-                    (
-                        label_spec(spec, sim.physics, sim.camera, pull),
-                        f"benchmark:{stream}",
-                        i,
-                        target,
-                    )
-                )
+                out.append((scene, f"benchmark:{stream}", i, target))
                 advance(1)
     return out
+
+
+def benchmark_start(
+    stream: str, cfg: Any, trials: Any, sim: Any, seed: int, index: int
+) -> tuple[Any, int]:
+    """(LabelledScene, target) of episode `index` of the seed stream `stream` drawn with `cfg`
+    (a SceneStreamConfig): one test-set scene, also what `clutterbench evaluate-predictor
+    --fresh` labels on streams of its own (data/testset_fresh.py)."""
+    from clutterbench.trials.core.scenes import draw_target, draw_trial_spec
+
+    pull = (trials.ch6.pull_increment_m, trials.ch6.grasp_lift_m)
+    spec = draw_trial_spec(stream, cfg, seed, index, sim.physics, sim.camera, trials.max_attempts)
+    obs = observe(world_at(spec, SceneState.start(spec), sim.physics, True), sim.camera)
+    target = draw_target(seed, stream, index, obs, trials.ch6.min_target_pixels, spec)
+    return label_spec(spec, sim.physics, sim.camera, pull), target
