@@ -544,8 +544,11 @@ def _notes(
         "that moved another box, an action outside the oracle's set (it simulates whole pulls); "
         "'holding a box during another box's pull': of those, episodes where the second arm "
         "held a box while a box other than the target was pulled (the bimanual pull planners' "
-        "idle hold), also outside the oracle's set (oracle_hold holds only during the target's "
-        "pull).",
+        "idle hold; oracle_hold may hold during any pull, oracle never holds). The search is "
+        "complete up to its node budget: it tells states apart by the boxes out and where the "
+        "rest stand (to float noise) and tries every clean action, every hold included; where "
+        "its budget ran out (counted below) it is no ceiling, and there the points below it "
+        "are a lower bound.",
         *search_notes(used),
     ]
 
