@@ -11,6 +11,7 @@ from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
 from clutterbench.support.config import SupportEvalConfig
 from clutterbench.support.run import SupportPaths, run_support
+from clutterbench.trials.config import TrialsConfig
 
 OUT = Path("reports/support")
 SCENES = Path("data/support")
@@ -32,7 +33,8 @@ def support(params: dict, base: BaseConfig) -> None:
         out=OUT,
         scenes=SCENES,
     )
-    mean = run_support(params, base.seed, cfg, sim, parallel, paths)
+    ch6 = load_section(TrialsConfig, "trials", params).ch6  # the trials' pull, fits, fusion
+    mean = run_support(params, base.seed, cfg, sim, parallel, paths, ch6)
     for method, r in mean.iterrows():
         print(f"support {method}: precision {r['precision']:.3f} recall {r['recall']:.3f}")
 

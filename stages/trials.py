@@ -60,8 +60,7 @@ def trials(params: dict, base: BaseConfig) -> None:
     results = run_episodes("trials", run_ch6_episode, jobs, cfg.workers, parallel)
     pfd = [c for c in conditions.values() if c.planner.startswith("physics_from_depth")]
     if pfd:  # estimated vs true boxes of a few scenes of the first such stream
-        from clutterbench.report.box_estimation import estimation_figure
-        from clutterbench.trials.ch6.physics_model import estimate_panels
+        from clutterbench.trials.ch6.box_figure import estimate_panels, estimation_figure
 
         panels = estimate_panels(
             pfd[0].stream,

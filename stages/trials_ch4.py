@@ -13,10 +13,10 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_json, write_text
 from clutterbench.parallel import ParallelConfig
 from clutterbench.precision import inference_from_params
-from clutterbench.report.risk_figure import draw_figure
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
 from clutterbench.trials.ch4.episodes import ch4_jobs, run_ch4_episode
+from clutterbench.trials.ch4.figure import draw_figure
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.core.harness import run_episodes, write_mcap
 from clutterbench.trials.core.records import write_records

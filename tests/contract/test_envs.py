@@ -4,8 +4,8 @@ the same bits from the same seed and varied actions whatever ran before, every o
 the four standard control modes, get/set_state (across episodes with other box counts),
 rgb_array / sensors rendering and a recorded video, success and fail, gym.make_vec (async;
 refused in one line when it would fork a process that holds the renderer), gymnasium's
-check_env, NaN, a box count out of range and a spec of the wrong type refused in one line,
-dense reward; the planning env
+check_env, NaN, a box count out of range, a spec of the wrong type and a spec-less arm env
+with no scene source refused in one line, dense reward; the planning env
 replays committed trial episodes step for step and, fed the multi-step planner, writes the
 trials' records."""
 
@@ -359,6 +359,20 @@ def test_success_and_fail_robot_uids_and_num_envs(stack3):
         gym.make("ClutterShelfExtract-v1", spec=stack3, robot_uids="panda")
     with pytest.raises(ClutterbenchError, match="num_envs=2.*make_vec"):
         gym.make("ClutterShelfExtract-v1", spec=stack3, num_envs=2)
+
+
+def test_the_arm_ids_draw_the_streams_envs_plugs_in_and_refuse_without_a_source(monkeypatch):
+    """`import clutterbench.envs` plugs the pipeline's streams into the ManiSkill tasks (the arm
+    level names nothing of the trials); with no source plugged in and none passed, a spec-less
+    arm env is refused in one line that says where a source comes from."""
+    from clutterbench.maniskill import tasks
+    from clutterbench.trials.sources import stream_source
+
+    assert tasks.resolve_scene_source(None) is stream_source
+    monkeypatch.setattr(tasks, "_default_scene_source", None)
+    with pytest.raises(ClutterbenchError, match="import clutterbench.envs") as err:
+        gym.make("ClutterShelfExtract-v1")
+    assert "\n" not in str(err.value)
 
 
 VEC_SCRIPT = """

@@ -148,7 +148,7 @@ def test_support_from_the_estimated_scene_finds_the_stack(stack3, physics):
     """Table 6.2's physics-from-depth row: removals simulated in the boxes fitted to the
     depth image of a 3-stack: taking out the bottom box moves the two above it, taking out
     the top one moves nothing."""
-    from clutterbench.trials.ch6.physics_model import estimated_moved
+    from clutterbench.support.physics_depth import estimated_moved
 
     obs = _observe(stack3, physics)
     moved, info = estimated_moved(obs, [0, 1, 2], "same", 20, Shelf(), CAM, physics, 0.5, 0.005)
@@ -165,9 +165,9 @@ def _refuse(*args, **kwargs):
 def test_a_perception_failure_is_recorded_in_the_episode_not_raised(stack3, monkeypatch):
     """An observation the world model cannot make a scene of ends nothing: the
     step records the failure, the planner pulls the target, the record counts it."""
-    import clutterbench.trials.ch6.physics_model as physics_model
+    from clutterbench.perception import fitted_scenes
 
-    monkeypatch.setattr(physics_model, "estimated_scene", _refuse)
+    monkeypatch.setattr(fitted_scenes, "estimated_scene", _refuse)
     rec = run_extraction(stack3, _job("physics_from_depth"), target=2).record
     assert [s["box"] for s in rec["steps"]] == [2]  # the target, as without a plan
     assert rec["perception_failed"] == 1
@@ -176,13 +176,14 @@ def test_a_perception_failure_is_recorded_in_the_episode_not_raised(stack3, monk
 
 def test_a_perception_failure_in_table_6_2_is_a_row_not_an_end(stack3, physics, monkeypatch):
     """The support stage's physics-from-depth row records a scene whose estimate failed."""
-    import clutterbench.trials.ch6.physics_model as physics_model
+    from clutterbench.perception import fitted_scenes
+    from clutterbench.support import physics_depth
 
-    with pytest.raises(physics_model.PerceptionError, match="outside"):
-        monkeypatch.setattr(physics_model, "estimated_scene", _refuse)
+    with pytest.raises(physics_depth.PerceptionError, match="outside"):
+        monkeypatch.setattr(fitted_scenes, "estimated_scene", _refuse)
         obs = _observe(stack3, physics)
-        physics_model.estimated_moved(obs, [0, 1, 2], "same", 20, Shelf(), CAM, physics, 0.5, 0.01)
-    support = physics_model.PhysicsDepthSupport.__new__(physics_model.PhysicsDepthSupport)
+        physics_depth.estimated_moved(obs, [0, 1, 2], "same", 20, Shelf(), CAM, physics, 0.5, 0.01)
+    support = physics_depth.PhysicsDepthSupport.__new__(physics_depth.PhysicsDepthSupport)
     sim = dataclasses.make_dataclass("Sim", ["camera", "physics"])(CAM, physics)
     cfg = dataclasses.make_dataclass("Cfg", ["test", "min_pixels", "moved_threshold_m"])(
         dataclasses.make_dataclass("Test", ["catalogue"])("same"), 20, 0.005

@@ -16,13 +16,13 @@ from clutterbench.observation import Observation
 from clutterbench.perception.masks import masks_from_instance
 from clutterbench.planning.ch4.risk import risk_index, soft_collapse
 from clutterbench.planning.ch4.risk_planner import plan_risk
-from clutterbench.report.risk_figure import draw_figure
 from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
 from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import ensure_renderer, observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch4.episodes import ch4_jobs, run_ch4_episode
 from clutterbench.trials.ch4.execution import plan_oracle, pull_outcome
+from clutterbench.trials.ch4.figure import draw_figure
 from clutterbench.trials.config import (
     Ch4ConditionConfig,
     Ch4TrialParams,
@@ -241,8 +241,8 @@ def test_the_mcap_shows_the_scene_and_the_camera(tmp_path):
     from mcap.reader import make_reader
     from mcap_protobuf.decoder import DecoderFactory
 
+    from clutterbench.data.trial_scenes import draw_trial_spec
     from clutterbench.trials.core.harness import write_mcap
-    from clutterbench.trials.core.scenes import draw_trial_spec
 
     job = _jobs(Path("unused"), planner="random")[1]
     result = run_ch4_episode(job)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from clutterbench.criteria import CollapseFreeConfig
+from clutterbench.data.trial_scenes import truth_moved_contact
 from clutterbench.logs.mcap_episode import read_episode
 from clutterbench.planning.ch6.extraction import Decision
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
@@ -33,7 +34,6 @@ from clutterbench.trials.config import PLANNERS as PLANNER_NAMES
 from clutterbench.trials.core.harness import run_episodes, write_mcap
 from clutterbench.trials.core.protocol import judge_pull
 from clutterbench.trials.core.records import read_records, write_records
-from clutterbench.trials.core.scenes import truth_moved_contact
 from tests.toy_jobs import toy_ch6_jobs
 
 STACK3 = Path(__file__).resolve().parents[1] / "data" / "stack3.json"

@@ -104,8 +104,8 @@ def test_fusion_rows_score_each_kind_against_its_own_truth():
 def test_fitted_boxes_are_mapped_to_their_masks(monkeypatch):
     """The fit keeps masks 0 and 2 (fitted boxes 0 and 1): the pull of fitted box 0 moving
     fitted box 1 marks mask 2 from mask 0; mask 1 was not fitted, so not simulated."""
+    from clutterbench.perception import fitted_scenes as fitted
     from clutterbench.sim import labelling
-    from clutterbench.trials.ch6 import physics_model
 
     n = 2
     disp = np.array([[np.nan, 0.05], [0.0, np.nan]])
@@ -116,8 +116,8 @@ def test_fitted_boxes_are_mapped_to_their_masks(monkeypatch):
         left_shelf=np.zeros((n, n), bool),
     )
     scene = types.SimpleNamespace(spec=types.SimpleNamespace(meta={"ids": [0, 2]}))
-    monkeypatch.setattr(physics_model, "make_estimator", lambda *a: lambda obs: None)
-    monkeypatch.setattr(physics_model, "scene_of", lambda *a: scene)
+    monkeypatch.setattr(fitted, "make_estimator", lambda *a: lambda obs: None)
+    monkeypatch.setattr(fitted, "scene_of", lambda *a: scene)
     monkeypatch.setattr(labelling, "pull_outcomes", lambda *a: outcome)
     from clutterbench.sim.config import SimConfig
     from clutterbench.trials.config import Ch6TrialParams
@@ -136,8 +136,9 @@ def test_the_trials_fitted_pull_maps_a_held_box_onto_the_fit(monkeypatch):
     """The fit keeps boxes 0 and 2 of the observation (fitted 0 and 1). A held pull is asked
     of the fit by fitted indices and answered over the visible ids; a held box the fit
     dropped cannot be simulated (None)."""
+    from clutterbench.perception import fitted_scenes as fitted
     from clutterbench.sim import pull
-    from clutterbench.trials.ch6 import physics_model, planners
+    from clutterbench.trials.ch6 import planners
 
     asked = []
 
@@ -157,8 +158,8 @@ def test_the_trials_fitted_pull_maps_a_held_box_onto_the_fit(monkeypatch):
             return np.array([False, True])  # the held box (fitted 1) leaves the shelf
 
     scene = types.SimpleNamespace(spec=types.SimpleNamespace(meta={"ids": [0, 2]}))
-    monkeypatch.setattr(physics_model, "make_estimator", lambda *a: lambda obs: None)
-    monkeypatch.setattr(physics_model, "scene_of", lambda *a: scene)
+    monkeypatch.setattr(fitted, "make_estimator", lambda *a: lambda obs: None)
+    monkeypatch.setattr(fitted, "scene_of", lambda *a: scene)
     monkeypatch.setattr(planners, "TruthCollapseMaps", Fit)
     monkeypatch.setattr(pull, "SceneState", types.SimpleNamespace(start=lambda spec: None))
     from clutterbench.trials.config import Ch6TrialParams

@@ -10,6 +10,7 @@ import pytest
 import yaml
 
 from clutterbench.config import load_params, load_section, parse
+from clutterbench.data.trial_scenes import stream_key
 from clutterbench.dev.ch4_piles import (
     candidate_network,
     made_with,
@@ -23,7 +24,6 @@ from clutterbench.dev.stats import mcnemar_p, paired, paired_cells
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import save_npz, write_json
 from clutterbench.trials.config import TrialsConfig
-from clutterbench.trials.core.scenes import stream_key
 from tests.toy_params import toy_train_params
 
 PILE = {"families": {"pile": 1}, "n_objects": [5, 5], "catalogue": "various"}

@@ -1,6 +1,6 @@
 """Several scenes fitted to one observation (trials.ch6.fit_hypotheses): the fit of the depth
 image, then fits of noisy copies of it; a pull's outcome for a box is the share of the fits
-whose pull marks it (trials/ch6/physics_model.py fitted_scenes, the support stage's and the
+whose pull marks it (trials/ch6/fitted.py fitted_scenes, the support stage's and the
 trials' fitted pulls, the fusion's inputs)."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 
 from clutterbench.collapse.box_predict import features
 from clutterbench.errors import PerceptionError
-from clutterbench.trials.ch6 import physics_model
+from clutterbench.perception import fitted_scenes as fitted
 
 
 def _obs(depth: np.ndarray):
@@ -24,7 +24,7 @@ def _obs(depth: np.ndarray):
 def _seen(monkeypatch) -> list[np.ndarray]:
     """The depth images the estimator is handed; scene_of answers each with its depth."""
     seen: list[np.ndarray] = []
-    monkeypatch.setattr(physics_model, "scene_of", lambda est, *a: est)
+    monkeypatch.setattr(fitted, "scene_of", lambda est, *a: est)
     return seen
 
 
@@ -44,7 +44,7 @@ def test_the_first_fit_is_the_image_and_the_others_noisy_copies_where_it_saw_som
     seen = _seen(monkeypatch)
     depth = np.full((6, 6), 0.8, np.float32)
     depth[0] = 0.0  # nothing was hit there
-    scenes = physics_model.fitted_scenes(_fit(seen), _obs(depth), None, None, None, 0.5, 4, 0.001)
+    scenes = fitted.fitted_scenes(_fit(seen), _obs(depth), None, None, None, 0.5, 4, 0.001)
     assert len(scenes) == 4
     assert np.array_equal(seen[0], depth)
     for noisy in seen[1:]:
@@ -58,18 +58,18 @@ def test_the_first_fit_is_the_image_and_the_others_noisy_copies_where_it_saw_som
 def test_the_same_observation_gives_the_same_fits_and_one_fit_is_the_image_alone(monkeypatch):
     depth = np.random.default_rng(3).uniform(0.5, 1.0, (8, 8)).astype(np.float32)
     first, again = _seen(monkeypatch), []
-    physics_model.fitted_scenes(_fit(first), _obs(depth), None, None, None, 0.5, 3, 0.002)
-    physics_model.fitted_scenes(_fit(again), _obs(depth.copy()), None, None, None, 0.5, 3, 0.002)
+    fitted.fitted_scenes(_fit(first), _obs(depth), None, None, None, 0.5, 3, 0.002)
+    fitted.fitted_scenes(_fit(again), _obs(depth.copy()), None, None, None, 0.5, 3, 0.002)
     assert all(np.array_equal(a, b) for a, b in zip(first, again, strict=True))
     alone: list[np.ndarray] = []
-    physics_model.fitted_scenes(_fit(alone), _obs(depth), None, None, None, 0.5, 1, 0.002)
+    fitted.fitted_scenes(_fit(alone), _obs(depth), None, None, None, 0.5, 1, 0.002)
     assert len(alone) == 1 and np.array_equal(alone[0], depth)
 
 
 def test_a_fit_that_gives_no_model_is_left_out(monkeypatch):
     seen = _seen(monkeypatch)
     depth = np.full((4, 4), 0.7, np.float32)
-    scenes = physics_model.fitted_scenes(
+    scenes = fitted.fitted_scenes(
         _fit(seen, fail={0, 2}), _obs(depth), None, None, None, 0.5, 3, 0.001
     )
     assert len(seen) == 3 and len(scenes) == 1
@@ -88,8 +88,8 @@ def test_a_share_of_the_fits_is_a_graded_fusion_input_and_one_fit_the_old_one():
 
 def _two_scenes(monkeypatch, ids: list[list[int]]):
     scenes = [types.SimpleNamespace(spec=types.SimpleNamespace(meta={"ids": i})) for i in ids]
-    monkeypatch.setattr(physics_model, "make_estimator", lambda *a: lambda obs: None)
-    monkeypatch.setattr(physics_model, "fitted_scenes", lambda *a: scenes)
+    monkeypatch.setattr(fitted, "make_estimator", lambda *a: lambda obs: None)
+    monkeypatch.setattr(fitted, "fitted_scenes", lambda *a: scenes)
     return scenes
 
 

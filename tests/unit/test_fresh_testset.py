@@ -20,6 +20,7 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.io import read_json, write_json
 from clutterbench.support.scorecard import score, write_row
 from clutterbench.support.testset_fresh import fresh_testset
+from clutterbench.trials.config import TrialsConfig
 from tests.unit.test_testset_scorecard import _write_testset
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -111,7 +112,8 @@ def test_evaluate_predictor_fresh_labels_new_scenes_and_says_so_in_its_row(tmp_p
     ours = label_scene("ch6_test", gen.datasets["ch6_test"], sim, load_base(params).seed, 0, 30)
     k = list(ts["source"]).index("fresh/ch6_test")
     assert not np.array_equal(ours.depth_m, ts["depth_m"][k])
-    again = fresh_testset(params, tmp_path / "ref", 2, 7, tmp_path / "again")
+    trials = load_section(TrialsConfig, "trials", params)
+    again = fresh_testset(params, trials, tmp_path / "ref", 2, 7, tmp_path / "again")
     assert again["sha256"] == ts["manifest"]["sha256"]
 
 

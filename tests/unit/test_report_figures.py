@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from clutterbench.planning.ch4.risk import CLASSES
-from clutterbench.report.risk_figure import COLOURS, risk_figure, risk_figure_fig
 from clutterbench.support.figure import SupportPanel, support_figure_fig
+from clutterbench.trials.ch4.figure import COLOURS, risk_figure, risk_figure_fig
 
 
 def _legend_labels(fig) -> list[str]:

@@ -67,12 +67,11 @@ CHAPTER_STAGES = {
 }
 """A chapter's code -> the stages an edit of it reruns (the arm-level stage executes ch. 4's and
 ch. 6's steps; the noise stage replays ch. 6's episodes and runs its search oracles). Table
-6.2's support stage also reads two ch. 6 files, named below, and the box head (stages box_head
-and testset, which scores it) the support rule's geometry."""
-SUPPORT_READS = {"trials/ch6/physics_model.py", "planning/ch6/support.py"}
+6.2's support stage also reads ch. 6's support rule, named below, and so does the box head
+(stages box_head and testset, which scores it); none of them reads the trials' code (the
+support layer stands below the trials: its physics-from-depth model is perception's)."""
+SUPPORT_READS = {"planning/ch6/support.py"}
 BOX_HEAD_READS = {"planning/ch6/support.py"}
-PHYSICS_BASELINE_READS = {"trials/ch6/physics_model.py"}
-"""The testset stage's physics-from-depth baseline reads the trials' fitted-box model."""
 
 
 def stages_depending_on(path: str) -> set[str]:
@@ -95,6 +94,5 @@ def test_an_edit_of_one_chapter_reruns_only_its_stages(chapter):
         rel = str(f.relative_to(ROOT / "src" / "clutterbench"))
         want = CHAPTER_STAGES[chapter] | ({"support"} if rel in SUPPORT_READS else set())
         want |= {"box_head", "testset"} if rel in BOX_HEAD_READS else set()
-        want |= {"testset"} if rel in PHYSICS_BASELINE_READS else set()
         got = stages_depending_on(f"src/clutterbench/{rel}")
         assert got == want, f"an edit of {rel} reruns {sorted(got)}, not {sorted(want)}"

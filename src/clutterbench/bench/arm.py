@@ -32,13 +32,13 @@ def _front_box(spec) -> int:
 def bench_arm(out_dir: Path = Path("reports/bench")) -> dict:
     import torch
 
+    from clutterbench.data.trial_scenes import draw_trial_spec
     from clutterbench.maniskill.executor import ArmExecutor
     from clutterbench.maniskill.motion import face_pose, plan_line
     from clutterbench.parallel import worker_init
     from clutterbench.sim.config import SimConfig
     from clutterbench.sim.pull import SceneState, execute_pull, world_at
     from clutterbench.trials.config import TrialsConfig
-    from clutterbench.trials.core.scenes import draw_trial_spec
 
     params = load_params("params.yaml")
     params = {**params, "base": {**params["base"], "scale": "default"}}

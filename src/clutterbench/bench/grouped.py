@@ -272,11 +272,11 @@ def _use_predictor(model: Path, image_size: int, new: bool) -> CollapsePredictor
 
 
 def _ch4_plan(params: dict[str, Any], sim: Any, trials: Any, piles: int) -> dict[str, float]:
+    from clutterbench.data.trial_scenes import draw_trial_spec
     from clutterbench.perception.masks import masks_from_instance
     from clutterbench.planning.ch4.risk_planner import plan_risk
     from clutterbench.sim.physics import BoxWorld
     from clutterbench.sim.render import observe
-    from clutterbench.trials.core.scenes import draw_trial_spec
 
     model = Path(f"models/{trials.ch6.ch4_model}/best.pt")
     scenes = []

@@ -107,12 +107,12 @@ def _planner_times(planner: str, times: dict[str, list[float]], walls: list[floa
 
 def _box_fit_times(episodes: int, trials, sim) -> dict:
     """The box fit alone, on the bench scenes' first observations: wall and CPU medians."""
+    from clutterbench.data.trial_scenes import draw_trial_spec
+    from clutterbench.perception.fitted_scenes import make_estimator
     from clutterbench.sim.pull import SceneState, world_at
     from clutterbench.sim.render import observe
-    from clutterbench.trials.ch6 import physics_model
-    from clutterbench.trials.core.scenes import draw_trial_spec
 
-    fit = physics_model.make_estimator(trials.streams["ch6_3_10"].catalogue, trials.ch6.min_pixels)
+    fit = make_estimator(trials.streams["ch6_3_10"].catalogue, trials.ch6.min_pixels)
     fits, fits_cpu = [], []
     for i in range(episodes):
         spec = draw_trial_spec(

@@ -102,12 +102,12 @@ def _bench_jobs(name: str, cond, scene_type: str, trials, sim, prob: float) -> l
 def _time_parts(jobs: list, cond, trials, sim, parts: dict[str, list[float]]) -> None:
     """Each job's draw, observation, detection, one collapse map and one plan, timed and
     appended to `parts`."""
+    from clutterbench.data.trial_scenes import draw_trial_spec
     from clutterbench.planning.ch5.replenish import ReplenishPlanner, place_clusters
     from clutterbench.sim.pull import SceneState, world_at
     from clutterbench.sim.render import observe
     from clutterbench.trials.ch5 import episodes as ch5
     from clutterbench.trials.ch5 import perception as ch5_perception
-    from clutterbench.trials.core.scenes import draw_trial_spec
 
     for job in jobs:
         spec, t = _timed(

@@ -14,6 +14,7 @@ import torch
 
 from clutterbench.bench import bench_ch6_jobs, header, measure_table, write_result
 from clutterbench.config import load_params, load_section
+from clutterbench.data.trial_scenes import draw_trial_spec
 from clutterbench.io import read_json
 from clutterbench.planning.ch6.cpg import build_cpg
 from clutterbench.planning.ch6.extraction import CollapseGraphPlanner
@@ -25,7 +26,6 @@ from clutterbench.sim.render import ensure_renderer, observe
 from clutterbench.trials.ch6.episodes import run_ch6_episode
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.core.harness import load_predictor
-from clutterbench.trials.core.scenes import draw_trial_spec
 
 THRESHOLDS = Path("reports/support/thresholds.json")
 

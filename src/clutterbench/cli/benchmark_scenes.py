@@ -28,13 +28,13 @@ from pathlib import Path
 from typing import Any
 
 from clutterbench.config import load_base, load_params, load_section, project_params_path
+from clutterbench.data.trial_scenes import stream_key
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_text
 from clutterbench.sim import benchmark
 from clutterbench.sim.config import SimConfig
 from clutterbench.support.config import SupportEvalConfig
 from clutterbench.trials.config import TrialsConfig
-from clutterbench.trials.core.scenes import stream_key
 
 
 def scale_jobs(params: dict[str, Any], scale: str) -> list[dict[str, Any]]:
@@ -155,7 +155,7 @@ def start_of(job: dict[str, Any], target: bool) -> Any:
     as the episode draws it)."""
     kind = job["kind"]
     if kind in ("ch6", "ch4"):
-        from clutterbench.trials.core.scenes import draw_target, draw_trial_spec
+        from clutterbench.data.trial_scenes import draw_target, draw_trial_spec
 
         spec = draw_trial_spec(  # the stream's settled scene job["index"], as every trial draws it
             job["stream"],
@@ -216,7 +216,7 @@ def first_observation(spec: Any, job: dict[str, Any]) -> Any:
 
 def target_key(job: dict[str, Any], spec: Any) -> str:
     """The artifact's key of a ch. 4 / ch. 6 job's target (trials.scenes.draw_target's)."""
-    from clutterbench.trials.core.scenes import target_fields
+    from clutterbench.data.trial_scenes import target_fields
 
     fields = target_fields(job["seed"], job["stream"], job["index"], job["min_pixels"], spec)
     return benchmark.entry_key("target", fields)

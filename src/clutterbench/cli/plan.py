@@ -125,9 +125,9 @@ def _observed(
     visible boxes and physics-truth support edges."""
     import numpy as np
 
+    from clutterbench.data.trial_scenes import truth_moved_contact
     from clutterbench.sim.physics import BoxWorld
     from clutterbench.sim.render import observe
-    from clutterbench.trials.core.scenes import truth_moved_contact
 
     obs = observe(BoxWorld.from_spec(spec, physics, render=True), spec.camera)
     if target not in obs.visible_boxes(trials.ch6.min_pixels):

@@ -191,10 +191,11 @@ def load_testset(ts_dir: Path) -> dict:
 def fresh_set(reference: Path, n: int, seed: int | None, root: Path) -> tuple[dict, dict]:
     """N fresh scenes labelled now (support/testset_fresh.py) in root/<seed>/ -> (the set, the
     card's `scored_on`); the seed is printed before the labelling starts."""
-    from clutterbench.config import load_base
+    from clutterbench.config import load_base, load_section
     from clutterbench.data.testset_fresh import draw_seed
     from clutterbench.platform_info import cpu_model
     from clutterbench.support.testset_fresh import fresh_testset
+    from clutterbench.trials.config import TrialsConfig
 
     params = project_params()
     if not params:
@@ -202,7 +203,8 @@ def fresh_set(reference: Path, n: int, seed: int | None, root: Path) -> tuple[di
     seed, seed_from = draw_seed(seed)
     out = root / str(seed)
     typer.echo(f"fresh: {n} scenes, seed {seed} ({seed_from}) -> {out}")
-    manifest = fresh_testset(params, reference, n, seed, out, load_base(params).cores)
+    trials = load_section(TrialsConfig, "trials", params)
+    manifest = fresh_testset(params, trials, reference, n, seed, out, load_base(params).cores)
     scored_on = {
         "set": "fresh",
         "scenes": n,

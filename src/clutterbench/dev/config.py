@@ -358,7 +358,7 @@ def check_dev_streams(dev: DevConfig, trials: TrialsConfig) -> None:
     """Dev runs and the tables never share scenes: no table stream is named like a dev stream
     (so no table condition, whose stream must be a table stream, runs on one), and no dev
     stream's seed key (trials.scenes.stream_key) is a table stream's."""
-    from clutterbench.trials.core.scenes import stream_key
+    from clutterbench.data.trial_scenes import stream_key
 
     for name in trials.streams:
         if name.startswith(DEV_PREFIX):

@@ -59,7 +59,7 @@ def perturbed(obs: Observation, sigma_m: float, rng: np.random.Generator) -> Obs
 def _noisy_estimator(job: PerturbedJob):
     """make_estimator's fit, of the observation with this job's depth noise (seeded per
     scene and decision)."""
-    from clutterbench.trials.ch6.physics_model import make_estimator
+    from clutterbench.perception.fitted_scenes import make_estimator
 
     fit = make_estimator(job.stream_cfg.catalogue, job.params.min_pixels)
     rng = np.random.default_rng([job.seed, job.index, 53])
@@ -85,8 +85,8 @@ def run_job(job: PerturbedJob) -> dict[str, Any]:
     """One scene: Table 6.2's row on its perturbed first image, then each planner's episode."""
     from clutterbench.sim.pull import SceneState, world_at
     from clutterbench.sim.render import observe
+    from clutterbench.support.physics_depth import estimated_moved
     from clutterbench.trials.ch6.episodes import job_spec, run_extraction
-    from clutterbench.trials.ch6.physics_model import estimated_moved
 
     spec = job_spec(job)
     obs = observe(world_at(spec, SceneState.start(spec), job.physics, render=True), job.camera)

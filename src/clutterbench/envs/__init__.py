@@ -18,7 +18,12 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-import clutterbench.maniskill.tasks  # noqa: F401  (registers the ManiSkill tasks)
+from clutterbench.maniskill import tasks  # registers the ManiSkill tasks
+from clutterbench.trials.sources import stream_source
+
+# The ManiSkill tasks draw a spec-less env's scenes from the pipeline's streams: plugged in
+# here, above the trials, so that the arm level names nothing of them.
+tasks.set_default_scene_source(stream_source)
 
 PLAN_ENV_ID = "ClutterShelfPlan-v1"
 ENV_IDS = ("ClutterShelfExtract-v1", "ClutterShelfBimanual-v1", PLAN_ENV_ID)

@@ -4,16 +4,17 @@ the project's depth camera, with one Panda (`ClutterShelfExtract-v1`) or two
 lengthened: rod_robot), standing in front of the shelf, on the CPU backend.
 
     import gymnasium as gym
-    import clutterbench.maniskill.tasks  # registers the tasks
+    import clutterbench.envs  # registers the tasks, the pipeline's streams plugged in
     env = gym.make("ClutterShelfExtract-v1")          # scenes of the stream ch6_3_10
     obs, info = env.reset(seed=17)                     # = the pipeline's episode 17 (scene, target)
     env = gym.make("ClutterShelfExtract-v1", spec=spec, target=2, obs_mode="state",
                    reward_mode="none", render_backend="none")   # one scene of your own
 
-With no `spec`, `reset(seed=i)` draws episode i of a named stream (DEFAULT_SCENE_SOURCE,
-trials/sources.py: the pipeline's scene i of that stream, its canonical settled start as its
-chapter's trials draw it, and its
-target; `scene_source=` plugs in another); the stream is
+With no `spec`, `reset(seed=i)` draws episode i of a named stream (the default scene source,
+which `import clutterbench.envs` plugs in: trials/sources.py, the pipeline's scene i of that
+stream, its canonical settled start as its chapter's trials draw it, and its target;
+`scene_source=` plugs in another; `import clutterbench.maniskill.tasks` alone registers the
+tasks for specs and sources of your own); the stream is
 `stream=` (a key of trials.streams, default ch6_3_10) or `family=` / `n_objects=` /
 `catalogue=`, as make kwargs or reset options (`scale=`: the params' scale profile). Box
 observations are then padded to MAX_BOXES (a padded slot is out of the scene), so the
@@ -251,17 +252,32 @@ def _start_method_of_vector_env() -> str | None:
     return None
 
 
-DEFAULT_SCENE_SOURCE = "clutterbench.trials.sources:stream_source"
-"""What draws a spec-less env's scenes: a factory `(stream, family, n_objects, catalogue,
-scale) -> source`, the source giving `.episode(i) -> (spec, target)`, `.physics` and `.trials`
-(its `arm` and `ch6.moved_threshold_m`). The default is the pipeline's named streams, named as
-gymnasium names entry points ("module:function") and imported only when a spec-less env is
-made: the arm level imports nothing of the trials, and `scene_source=` (a name or a callable)
-plugs in another source."""
+_default_scene_source: Callable[..., Any] | None = None
+"""What draws a spec-less env's scenes unless `scene_source=` (a callable or its
+"module:function" name) names another: a factory `(stream, family, n_objects, catalogue,
+scale) -> source`, the source giving `.episode(i) -> (spec, target)`, `.spec(i)`, `.physics`
+and `.trials` (its `arm` and `ch6.moved_threshold_m`). The layer that owns the streams plugs
+it in (`set_default_scene_source`; `import clutterbench.envs` plugs in the pipeline's named
+streams), so that the arm level names nothing above it."""
 
 
-def resolve_scene_source(source: str | Callable[..., Any]) -> Callable[..., Any]:
-    """A scene-source factory from itself or its "module:function" name."""
+def set_default_scene_source(factory: Callable[..., Any]) -> None:
+    """Make `factory` the scene source of every spec-less env made after (`_default_scene_source`;
+    a process's forked workers inherit it)."""
+    global _default_scene_source
+    _default_scene_source = factory
+
+
+def resolve_scene_source(source: str | Callable[..., Any] | None) -> Callable[..., Any]:
+    """A scene-source factory from itself, its "module:function" name, or (None) the default
+    one plugged in; with none plugged in, one line saying where one comes from."""
+    if source is None:
+        if _default_scene_source is None:
+            raise ClutterbenchError(
+                "ClutterShelf env: no spec and no scene source: pass spec= or scene_source=, "
+                "or import clutterbench.envs (which plugs in the pipeline's streams)"
+            )
+        return _default_scene_source
     if callable(source):
         return source
     module, _, name = str(source).partition(":")
@@ -303,7 +319,7 @@ class ClutterShelfEnv(BaseEnv):
         n_objects: Any = None,
         catalogue: str | None = None,
         scale: str | None = None,
-        scene_source: str | Callable[..., Any] = DEFAULT_SCENE_SOURCE,
+        scene_source: str | Callable[..., Any] | None = None,
         **kwargs: Any,
     ):
         self.stream_source = None

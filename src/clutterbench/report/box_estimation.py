@@ -1,9 +1,9 @@
 """The physics-from-depth planner's box estimates against the truth: a table of
 estimation errors per trial stream (reports/tables/box_estimation.{md,csv}) from the trial
 records' `estimate_start` (each episode's first observation, the canonical start, fitted by
-perception/box_fit.py and scored by the trials), and a figure of estimated vs true boxes
-drawn over the depth image of a few scenes (like thesis Fig. 6.8; made by the trials stage,
-which holds the scenes)."""
+perception/box_fit.py and scored by the trials). The figure of estimated vs true boxes over
+the depth image of a few scenes (like thesis Fig. 6.8) is the trials stage's, which holds the
+scenes (trials/ch6/box_figure.py)."""
 
 from __future__ import annotations
 
@@ -144,50 +144,3 @@ def estimation_table(
         frame, COLUMNS, out_dir, TABLE, "Box estimation from one depth image: errors", notes
     )
     return write_raw_csv(rows, out_dir / f"{TABLE}.csv", counts=("scenes", "boxes"))
-
-
-def _edges(size: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """(12, 2, 3) the edges of a box in the shelf frame."""
-    from clutterbench.sim.geometry import quat_to_matrix
-
-    R = quat_to_matrix(pose[3:])
-    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
-    corners = pose[:3] + (signs * (np.asarray(size) / 2)) @ R.T
-    pairs = [(a, b) for a in range(8) for b in range(a + 1, 8) if np.sum(signs[a] != signs[b]) == 1]
-    return np.array([[corners[a], corners[b]] for a, b in pairs])
-
-
-def estimation_figure(panels: Sequence[dict[str, Any]], path: Path) -> None:
-    """Each panel: the depth image with the true boxes (pink) and the estimated ones (white,
-    dashed) projected by the camera. panel: depth_m, camera (CameraModel), true (sizes,
-    poses), est (sizes, poses), title."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from clutterbench.io import atomic_path
-
-    n = max(1, len(panels))
-    fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.8), squeeze=False)
-    for ax, p in zip(axes[0], panels):
-        depth = np.where(p["depth_m"] > 0, p["depth_m"], np.nan)
-        ax.imshow(depth, cmap="viridis")
-        for (sizes, poses), style in (
-            (p["true"], {"color": "#ff4fa3", "lw": 1.4}),
-            (p["est"], {"color": "white", "lw": 1.0, "ls": "--"}),
-        ):
-            for size, pose in zip(sizes, poses):
-                for a, b in _edges(size, pose):
-                    u, v, _ = p["camera"].world_to_pixel(np.stack([a, b]))
-                    ax.plot(u - 0.5, v - 0.5, **style)
-        h, w = depth.shape
-        ax.set_xlim(0, w)
-        ax.set_ylim(h, 0)
-        ax.set_title(p["title"], fontsize=8)
-        ax.axis("off")
-    fig.suptitle("Estimated (white, dashed) and true (pink) boxes", fontsize=9)
-    fig.tight_layout()
-    with atomic_path(Path(path)) as tmp:
-        fig.savefig(tmp, format="png", dpi=110, metadata={"Software": None})
-    plt.close(fig)

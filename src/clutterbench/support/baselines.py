@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -21,7 +22,6 @@ from clutterbench.data.testset_load import labels, visible
 from clutterbench.models.checkpoint import checkpoint_heads, load_checkpoint
 from clutterbench.sim.config import CameraConfig, SimConfig
 from clutterbench.support.scorecard import PredictFn
-from clutterbench.trials.config import Ch6TrialParams
 
 
 def constant(_depth, masks, _cam, _i) -> np.ndarray:
@@ -72,21 +72,21 @@ def box_head(model: Path, box: Path, camera: CameraConfig) -> PredictFn:
 
 
 def physics_from_depth(
-    sim: SimConfig, ch6: Ch6TrialParams, catalogue: str, min_pixels: int, thresholds: dict
+    sim: SimConfig, ch6: Any, catalogue: str, min_pixels: int, thresholds: dict
 ) -> PredictFn:
     """Physics from depth (the trials' physics_from_depth planners' model, no training): the
-    boxes fitted to the depth image and masks, settled (trials/ch6/physics_model.py), each
+    boxes fitted to the depth image and masks, settled (perception/fitted_scenes.py), each
     visible box pulled out of them by the trials' executor (sim.labelling.pull_outcomes, the
     labels' own code path) -> 1 for each box the pull collapses there (left the shelf, dropped
     or tipped beyond the test set's thresholds), else 0; a box not fitted: 0; a scene the fit
     fails on: 0 for every box."""
     from clutterbench.errors import PerceptionError
     from clutterbench.observation import Observation
+    from clutterbench.perception.fitted_scenes import make_estimator, scene_of
     from clutterbench.sim.labelling import pull_outcomes
     from clutterbench.sim.physics import BoxWorld
     from clutterbench.sim.render import camera_model
     from clutterbench.sim.shelf import Shelf
-    from clutterbench.trials.ch6.physics_model import make_estimator, scene_of
 
     shelf = Shelf()
     camera = camera_model(BoxWorld(shelf, sim.physics, render=True), sim.camera)

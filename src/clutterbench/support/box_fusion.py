@@ -310,13 +310,13 @@ def scenes_fitted_to(
     sim: Any, ch6: Any, catalogue: str, min_pixels: int
 ) -> Callable[[np.ndarray, np.ndarray], list[Any]]:
     """(depth_m, masks (K, H, W)) -> the settled scenes fitted to that image with `catalogue`'s
-    sizes (trials/ch6/physics_model.py fitted_scenes: ch6.fit_hypotheses of them), mask j
+    sizes (perception/fitted_scenes.py fitted_scenes: ch6.fit_hypotheses of them), mask j
     seen as box j; a fitted scene's box a is mask `spec.meta["ids"][a]`."""
     from clutterbench.observation import Observation
+    from clutterbench.perception.fitted_scenes import fitted_scenes, make_estimator
     from clutterbench.sim.physics import BoxWorld
     from clutterbench.sim.render import camera_model
     from clutterbench.sim.shelf import Shelf
-    from clutterbench.trials.ch6.physics_model import fitted_scenes, make_estimator
 
     shelf = Shelf()
     camera = camera_model(BoxWorld(shelf, sim.physics, render=True), sim.camera)
@@ -344,8 +344,8 @@ def fitted_contacts(sim: Any, ch6: Any, catalogue: str, min_pixels: int) -> Fitt
     """(depth_m, masks (K, H, W)) -> (K, K): the share of the scenes fitted to the image
     (`scenes_fitted_to`) in which boxes x and y touch, by the truth's own rule
     (sim.labelling.settled_contacts); NaN where no fit holds both."""
+    from clutterbench.perception.fitted_scenes import contact_share
     from clutterbench.sim.labelling import settled_contacts
-    from clutterbench.trials.ch6.physics_model import contact_share
 
     fit = scenes_fitted_to(sim, ch6, catalogue, min_pixels)
 
@@ -368,7 +368,7 @@ def fitted_pulls(
     min_pixels: int,
 ) -> SimulatePulls:
     """Every visible box pulled out of the boxes fitted to the depth image and masks, settled
-    (trials/ch6/physics_model.py, the physics-from-depth planners' model) by the trials'
+    (perception/fitted_scenes.py, the physics-from-depth planners' model) by the trials'
     executor (sim.labelling.pull_outcomes, the labels' own code path), each other box marked
     by each pull label kind's own rule (data/labels.py label_matrix); with
     ch6.fit_hypotheses > 1, in each of the scenes fitted to the image and its noisy copies

@@ -8,7 +8,7 @@ from __future__ import annotations
 import dataclasses
 
 from clutterbench.config import bounded, cores_field
-from clutterbench.trials.config import SceneStreamConfig
+from clutterbench.data.trial_params import SceneStreamConfig
 
 
 @dataclasses.dataclass(frozen=True)

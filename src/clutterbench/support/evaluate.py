@@ -30,6 +30,7 @@ import pandas as pd
 
 from clutterbench.data.labels import LABEL_ARRAYS, label_matrix
 from clutterbench.data.shards import ShardStore, iter_shards, load_split
+from clutterbench.data.trial_params import PULL_MAP_HEADS
 from clutterbench.errors import ClutterbenchError
 from clutterbench.perception.gaps import camera_points  # noqa: F401  (re-exported)
 from clutterbench.planning.ch6.support import (
@@ -45,7 +46,6 @@ from clutterbench.planning.ch6.support import (
     sweep_support,
 )
 from clutterbench.sim.config import CameraConfig
-from clutterbench.trials.config import PULL_MAP_HEADS
 
 SCENE_KEYS = ("scene_index", "n_objects", "family", "depth_m", "instance", "removal_m", "contact")
 PULL_HEADS = tuple(PULL_MAP_HEADS.values())

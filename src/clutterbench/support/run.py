@@ -17,6 +17,7 @@ from clutterbench.config import as_dict, load_section
 from clutterbench.criteria import label_thresholds
 from clutterbench.data.config import DatasetConfig, GenerateConfig
 from clutterbench.data.generate import generate_dataset
+from clutterbench.data.trial_scenes import stream_key
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import read_json, write_json, write_text
 from clutterbench.models.checkpoint import checkpoint_heads, load_checkpoint
@@ -54,9 +55,7 @@ from clutterbench.support.evaluate import (
     val_metrics_at,
 )
 from clutterbench.support.figure import SupportPanel, support_figure
-from clutterbench.trials.ch6.physics_model import SUPPORT_METHOD, SUPPORT_RULE, PhysicsDepthSupport
-from clutterbench.trials.config import Ch6TrialParams, TrialsConfig
-from clutterbench.trials.core.scenes import stream_key
+from clutterbench.support.physics_depth import SUPPORT_METHOD, SUPPORT_RULE, PhysicsDepthSupport
 
 
 @dataclass(frozen=True)
@@ -98,12 +97,15 @@ def run_support(
     sim: SimConfig,
     parallel: ParallelConfig,
     paths: SupportPaths,
+    ch6: Any,
 ) -> pd.DataFrame:
     """Choose thresholds on val scenes, score every method on fresh test scenes and write the
-    outputs; returns each method's mean precision and recall over the test scenes."""
+    outputs; returns each method's mean precision and recall over the test scenes. `ch6`: the
+    trials' ch. 6 params (the `trials` section's `ch6`: the trials' pull, the fitted scenes,
+    the box head's fusion), parsed by the stage: the support stage stands below the trials
+    and imports none of them."""
     precision = inference_from_params(params)
     models = load_predictors(paths.model, sim.camera.image_size)
-    ch6 = load_section(TrialsConfig, "trials", params).ch6
     read = {"heads": models.heads, "collapse_free": label_thresholds(params)}
 
     # 1. thresholds on validation scenes
@@ -202,7 +204,7 @@ def generate_test_scenes(
     sim: SimConfig,
     parallel: ParallelConfig,
     seed: int,
-    ch6: Ch6TrialParams,
+    ch6: Any,
     heads: list[str],
     scenes_dir: Path,
 ) -> None:
@@ -275,7 +277,7 @@ def score_test_scenes(
 
 
 def fitted_pulls_of(
-    params: dict, cfg: SupportEvalConfig, sim: SimConfig, ch6: Ch6TrialParams, catalogue: str
+    params: dict, cfg: SupportEvalConfig, sim: SimConfig, ch6: Any, catalogue: str
 ) -> SimulatePulls:
     """Physics from depth's pulls of every visible box (support/box_fusion.py), the boxes
     fitted with `catalogue`'s sizes, marked as the support truth marks them."""
@@ -312,7 +314,7 @@ def choose_box_fusion(
 
 
 def fitted_contacts_of(
-    cfg: SupportEvalConfig, sim: SimConfig, ch6: Ch6TrialParams, catalogue: str
+    cfg: SupportEvalConfig, sim: SimConfig, ch6: Any, catalogue: str
 ) -> FittedContacts | None:
     """The fitted scenes' contacts where the edges learn their contact from them
     (trials.ch6.box_contact learned), else None."""

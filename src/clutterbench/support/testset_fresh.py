@@ -72,6 +72,7 @@ def label_fresh(job: Mapping[str, Any]) -> tuple[Any, str, int, int]:
 
 def fresh_testset(
     params: Mapping[str, Any],
+    trials: Any,
     reference: Path,
     n: int,
     seed: int,
@@ -81,7 +82,9 @@ def fresh_testset(
     """N fresh scenes (user seed `seed`) drawn in the proportions of the test set `reference`,
     labelled and written to out/ as a test set (scenes.npz, manifest.json, load_testset.py)
     with the reference's thresholds and visible-box threshold; returns its manifest, whose
-    `fresh` entry names the seed, the stream seed and the reference."""
+    `fresh` entry names the seed, the stream seed and the reference. `trials`: the params'
+    `trials` section (trials.config.TrialsConfig: its streams and the trials' pull), parsed
+    by the caller: this layer stands below the trials and imports none of them."""
     from clutterbench.config import load_base, load_section
     from clutterbench.data.config import GenerateConfig
     from clutterbench.data.testset import export_testset, labelled_arrays
@@ -89,14 +92,13 @@ def fresh_testset(
     from clutterbench.io import write_json
     from clutterbench.parallel import iter_in_workers
     from clutterbench.sim.config import SimConfig
-    from clutterbench.trials.config import TrialsConfig
 
     ref = load_reference(reference)
     sim = load_section(SimConfig, "sim", params)
     check_camera(ref, sim.camera, reference)
     setting = {
         "generate": load_section(GenerateConfig, "generate", params),
-        "trials": load_section(TrialsConfig, "trials", params),
+        "trials": trials,
         "sim": sim,
     }
     counts = allocate(ref["sources"], n)

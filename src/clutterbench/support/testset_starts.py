@@ -34,7 +34,7 @@ def benchmark_start(
     """(LabelledScene, target) of episode `index` of the seed stream `stream` drawn with `cfg`
     (a SceneStreamConfig): one test-set scene, also what `clutterbench evaluate-predictor
     --fresh` labels on streams of its own (data/testset_fresh.py)."""
-    from clutterbench.trials.core.scenes import draw_target, draw_trial_spec
+    from clutterbench.data.trial_scenes import draw_target, draw_trial_spec
 
     pull = (trials.ch6.pull_increment_m, trials.ch6.grasp_lift_m)
     spec = draw_trial_spec(stream, cfg, seed, index, sim.physics, sim.camera, trials.max_attempts)

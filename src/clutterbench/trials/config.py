@@ -1,6 +1,8 @@
 """Params of the simulated trials (the `trials` section of params.yaml).
 
-Imports no SAPIEN and no torch, so that the report stage can read them.
+Imports no SAPIEN and no torch, so that the report stage can read them. A stream's scenes
+(SceneStreamConfig) and the pull heads' names (PULL_MAP_HEADS) are data/trial_params.py's:
+the support stage, which stands below the trials, reads them too.
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ from typing import Literal
 
 from clutterbench.config import bounded, cores_field
 from clutterbench.criteria import CollapseFreeConfig
-from clutterbench.data.config import DatasetConfig
+from clutterbench.data.trial_params import PULL_MAP_HEADS, SceneStreamConfig
 from clutterbench.maniskill.config import ArmConfig
 
 PLANNERS = (
@@ -60,9 +62,6 @@ with the thresholds the support stage chose for it on validation scenes (`box_he
 BOX_PHYSICS_PLANNERS = ("multi_step_box_physics", "bimanual_box_physics")
 """The box planners that fuse the box head with physics from depth (collapse/box_predict.py
 FusedBoxMaps)."""
-PULL_MAP_HEADS = {"moved": "pull", "collapse": "pull_collapse"}
-"""trials.ch6.pull_map_meaning -> the collapse predictor's head (data.labels.LABEL_KINDS)
-whose maps mean the same: every box the pull moves, or only what it collapses."""
 
 
 def support_method(planner: str, rule: str, meaning: str = "moved") -> str:
@@ -73,27 +72,6 @@ def support_method(planner: str, rule: str, meaning: str = "moved") -> str:
     if planner not in PULL_HEAD_PLANNERS + BOX_PLANNERS:
         return rule
     return f"{PULL_MAP_HEADS[meaning]}_{rule}"
-
-
-@dataclasses.dataclass(frozen=True)
-class SceneStreamConfig:
-    """Where the scenes of trials come from: a seed stream of its own, never a dataset's."""
-
-    families: Mapping[str, float] = dataclasses.field(default_factory=dict)
-    """Scene family -> relative weight."""
-    n_objects: tuple[int, int] = bounded((3, 10), ge=1, le=30)
-    """Inclusive range of the number of boxes per scene."""
-    catalogue: Literal["same", "various", "new"] = "various"
-    """Box catalogue the sizes are drawn from."""
-
-    def __post_init__(self) -> None:
-        # A stream's scene mix obeys the rules of a dataset's: one validator for both.
-        DatasetConfig(
-            n_scenes=1,
-            families=dict(self.families),
-            catalogue=self.catalogue,
-            n_objects=self.n_objects,
-        )
 
 
 @dataclasses.dataclass(frozen=True)

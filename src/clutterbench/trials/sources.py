@@ -1,6 +1,7 @@
-"""Where the environments' episodes come from (maniskill/tasks.py DEFAULT_SCENE_SOURCE,
-envs/plan.py): the named streams' starts drawn exactly as their chapter's trials draw them, so
-episode i of an environment starts from the bytes of the table's episode i.
+"""Where the environments' episodes come from (the ManiSkill tasks' default scene source,
+which envs/__init__.py plugs into maniskill/tasks.py, and envs/plan.py): the named streams'
+starts drawn exactly as their chapter's trials draw them, so episode i of an environment
+starts from the bytes of the table's episode i.
 
 A ch. 6 (or ch. 4) stream's start is scene i drawn and settled (trials/core/streams.py). A
 ch. 5 stream's start also depends on the episode's new box: a shelved start with a free place

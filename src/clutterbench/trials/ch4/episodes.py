@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from clutterbench.data.trial_scenes import draw_target, draw_trial_spec, policy_rng
 from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.perception.depth_segmentation import shelf_roi
@@ -51,7 +52,6 @@ from clutterbench.trials.core.harness import (
     load_predictor,
 )
 from clutterbench.trials.core.jobs import shelf_fields
-from clutterbench.trials.core.scenes import draw_target, draw_trial_spec, policy_rng
 
 RISKS_LOGGED = 8
 """The decision message lists the candidates of least risk, this many."""

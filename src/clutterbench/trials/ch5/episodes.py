@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from clutterbench import criteria
+from clutterbench.data.trial_scenes import draw_trial_spec, policy_rng, stream_key
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import read_json
 from clutterbench.observation import Observation
@@ -59,7 +60,6 @@ from clutterbench.trials.ch5.perception import collapse_map_fn, perceive, true_c
 from clutterbench.trials.config import Ch5ConditionConfig, Ch5TrialParams, TrialsConfig
 from clutterbench.trials.core.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
 from clutterbench.trials.core.jobs import shelf_fields
-from clutterbench.trials.core.scenes import draw_trial_spec, policy_rng, stream_key
 
 ENDS = ("placed", "collapse", "misplaced", "gave_up", "max_steps")
 """Why an episode ended: the box was placed and nothing else moved (success); a step moved

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from clutterbench.criteria import CollapseFreeConfig
+from clutterbench.data.trial_scenes import draw_target, draw_trial_spec
 from clutterbench.errors import ClutterbenchError
 from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
@@ -58,7 +59,6 @@ from clutterbench.trials.core.harness import DECISION_TOPIC, EpisodeLog, Episode
 from clutterbench.trials.core.jobs import shelf_fields
 from clutterbench.trials.core.judge import disturbance
 from clutterbench.trials.core.protocol import episode_end, judge_episode, judge_pull, step_notes
-from clutterbench.trials.core.scenes import draw_target, draw_trial_spec
 
 
 def execute_decision(

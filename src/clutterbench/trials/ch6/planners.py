@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from clutterbench.data.trial_scenes import policy_rng
 from clutterbench.errors import ClutterbenchError
 from clutterbench.observation import Observation
 from clutterbench.planning.ch6.extraction import (
@@ -27,7 +28,6 @@ from clutterbench.trials.ch6.truth_maps import TruthCollapseMaps
 from clutterbench.trials.config import PLANNERS as BUILT_IN
 from clutterbench.trials.config import PULL_MAP_HEADS, Ch6TrialParams
 from clutterbench.trials.core.harness import load_predictor
-from clutterbench.trials.core.scenes import policy_rng
 
 if TYPE_CHECKING:
     from clutterbench.trials.ch6.jobs import Ch6Job
@@ -300,18 +300,18 @@ def _box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = F
 def fitted_pull(job: Ch6Job, spec: SceneSpec, head: str):
     """SimulateFn of FusedBoxMaps: the trials' pull of one box in the scenes fitted to the
     observation (physics from depth's estimate, settled; trials.ch6.fit_hypotheses of them,
-    physics_model.fitted_scenes), each box's outcome the share of those fits whose pull marks
+    perception/fitted_scenes.py), each box's outcome the share of those fits whose pull marks
     it by `head`; with a held box, the pull made holding it, the held box let go and judged
     as the trials judge a released box. Of the episode's spec it reads the shelf only; of
     its stream the catalogue. Its `contacts(obs, ids)` gives the same fits' contacts
     (FittedContactFn: trials.ch6.box_contact learned)."""
-    from clutterbench.sim.labelling import settled_contacts
-    from clutterbench.sim.pull import SceneState
-    from clutterbench.trials.ch6.physics_model import (
+    from clutterbench.perception.fitted_scenes import (
         contact_share,
         fitted_scenes,
         make_estimator,
     )
+    from clutterbench.sim.labelling import settled_contacts
+    from clutterbench.sim.pull import SceneState
 
     params: Ch6TrialParams = job.params
     estimate = make_estimator(job.stream_cfg.catalogue, params.min_pixels)
@@ -404,8 +404,9 @@ def _physics_from_depth(job: Ch6Job, spec: SceneSpec, holding: bool):
     set of the oracle it mirrors (`holding`: oracle_hold's, a box may be held during any
     pull). Of the episode's spec it gets the shelf only (fixed, a robot knows it); of its
     stream the catalogue."""
+    from clutterbench.perception.fitted_scenes import make_estimator
     from clutterbench.planning.ch6.physics_depth import PhysicsFromDepthPlanner
-    from clutterbench.trials.ch6.physics_model import EstimatedWorldModel, make_estimator
+    from clutterbench.trials.ch6.physics_model import EstimatedWorldModel
 
     params: Ch6TrialParams = job.params
     model = EstimatedWorldModel(

@@ -1,6 +1,6 @@
 """Named scene streams as the environments draw them: episode i of a stream is the pipeline's
 scene i of that stream (the same seed stream, generator and canonical settled start) and its
-target (the target stream of trials/core/scenes.py), read from the project's params.yaml.
+target (the target stream of data/trial_scenes.py), read from the project's params.yaml.
 
     source = stream_source("ch6_3_10")            # a stream of trials.streams
     source = stream_source(family="stacked", n_objects=(3, 5), catalogue="various")
@@ -54,7 +54,7 @@ class StreamSource:
             raise ClutterbenchError(f"episode {index!r}: an episode index is an integer >= 0")
         key = (self.name, repr(self.cfg), self.seed, self.physics, self.camera, index)
         if key not in _SPECS:
-            from clutterbench.trials.core.scenes import draw_trial_spec
+            from clutterbench.data.trial_scenes import draw_trial_spec
 
             if len(_SPECS) > 256:
                 _SPECS.clear()
@@ -72,9 +72,9 @@ class StreamSource:
     def episode(self, index: int) -> tuple[SceneSpec, int]:
         """Scene `index` of the stream and its target (the trials' target stream, drawn from
         the canonical start's observation)."""
+        from clutterbench.data.trial_scenes import draw_target
         from clutterbench.sim.pull import SceneState, world_at
         from clutterbench.sim.render import observe
-        from clutterbench.trials.core.scenes import draw_target
 
         spec = self.spec(index)  # the episode's canonical start, as trials.ch6.Extraction's
         obs = observe(world_at(spec, SceneState.start(spec), self.physics, True), self.camera)

@@ -1,7 +1,10 @@
 """Figure like thesis Fig. 4.8: one scene, one target, the network's output for several
 choices of the box to hold: extracted E (green), supported S (blue), predicted collapse C
 (red), and the risk index r_c of each choice (eq. 4.1), the least first. A legend names the
-colours; given the boxes' masks, every panel numbers the boxes as the planner names them."""
+colours; given the boxes' masks, every panel numbers the boxes as the planner names them.
+
+Stage trials_ch4 draws it (reports/trials_ch4/fig_4_8.png) by re-running one decision of a
+risk condition, so it lives with the ch. 4 trials: no stage but report imports report/."""
 
 from __future__ import annotations
 
@@ -145,15 +148,15 @@ def risk_figure(
 def draw_figure(job: Any, out_path: Path) -> None:
     """Thesis Fig. 4.8 from one episode of a risk condition in target mode: its scene, its
     target, the network's E / S / C for the supports of least risk (run in this process).
-    The simulator and the trials' helpers load only when it is called, so the report stage
-    that imports this module loads no SAPIEN and the trials import nothing of the report."""
+    The simulator and the trials' helpers load only when it is called: drawing a figure of
+    given maps (`risk_figure`) loads no SAPIEN."""
+    from clutterbench.data.trial_scenes import draw_target, draw_trial_spec
     from clutterbench.errors import ClutterbenchError
     from clutterbench.planning.ch4.risk_planner import plan_risk
     from clutterbench.sim.physics import BoxWorld
     from clutterbench.sim.render import ensure_renderer
     from clutterbench.trials.ch4.episodes import observe_and_segment, target_segment
     from clutterbench.trials.core.harness import load_predictor
-    from clutterbench.trials.core.scenes import draw_target, draw_trial_spec
 
     cond, params = job.cond, job.params
     ensure_renderer()

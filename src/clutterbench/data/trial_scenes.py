@@ -3,6 +3,9 @@
 A trial scene is never a dataset scene: its placement stream is keyed by "trials/<stream>"
 (data/generate keys datasets by their own names), and the target is drawn from a third
 stream, so every condition on one stream sees the same scenes and the same targets.
+
+Here, below the trials, because the support stage (the test set's benchmark starts, its own
+test stream) draws the same scenes and targets as the trials and stands below them.
 """
 
 from __future__ import annotations
@@ -12,13 +15,13 @@ from collections.abc import Callable
 
 import numpy as np
 
+from clutterbench.data.trial_params import SceneStreamConfig
 from clutterbench.observation import Observation
 from clutterbench.sim import benchmark
 from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.labelling import draw_settled_spec, removal_matrix, settled_contacts
 from clutterbench.sim.shelf import Shelf
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.config import SceneStreamConfig
 
 
 def stream_key(stream: str) -> str:
