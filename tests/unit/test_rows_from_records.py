@@ -22,7 +22,7 @@ from clutterbench.report.config import ReportConfig
 from clutterbench.report.tables import load_thesis_figures
 from clutterbench.support.scorecard import is_fresh, leaderboard
 from clutterbench.trials.core.records import read_records
-from clutterbench.trials.core.stats import aggregate
+from clutterbench.trials.core.stats import aggregate, aggregate_games
 
 ROOT = Path(__file__).resolve().parents[2]
 BOARD = ROOT / "reports/leaderboard"
@@ -139,15 +139,17 @@ def test_every_trials_summary_is_its_records(condition):
             assert summary[key] == value, (condition, key)
 
 
-README_TRIAL_FIGURES = ("Table 4.1", "4.3.3 (text)", "Table 5.2", "Table 6.3")
-"""The README's results rows that quote trials (chapters 4, 5 and 6: reports/trials_ch4,
-trials_ch5 and reports/trials)."""
+README_TRIAL_FIGURES = ("Fig. 3.15", "Table 4.1", "4.3.3 (text)", "Table 5.2", "Table 6.3")
+"""The README's results rows that quote trials (chapters 3 to 6: reports/trials_ch3,
+trials_ch4, trials_ch5 and reports/trials)."""
 
 
 def _tables_from_records(out: Path) -> dict[str, pd.DataFrame]:
-    """Tables 4.1 (and its predetermined-target row), 5.2 and 6.3 rebuilt by the report's own
-    builders from the committed trials records, read back as the summary reads them."""
+    """Fig. 3.15 and Tables 4.1 (and its predetermined-target row), 5.2 and 6.3 rebuilt by the
+    report's own builders from the committed trials records, read back as the summary reads
+    them."""
     from clutterbench.report.build import by_condition
+    from clutterbench.report.fig_3_15 import fig_3_15_table
     from clutterbench.report.table_4_1 import table_4_1, table_4_1_target
     from clutterbench.report.table_5_2 import table_5_2
     from clutterbench.report.table_6_3 import extraction_table
@@ -158,23 +160,27 @@ def _tables_from_records(out: Path) -> dict[str, pd.DataFrame]:
     ch4 = by_condition(read_records(ROOT / "reports/trials_ch4/records.jsonl"))
     ch5 = by_condition(read_records(ROOT / "reports/trials_ch5/records.jsonl"))
     ch6 = {c: read_records(TRIALS / c / "records.jsonl") for c in cfg.table_6_3.values()}
+    games = read_records(ROOT / "reports/trials_ch3/records.jsonl")
+    val = read_json(ROOT / "reports/train_slide/metrics.json")["val"]
+    fig_3_15_table(aggregate_games(games), games, figures, val, out, out / "f.png", scale)
     table_4_1(ch4, cfg.table_4_1, figures, out, scale)
     table_4_1_target(ch4, cfg.table_4_1_target, figures, out, scale)
     table_5_2(ch5, cfg.table_5_2, figures, out, scale)
     extraction_table(ch6, cfg.table_6_3, figures, out, scale)
-    names = ("table_4_1", "table_4_1_target", "table_5_2", "table_6_3")
+    names = ("fig_3_15", "table_4_1", "table_4_1_target", "table_5_2", "table_6_3")
     return {name: pd.read_csv(out / f"{name}.csv") for name in names} | {"figures": figures}
 
 
 def test_the_readme_trial_rows_are_the_trials_records(tmp_path):
-    """The README's results rows of Tables 4.1, 5.2 and 6.3, recomputed by the report's own
-    builders and summary code from the committed trials records: none stale, none missing,
-    none extra."""
+    """The README's results rows of Fig. 3.15 and Tables 4.1, 5.2 and 6.3, recomputed by the
+    report's own builders and summary code from the committed trials records: none stale,
+    none missing, none extra."""
     from clutterbench.report import summary
 
     frames = _tables_from_records(tmp_path)
     figures = frames.pop("figures")
     rows = [
+        *summary._fig_3_15(frames, figures),
         *summary._table_4_1(frames, figures),
         *summary._table_5_2(frames, figures),
         *summary._table_6_3(frames, figures),
