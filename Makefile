@@ -19,7 +19,7 @@ TORCH_PIP_ARGS := $(if $(TORCH_INDEX_URL),--index-url $(TORCH_INDEX_URL))
 TORCH_CHOICE := $(if $(filter-out torch==2.13.0,$(TORCH_SPEC))$(TORCH_INDEX_URL),echo '$(TORCH_SPEC) $(TORCH_INDEX_URL)';)
 STAMP := $(VENV)/.installed-$(shell ($(TORCH_CHOICE) cat requirements.lock pyproject.toml) 2>/dev/null | sha1sum | cut -c1-12)
 
-.PHONY: setup system venv repro test lint bench learning-curve designs dev-ch4-piles dev-ch5-planner dev-perturbed-fit dev-ch6-pull dev-ch6-pull-thresholds dev-ch6-pull-watch dev-ch6-no-plan dev-ch6-no-plan-thresholds dev-ch6-idle-hold dev-ch6-clear dev-ch6-hold dev-ch6-vs-pfd dev-ch6-box dev-ch6-box-physics dev-ch6-box-hold dev-ch6-fit-hypotheses dev-ch6-box-contact dev-ch6-box-cp-max dev-ch6-box-edge dev-ch6-release dev-box-head-data dev-box-physics-fusion benchmark-scenes clean-venv shell
+.PHONY: setup system venv repro test lint bench learning-curve designs benchmark-scenes clean-venv shell
 
 setup: system venv .dvc/config
 
@@ -49,15 +49,17 @@ shell: setup
 	@bash --rcfile <(cat ~/.bashrc 2>/dev/null; echo 'source $(abspath $(VENV))/bin/activate') -i
 
 lint: setup
-	ruff check src stages tests
-	ruff format --check src stages tests
+	ruff check src stages tests experiments
+	ruff format --check src stages tests experiments
 
 # params.yaml checked first (clutterbench check: every section at every scale, in a second or
-# two, no data), so a typo fails here rather than in the stage that reads it. Then two
+# two, no data), so a typo fails here rather than in the stage that reads it, and the
+# rechecks' experiments/params.yaml beside it (python -m experiments.check). Then two
 # workers (pytest-xdist), a file each at a time: the tiny end-to-end repro (collected first)
 # on one, every other file on the other.
 test: lint
 	clutterbench check
+	python -m experiments.check
 	python -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder --durations=25 tests
 
 bench: setup
@@ -104,131 +106,7 @@ learning-curve: setup
 designs: setup
 	python -m clutterbench.collapse.designs
 
-# The ch. 4 training piles rechecked on dev streams (params dev.ch4_piles; ~30 min at default
-# scale on 2 free cores): a network per pile range, the risk planner on each dev stream ->
-# reports/dev/ch4_piles.{json,md}; scratch data and networks in data/dev/ch4_piles/
-dev-ch4-piles: setup
-	python -m clutterbench.dev.ch4_piles
-
-# How the ch. 5 planner carries a blocker, rechecked on dev streams (params dev.ch5_planner;
-# ~7 min at default scale on 2 cores, after dvc repro of trials_ch5's upstream): each
-# variant of trials.ch5's blocker_goal / upright_footprint, the thesis' planner and the one
-# that may push (contact), with the detector's and the true clusters, and its oracle
-# -> reports/dev/ch5_planner.{json,md}
-dev-ch5-planner: setup
-	python -m clutterbench.dev.ch5_planner
-
-# No box fit raises out of a stage: both physics-from-depth planners and Table
-# 6.2's row on dev scenes of the 3-10 stream with noisy depth (params dev.perturbed_fit; no
-# network needed) -> reports/dev/perturbed_fit.{json,md}
-dev-perturbed-fit: setup
-	python -m clutterbench.dev.perturbed_fit
-
-# What the ch. 6 pull planners do after an abort: trials.ch6.abort_response block vs
-# learn for each planner of dev.ch6_pull.planners and both oracles on dev scenes of the 3-10
-# stream (reads the support stage's thresholds) -> reports/dev/ch6_pull.{json,md}
-dev-ch6-pull: setup
-	python -m clutterbench.dev.ch6_pull
-
-# The pull-head CP planners' thresholds: trials.ch6.pull_prob_threshold and
-# pull_score_threshold, each variant of dev.ch6_pull_thresholds on dev scenes of the 3-10 stream
-# -> reports/dev/ch6_pull_thresholds.{json,md}
-dev-ch6-pull-thresholds: setup
-	python -m clutterbench.dev.ch6_pull ch6_pull_thresholds
-
-# The pull-head CP planners watching their pull in depth: trials.ch6.pull_watch_m,
-# each variant of dev.ch6_pull_watch on dev scenes of the 3-10 stream
-# -> reports/dev/ch6_pull_watch.{json,md}
-dev-ch6-pull-watch: setup
-	python -m clutterbench.dev.ch6_pull ch6_pull_watch
-
-# What the pull planners do when their rule rejects every candidate:
-# trials.ch6.when_no_plan, each variant of dev.ch6_no_plan on dev scenes of the 3-10 stream
-# -> reports/dev/ch6_no_plan.{json,md}
-dev-ch6-no-plan: setup
-	python -m clutterbench.dev.ch6_pull ch6_no_plan
-
-# The pull-head CP planners' thresholds once a decision that rejects every candidate pulls the
-# least risky one: each variant of dev.ch6_no_plan_thresholds on dev scenes of the
-# 3-10 stream -> reports/dev/ch6_no_plan_thresholds.{json,md}
-dev-ch6-no-plan-thresholds: setup
-	python -m clutterbench.dev.ch6_pull ch6_no_plan_thresholds
-
-# The bimanual pull planners' idle arm: trials.ch6.idle_hold_share, each variant of
-# dev.ch6_idle_hold on dev scenes of the 3-10 stream -> reports/dev/ch6_idle_hold.{json,md}
-dev-ch6-idle-hold: setup
-	python -m clutterbench.dev.ch6_pull ch6_idle_hold
-
-# Whose shares the pull planners' collapse score takes, and clearing around a rejected plan
-#: trials.ch6.score_over and when_no_plan clear, each variant of dev.ch6_clear on
-# dev scenes of the 3-10 stream -> reports/dev/ch6_clear.{json,md}
-dev-ch6-clear: setup
-	python -m clutterbench.dev.ch6_pull ch6_clear
-
-# How the bimanual pull planners score and choose a held pull: trials.ch6.truth_hold
-# and hold_feared, each variant of dev.ch6_hold on dev scenes of the 3-10 stream
-# -> reports/dev/ch6_hold.{json,md}
-dev-ch6-hold: setup
-	python -m clutterbench.dev.ch6_pull ch6_hold
-
-# The pull-head CP planners against physics from depth, the params' own
-# settings, on more dev scenes than a table has -> reports/dev/ch6_vs_pfd.{json,md}
-dev-ch6-vs-pfd: setup
-	python -m clutterbench.dev.ch6_pull ch6_vs_pfd
-
-dev-ch6-box: setup
-	python -m clutterbench.dev.ch6_pull ch6_box
-
-# The learned-plus-physics planners against physics from depth, episode by episode (each
-# decision simulates the pulls the box head is unsure of): reports/dev/ch6_box_physics.md
-dev-ch6-box-physics: setup
-	python -m clutterbench.dev.ch6_pull ch6_box_physics
-
-# How the learned-plus-physics bimanual planner scores a pull made holding a box
-# (trials.ch6.box_hold): the held box left out, or the held pull simulated on the fitted boxes
-# -> reports/dev/ch6_box_hold.{json,md}
-dev-ch6-box-hold: setup
-	python -m clutterbench.dev.ch6_pull ch6_box_hold
-
-# How many scenes the learned-plus-physics planners fit to one observation (trials.ch6
-# fit_hypotheses, fit_noise_mm), each variant's fusion chosen again on the support stage's val
-# scenes -> reports/dev/ch6_fit_hypotheses.{json,md}
-dev-ch6-fit-hypotheses: setup
-	python -m clutterbench.dev.ch6_pull ch6_fit_hypotheses
-
-# The contact in the learned-plus-physics planners' support edges (trials.ch6.box_contact): the
-# box head's, or learned from it and the fitted scenes' contacts, each variant's fusion chosen
-# again on the support stage's val scenes -> reports/dev/ch6_box_contact.{json,md}
-dev-ch6-box-contact: setup
-	python -m clutterbench.dev.ch6_pull ch6_box_contact
-
-# The collapse score over which the learned-plus-physics planners reject or stop a pull
-# (trials.ch6.box_cp_max): the support stage's outcome threshold or lower
-# -> reports/dev/ch6_box_cp_max.{json,md}
-dev-ch6-box-cp-max: setup
-	python -m clutterbench.dev.ch6_pull ch6_box_cp_max
-
-# The learned-plus-physics planners' support graph (trials.ch6.box_contact, box_edge_precision):
-# the support stage's, or the learned contact at the most recall for 0.90 precision on val
-# -> reports/dev/ch6_box_edge.{json,md}
-dev-ch6-box-edge: setup
-	python -m clutterbench.dev.ch6_pull ch6_box_edge
-
-# How the ch. 6 executor lets go of an aborted pull's box and of a held box (trials.ch6
-# abort_release, held_release), the oracles under each variant too: reports/dev/ch6_release.md
-dev-ch6-release: setup
-	python -m clutterbench.dev.ch6_pull ch6_release
-
-# What the box head learns from (after box_head): the stage's train scenes, all of them,
-# val scenes its collapse predictor never trained on, more width; each scored on the stage's
-# val scenes -> reports/dev/box_head_data.md
-dev-box-head-data: setup
-	python -m clutterbench.dev.box_head_data
-
-# The box head and physics from depth fused per box (after box_head): each alone and fused,
-# cross-fitted over two halves of the box head's val scenes -> reports/dev/box_physics_fusion.md
-dev-box-physics-fusion: setup
-	python -m clutterbench.dev.box_physics_fusion
+include experiments/Makefile
 
 # The benchmark scenes (data/benchmark/: every table's test-stream starts and targets, the
 # same bytes on every CPU), regenerated for the tiny and default profiles. Never run by a

@@ -183,7 +183,7 @@ def test_the_trials_fitted_pull_maps_a_held_box_onto_the_fit(monkeypatch):
 def test_the_edges_take_the_contact_they_are_given_and_the_head_s_by_default():
     """A recheck may score the graph with another contact (dev box_physics_fusion: the fitted
     scene's, or the truth as a ceiling); the stage's edges keep the head's."""
-    from clutterbench.dev.box_physics_fusion import contact_of
+    from experiments.box_physics_fusion import contact_of
 
     sc = _scene(np.random.default_rng(4), k=3)
     sc.probs[..., OUTPUTS.index("contact")] = 0.9
@@ -220,7 +220,7 @@ def test_the_learned_contact_follows_the_fitted_contact_where_it_tells_the_truth
     """trials.ch6.box_contact learned: fitted on scenes whose fitted contact is the truth and
     whose head says 0.9 everywhere, it puts touching pairs above the others and falls back on
     the head's logit where no fit holds the pair."""
-    from clutterbench.dev.box_physics_fusion import contact_of
+    from experiments.box_physics_fusion import contact_of
 
     scenes = _touching_scenes(np.random.default_rng(7))
     w = bf.fit_contact(scenes)

@@ -1,10 +1,10 @@
 """The reference docs name only what exists. In README.md, docs/ and the READMEs under
-reports/, every
+reports/ and experiments/, every
 
 - repository path, in backticks or as a Markdown link, is a file or folder of the tree, or an
   output that a fresh clone does not have yet: under one of dvc.yaml's outputs, metrics or
   plots, or ignored by .gitignore (data/, models/, reports/timing/, ...);
-- `make <target>` names a target the Makefile defines;
+- `make <target>` names a target the Makefile (or a file it includes) defines;
 - dvc stage named in backticks (`train@cp_focal`, `dvc repro trials_ch4`, "stage `support`",
   "the `noise` stage") is one of dvc.yaml's, a foreach stage's key one of the params.yaml list
   it runs over.
@@ -41,8 +41,14 @@ SUFFIXES = {
 
 
 def markdown_files(root: Path = ROOT) -> list[Path]:
-    """The docs checked: README.md, docs/**/*.md and every README.md under reports/."""
-    files = [root / "README.md", *root.glob("docs/**/*.md"), *root.glob("reports/**/README.md")]
+    """The docs checked: README.md, docs/**/*.md and every README.md under reports/ and
+    experiments/ (the rechecks' index and their reports')."""
+    files = [
+        root / "README.md",
+        *root.glob("docs/**/*.md"),
+        *root.glob("reports/**/README.md"),
+        *root.glob("experiments/**/README.md"),
+    ]
     return sorted(p for p in files if p.is_file())
 
 
@@ -80,6 +86,13 @@ def make_targets(makefile: str) -> set[str]:
         names += m.group(1).split() if m.group(1) != ".PHONY" else []
         out.update(n for n in names if "$" not in n and "%" not in n)
     return out
+
+
+def makefile_text(root: Path) -> str:
+    """The Makefile with the files it includes (`include experiments/Makefile`)."""
+    text = (root / "Makefile").read_text()
+    included = re.findall(r"^-?include\s+(.+)$", text, re.M)
+    return "\n".join([text, *((root / name).read_text() for name in " ".join(included).split())])
 
 
 def _dotted(params: dict, ref: str):
@@ -166,7 +179,7 @@ def facts(root: Path = ROOT) -> Facts:
     package = root / PACKAGE
     return Facts(
         root=root,
-        targets=frozenset(make_targets((root / "Makefile").read_text())),
+        targets=frozenset(make_targets(makefile_text(root))),
         stages=dvc_stages(dvc, params),
         foreach=foreach_params(dvc),
         outs=outs,

@@ -1,7 +1,7 @@
 """The prose of the repository stays readable on its own: README.md, docs/, the comments of
 params.yaml, dvc.yaml and the Makefile, and the docstrings and comments of src/, stages/ and
 scripts/ name no README section that README.md does not have, no issue number and no absolute
-path of a machine; the dev reports (reports/dev/) name no absolute path or issue number
+path of a machine; the dev reports (experiments/reports/) name no absolute path or issue number
 either. Relative links in README.md and docs/ resolve to a file (and to a heading where they
 name one), and docs/running.md's stage table lists dvc.yaml's stages.
 
@@ -35,9 +35,13 @@ PROSE = _files(
     "src/**/*.py",
     "stages/**/*.py",
     "scripts/*.sh",
+    "experiments/*.py",
+    "experiments/README.md",
+    "experiments/params.yaml",
+    "experiments/Makefile",
 )
 # Records of dev rechecks: checked for absolute paths only (they tell which run they record).
-DEV_REPORTS = _files("reports/dev/**/*.md", "reports/dev/**/*.py")
+DEV_REPORTS = _files("experiments/reports/**/*.md", "experiments/reports/**/*.py")
 MARKDOWN = _files("README.md", "docs/**/*.md")
 # Hits still in the tree, tolerated by their exact text until their module is next edited:
 # delete an entry with its fix (none left).

@@ -41,7 +41,7 @@ LAYERS: tuple[frozenset[str], ...] = tuple(
         "support",  # the offline per-box work: box head, test set, Table 6.2 (the trials read it)
         "trials",  # the world and the planner together
         "report",  # tables and figures from records
-        "envs cli bench dev crosscheck readme",  # entry points over everything
+        "envs cli bench crosscheck readme",  # entry points over everything
     )
 )
 """src/clutterbench's top-level modules and packages, lowest first: a module may import its own

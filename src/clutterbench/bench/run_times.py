@@ -94,7 +94,7 @@ def collect(
             raise ClutterbenchError(f"{timing_dir}: stage timings of more than one {key}: {seen}")
     stages = {r["stage"]: round(r["seconds"] / 60.0, 2) for r in runs}
     extra: dict[str, Any] = {"partial": True, "missing": missing} if missing else {}
-    if ignored:  # dev rechecks leave timings too (dev/command.py); no stage of the pipeline
+    if ignored:  # dev rechecks leave timings too (experiments/command.py); no stage of the pipeline
         extra["ignored"] = ignored
     shares = {r["stage"]: {k: r[k] for k in SHARE_KEYS} for r in runs if "busy_cores" in r}
     if shares:

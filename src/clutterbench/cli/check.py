@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import difflib
 import importlib
-import typing
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Annotated, Any
@@ -52,7 +51,6 @@ def sections() -> dict[str, type]:
     from clutterbench.collapse.detector import DetectorParams
     from clutterbench.data.config import GenerateConfig
     from clutterbench.data.split import SplitConfig
-    from clutterbench.dev.config import DevConfig
     from clutterbench.parallel import ParallelConfig
     from clutterbench.precision import InferenceConfig
     from clutterbench.report.config import ReportConfig
@@ -72,7 +70,6 @@ def sections() -> dict[str, type]:
         "support": SupportEvalConfig,  # support, box_head, testset
         "trials": TrialsConfig,  # every trials stage, noise, generate, testset
         "noise": NoiseConfig,
-        "dev": DevConfig,  # the dev rechecks (make dev-*)
         "yamakuzushi": Ch3Config,  # slides, train_slide, trials_ch3
         "report": ReportConfig,
         "train": TrainConfig,
@@ -242,7 +239,7 @@ def ch6_planners(p: Resolved) -> tuple[list[str], list[str]]:
 
 
 def check_trials(p: Resolved) -> list[str]:
-    from clutterbench.dev.config import DEV_PREFIX
+    from clutterbench.trials.config import DEV_PREFIX
 
     planners, out = ch6_planners(p)
     streams = _keys(p, "trials.streams")
@@ -350,28 +347,6 @@ def check_designs(p: Resolved) -> list[str]:
     return out
 
 
-def check_dev(p: Resolved) -> list[str]:
-    from clutterbench.dev.config import DEV_PREFIX, Ch6PullConfig, DevConfig
-
-    planners, _ = ch6_planners(p)
-    streams = _keys(p, "dev.streams")
-    out = [
-        f"dev.streams.{s}: a dev stream's name starts with '{DEV_PREFIX}'"
-        for s in streams
-        if not s.startswith(DEV_PREFIX)
-    ]
-    types = typing.get_type_hints(DevConfig)
-    for check, cfg in _entries(p, "dev").items():
-        if check == "streams":
-            continue
-        for stream in _list(cfg.get("streams")):
-            out += _ref(p, f"dev.{check}.streams", stream, "dev.streams", "stream")
-        if types.get(check) is Ch6PullConfig:  # a ch. 6 recheck runs trial planners
-            for planner in _list(cfg.get("planners")):
-                out += unknown_name(f"dev.{check}.planners", planner, planners, "planner")
-    return out + _model_ref(p, "dev.ch4_piles.model", _at(p, "dev.ch4_piles.model"))
-
-
 CROSS: dict[str, Callable[[Resolved], list[str]]] = {
     "split": check_split,
     "train": check_train,
@@ -381,7 +356,6 @@ CROSS: dict[str, Callable[[Resolved], list[str]]] = {
     "trials": check_trials,
     "noise": check_noise,
     "designs": check_designs,
-    "dev": check_dev,
     "yamakuzushi": check_yamakuzushi,
 }
 """Section -> what its readers check against other sections (and check_report)."""
@@ -392,7 +366,13 @@ OPTIONAL = ("benchmark",)
 
 
 # -- the whole file --------------------------------------------------------------------------
-def check_scale(params: Mapping[str, Any], scale: str, root: Path) -> list[str]:
+Extra = Mapping[str, tuple[type, Callable[[Resolved], list[str]]]]
+"""Sections a caller adds to the check: name -> (dataclass, cross-section check)."""
+
+
+def check_scale(
+    params: Mapping[str, Any], scale: str, root: Path, extra: Extra | None = None
+) -> list[str]:
     """Every problem of the sections at scale profile `scale`: each section's own, its
     cross-section ones, and, where neither found any, whatever the section's full parse
     still refuses (the checks its __post_init__ makes across its fields)."""
@@ -402,16 +382,18 @@ def check_scale(params: Mapping[str, Any], scale: str, root: Path) -> list[str]:
         cores: int | None = load_base({**params, "base": raw_base}).cores
     except ClutterbenchError:
         cores = None  # base's own check names the problem
+    known = {**sections(), **{k: cls for k, (cls, _) in (extra or {}).items()}}
+    cross = {**CROSS, **{k: check for k, (_, check) in (extra or {}).items()}}
     out: list[str] = []
     resolved = {}
-    for name in sections():
+    for name in known:
         if name in params:
             resolved[name] = resolve_scale_collecting(params[name], scale, name, out)
-    for name, cls in sections().items():
+    for name, cls in known.items():
         if name not in resolved:
             continue
         mine = parse_problems(cls, resolved[name], name, cores, construct=False)
-        mine += CROSS.get(name, lambda p: [])(resolved)
+        mine += cross.get(name, lambda p: [])(resolved)
         mine += check_report(resolved, root) if name == "report" else []
         if not mine and hasattr(cls, "__post_init__"):  # its checks across its fields
             mine = _refused(parse, cls, resolved[name], name, cores)
@@ -419,14 +401,17 @@ def check_scale(params: Mapping[str, Any], scale: str, root: Path) -> list[str]:
     return out
 
 
-def check_params(path: Path) -> list[str]:
+def check_params(
+    path: Path, extra: Extra | None = None, more: Mapping[str, Any] | None = None
+) -> list[str]:
     """One line per problem of params file `path`, at every scale profile: a problem of some
-    profiles only says which."""
+    profiles only says which. `more`: sections read from elsewhere, checked as `extra` says
+    (experiments/check.py adds the rechecks' `dev` section)."""
     try:
-        params = load_params(path)
+        params = {**load_params(path), **(more or {})}
     except ClutterbenchError as exc:
         return [str(exc)]
-    known = sections()
+    known = {**sections(), **{k: cls for k, (cls, _) in (extra or {}).items()}}
     out = []
     for name in params:
         if name not in known:
@@ -440,7 +425,7 @@ def check_params(path: Path) -> list[str]:
     ]
     seen: dict[str, list[str]] = {}  # problem -> the scales it is found at
     for scale in SCALES:
-        for line in check_scale(params, scale, project_dir(path)):
+        for line in check_scale(params, scale, project_dir(path), extra):
             if scale not in seen.setdefault(line, []):
                 seen[line].append(scale)
     for line, scales in seen.items():

@@ -16,6 +16,9 @@ from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.data.trial_params import PULL_MAP_HEADS, SceneStreamConfig
 from clutterbench.maniskill.config import ArmConfig
 
+DEV_PREFIX = "dev_"
+"""Every dev stream's name starts with it (experiments/params.yaml), and no table stream's does."""
+
 PLANNERS = (
     "pull_target",
     "single_step",

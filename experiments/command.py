@@ -1,0 +1,41 @@
+"""What every dev-stream recheck does at its end: its result saved as JSON and Markdown under
+experiments/reports/, and its command line (params.yaml, seeding and one-line errors as a stage)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from clutterbench.io import write_json, write_text
+
+OUT = Path("experiments/reports")
+
+
+def save(
+    result: dict[str, Any],
+    started: float,
+    out_dir: Path,
+    name: str,
+    markdown: Callable[[Mapping[str, Any]], str],
+) -> dict[str, Any]:
+    """`result` with its wall time since `started` -> out_dir/<name>.{json,md}; returns it."""
+    result["seconds"] = time.perf_counter() - started
+    write_json(out_dir / f"{name}.json", result)
+    write_text(out_dir / f"{name}.md", markdown(result))
+    return result
+
+
+def run_command(recheck: Callable[[Mapping[str, Any]], dict[str, Any]], name: str) -> None:
+    """Run `recheck(params)` as a stage runs (params.yaml, seeding, torch threads; errors: one
+    line), then print its finding and where its report went."""
+    from clutterbench.config import BaseConfig
+    from clutterbench.stage import run_stage
+
+    def run(params: dict[str, Any], base: BaseConfig) -> None:
+        result = recheck(params)
+        print(result["shows"])
+        print(f"-> {OUT / f'{name}.md'} ({result['seconds'] / 60:.1f} min)")
+
+    run_stage(run)
