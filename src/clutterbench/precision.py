@@ -2,9 +2,9 @@
 
 bfloat16 autocast is ~1.7x faster than float32 on a CPU that runs it natively (AVX-512 with
 the BF16 extension, or AMX) and ~10x slower where torch has to emulate it (an AVX2-only CPU:
-docs/run-times.md). `auto`, the default everywhere, picks bf16 only where it is native, so a
-user never gets the emulated path by accident; `fp32` and `bf16` force one. The precision
-actually used is recorded beside every result it shaped (checkpoint, training summary,
+reports/bench/avx2/models.md). `auto`, the default everywhere, picks bf16 only where it is
+native, so a user never gets the emulated path by accident; `fp32` and `bf16` force one. The
+precision actually used is recorded beside every result it shaped (checkpoint, training summary,
 evaluation metrics, trial summaries), because bits match only on the same instruction set
 and precision (docs/determinism.md).
 """
