@@ -10,7 +10,7 @@ from typing import Annotated
 
 import typer
 
-from clutterbench.cli.common import app, default_path, user_errors
+from clutterbench.cli.common import FreshSeed, app, default_path, user_errors
 from clutterbench.errors import ClutterbenchError
 
 FreshEpisodes = Annotated[
@@ -21,15 +21,6 @@ FreshEpisodes = Annotated[
         help="Run N fresh episodes instead (0..N-1 of an unpublished stream of the stream's "
         "kind, drawn from a new seed): a score no lookup of the published episodes can have "
         "made. Replaces --episodes and --first.",
-    ),
-]
-FreshSeed = Annotated[
-    int | None,
-    typer.Option(
-        "--seed",
-        min=0,
-        help="With --fresh: the seed (default: drawn from os.urandom; give one only to "
-        "reproduce a fresh run).",
     ),
 ]
 

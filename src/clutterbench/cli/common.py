@@ -252,3 +252,15 @@ def check_indices(n: int, target: int, support: int | None, flag: str = "--remov
             )
         if support == target:
             raise ClutterbenchError(f"--support {support}: must differ from the removed box")
+
+
+FreshSeed = Annotated[
+    int | None,
+    typer.Option(
+        "--seed",
+        min=0,
+        help="With --fresh: the seed (default: drawn from os.urandom; give one only to "
+        "reproduce a fresh run or score).",
+    ),
+]
+"""evaluate-agent's and evaluate-predictor's --seed (with --fresh)."""

@@ -20,7 +20,7 @@ from typing import Annotated
 
 import typer
 
-from clutterbench.cli.common import app, default_path, project_params, user_errors
+from clutterbench.cli.common import FreshSeed, app, default_path, project_params, user_errors
 from clutterbench.errors import ClutterbenchError
 
 TESTSET = "data/testset"
@@ -87,15 +87,6 @@ FreshScenes = Annotated[
         min=1,
         help="Score on N fresh scenes instead, drawn from an unpublished seed and labelled "
         "now by simulation: a score that cannot have read its labels.",
-    ),
-]
-FreshSeed = Annotated[
-    int | None,
-    typer.Option(
-        "--seed",
-        min=0,
-        help="With --fresh: the seed (default: drawn from os.urandom; give one only to "
-        "reproduce a fresh score).",
     ),
 ]
 FreshDir = Annotated[
