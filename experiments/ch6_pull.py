@@ -162,13 +162,11 @@ def trial_jobs(
     with trials.ch6 as params set it but for the variant's overrides, and both oracles'."""
     from clutterbench.sim.config import SimConfig
     from clutterbench.trials.ch6.episodes import (
-        BOX_PHYSICS_PLANNERS,
-        CP_PLANNERS,
         box_fields,
         ch6_jobs,
         load_planners,
+        planner_info,
         planner_support,
-        reads_truth_maps,
     )
     from clutterbench.trials.config import ConditionConfig, TrialsConfig
 
@@ -177,7 +175,7 @@ def trial_jobs(
     sim = load_section(SimConfig, "sim", params)
     cfg = getattr(dev, section)
     load_planners(trials.planner_modules, cfg.planners)
-    predicted = [p for p in cfg.planners if p in CP_PLANNERS and not reads_truth_maps(p)]
+    predicted = [p for p in cfg.planners if "cp" in planner_info(p).networks]
     if predicted and not Path(f"models/{trials.ch6.model}/best.pt").exists():
         raise ClutterbenchError(
             f"models/{trials.ch6.model}/best.pt missing (planner {predicted[0]} reads it); "
@@ -189,7 +187,8 @@ def trial_jobs(
     refit = {  # the variants whose fusion is chosen again for them
         v: variant_thresholds(params, v, dataclasses.replace(trials.ch6, **over), section)
         for v, over in cfg.variants.items()
-        if FUSION_FIELDS & set(over) and set(cfg.planners) & set(BOX_PHYSICS_PLANNERS)
+        if FUSION_FIELDS & set(over)
+        and any(planner_info(p).maps == "box_physics" for p in cfg.planners)
     }
     jobs = []
     for stream in cfg.streams:

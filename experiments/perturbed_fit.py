@@ -68,9 +68,11 @@ def _noisy_estimator(job: PerturbedJob):
 
 def _perturbed_planner(holding: bool):
     def factory(job: PerturbedJob, spec: Any):
-        from clutterbench.trials.ch6.planners import _physics_from_depth
+        from clutterbench.trials.ch6.planners.physics_from_depth import (
+            physics_from_depth_planner,
+        )
 
-        planner = _physics_from_depth(job, spec, holding)
+        planner = physics_from_depth_planner(job, spec, holding)
         planner.estimate = _noisy_estimator(job)
         return planner
 

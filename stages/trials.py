@@ -16,6 +16,7 @@ from clutterbench.precision import inference_from_params
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
 from clutterbench.trials.ch6.episodes import condition_jobs, load_planners, run_ch6_episode
+from clutterbench.trials.ch6.planners import planner_info
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.core.harness import run_episodes, write_condition
 
@@ -58,7 +59,7 @@ def trials(params: dict, base: BaseConfig) -> None:
         }
     parallel = load_section(ParallelConfig, "parallel", params)
     results = run_episodes("trials", run_ch6_episode, jobs, cfg.workers, parallel)
-    pfd = [c for c in conditions.values() if c.planner.startswith("physics_from_depth")]
+    pfd = [c for c in conditions.values() if planner_info(c.planner).world == "fitted"]
     if pfd:  # estimated vs true boxes of a few scenes of the first such stream
         from clutterbench.trials.ch6.box_figure import estimate_panels, estimation_figure
 

@@ -114,8 +114,8 @@ def test_the_planner_sees_the_observation_only(stack3, physics):
     )
     for name in ("physics_from_depth", "physics_from_depth_hold"):
         job = _job(name)
-        a = PLANNERS[name](job, stack3)
-        b = PLANNERS[name](job, poisoned)
+        a = PLANNERS[name].factory(job, stack3)
+        b = PLANNERS[name].factory(job, poisoned)
         assert isinstance(a, PhysicsFromDepthPlanner) and not hasattr(a, "state")
         da, db = a.decide(obs, 2, frozenset()), b.decide(obs, 2, frozenset())
         assert (da.pull, da.hold, da.state) == (db.pull, db.hold, db.state)
@@ -125,7 +125,7 @@ def test_the_holding_planner_searches_with_oracle_hold_s_actions(stack3):
     """physics_from_depth_hold runs the search of oracle_hold (a box may be held during any
     pull) on its estimate; physics_from_depth the one-arm oracle's (no hold at all)."""
     for name, holds_any in (("physics_from_depth", False), ("physics_from_depth_hold", True)):
-        model = PLANNERS[name](_job(name), stack3).search
+        model = PLANNERS[name].factory(_job(name), stack3).search
         search = model.search_cls(
             stack3, model.physics, model.camera, model.params, model.holding, model.cf
         )

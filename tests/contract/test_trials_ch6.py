@@ -23,14 +23,9 @@ from clutterbench.trials.ch6.episodes import (
     run_ch6_episode,
     run_extraction,
 )
-from clutterbench.trials.config import (
-    BOX_PHYSICS_PLANNERS,
-    BOX_PLANNERS,
-    PULL_HEAD_PLANNERS,
-    SceneStreamConfig,
-    TrialsConfig,
-)
-from clutterbench.trials.config import PLANNERS as PLANNER_NAMES
+from clutterbench.trials.ch6.planners import BUILT_IN as PLANNER_NAMES
+from clutterbench.trials.ch6.planners import planner_info
+from clutterbench.trials.config import SceneStreamConfig, TrialsConfig
 from clutterbench.trials.core.harness import run_episodes, write_mcap
 from clutterbench.trials.core.protocol import judge_pull
 from clutterbench.trials.core.records import read_records, write_records
@@ -454,16 +449,16 @@ def test_collapse_meaning_pull_planners_read_the_pull_collapse_head(
     and run with the thresholds chosen for it; the record says both."""
     import dataclasses
 
-    import clutterbench.trials.ch6.planners as planners
+    import clutterbench.trials.ch6.planners.algorithm1 as algorithm1
 
     heads: list[str] = []
-    real = planners.load_predictor
+    real = algorithm1.load_predictor
 
     def spy(path, image_size, head="deletion"):
         heads.append(head)
         return real(path, image_size, head)
 
-    monkeypatch.setattr(planners, "load_predictor", spy)
+    monkeypatch.setattr(algorithm1, "load_predictor", spy)
     for meaning, head in (("collapse", "pull_collapse"), ("moved", "pull")):
         job = _job("multi_step_pull", 1, tiny_cp_three_heads)[0]
         job = dataclasses.replace(
@@ -503,25 +498,26 @@ def _jobs(planner: str, cp: Path, episodes: int = 2) -> list[Ch6Job]:
 def test_every_planner_gives_a_judged_record(
     planner, tiny_cp, tiny_cp_heads, tiny_cp_three_heads, tiny_box_head, tiny_ch4
 ):
-    cp = tiny_cp_heads if planner in PULL_HEAD_PLANNERS else tiny_cp
+    maps = planner_info(planner).maps
+    cp = tiny_cp_heads if maps == "pull" else tiny_cp
     box = {}
-    if planner in BOX_PLANNERS:  # the box head over a three-head CP's maps
+    if maps in ("box", "box_physics"):  # the box head over a three-head CP's maps
         cp = tiny_cp_three_heads
         box = {"box_head_path": tiny_box_head, "box_edge_threshold": 0.5, "cp_max": 0.5}
-        if planner in BOX_PHYSICS_PLANNERS:  # the fusion: the head's logit and the simulation
+        if maps == "box_physics":  # the fusion: the head's logit and the simulation
             box["box_fusion"] = (1.0, 2.0, -2.0, 0.0)
     job = dataclasses.replace(_jobs(planner, cp, 1)[0], ch4_model_path=tiny_ch4, **box)
     rec = run_ch6_episode(job).record
     assert rec["planner"] == planner and rec["steps"]
-    if planner in PULL_HEAD_PLANNERS:  # the record says which head its maps came from
+    if maps == "pull":  # the record says which head its maps came from
         assert rec["collapse_maps"] == "predicted by the pull head"
         assert rec["support_method"] == f"pull_{rec['rule']}"
-    if planner in BOX_PLANNERS:  # ... and that they were per box, fused with the simulation
+    if maps in ("box", "box_physics"):  # ... and that they were per box, fused with physics
         assert rec["collapse_maps"].startswith("predicted by the pull head per box (box head)")
         fused = rec["collapse_maps"].endswith("fused with each pull simulated on the fitted boxes")
-        assert fused == (planner in BOX_PHYSICS_PLANNERS)
+        assert fused == (maps == "box_physics")
         # the fused planner simulates every pull it asks about, the network alone none
-        assert (rec["box_pulls_simulated"] > 0) == (planner in BOX_PHYSICS_PLANNERS)
+        assert (rec["box_pulls_simulated"] > 0) == (maps == "box_physics")
     assert rec["success"] == (rec["end"] == "target_out")
     for s in rec["steps"]:
         expected = (s["extracted"] and s["collapse_free"]) if s["counted"] else None

@@ -31,9 +31,9 @@ from clutterbench.models.collapse_map import CollapseMapConfig, CollapseMapNet
 from clutterbench.models.vgg import VGGConfig
 from clutterbench.precision import resolve_precision
 from clutterbench.report.config import ReportConfig
-from clutterbench.report.decomposition import PULL_CHAIN
 from clutterbench.sim.config import SimConfig
 from clutterbench.trials.ch3.config import Ch3Config
+from clutterbench.trials.ch6.planners import planner_info
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.core.records import read_records
 
@@ -198,7 +198,7 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     assert len(dec) == 2 * 12 and set(dec["key"]) == {"success", "strict_success"}
     parts = dec["planning"] + dec["meaning"].fillna(0.0) + dec["perception"]
     assert ((parts - dec["gap"]).abs() < 1e-9).all()
-    pull_chain = dec["planner"].isin(PULL_CHAIN)
+    pull_chain = dec["planner"].map(lambda p: planner_info(p).of_the_pull)
     # the pull head's and the box head's chains: oracle -> pull truth -> CP (4 + 4 rows)
     assert pull_chain.sum() == 2 * 8
     assert dec[~pull_chain]["meaning"].notna().all()  # every CP row has its pull-truth row

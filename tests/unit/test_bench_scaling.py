@@ -87,13 +87,15 @@ def test_the_trials_workload_is_the_stages_mix_of_network_free_planners():
     """The bench's trials jobs cycle through every default condition whose planner needs no
     network (the search oracles, the truth-map planners, physics from depth, random,
     pull_target), so its per-episode cost weighs them as the stage does."""
-    from clutterbench.bench.workloads import NETWORK_PLANNERS, mix_conditions
+    from clutterbench.bench.workloads import mix_conditions
+    from clutterbench.trials.ch6.planners import planner_info
 
     trials = load_section(TrialsConfig, "trials", scale_params("default"))
     names = mix_conditions(trials)
     planners = {trials.conditions[n].planner for n in names}
     assert {"oracle", "oracle_hold", "multi_step_pull_truth", "physics_from_depth"} <= planners
-    assert not planners & set(NETWORK_PLANNERS)
+    assert not any(planner_info(p).networks for p in planners)
+    assert not {"multi_step", "single_step", "multi_step_box", "bimanual_box_physics"} & planners
     _, jobs, units = workload_jobs("trials", "default", 0, 0, len(names) + 2)
     assert units == len(jobs) == len(names) + 2
     got = [j.planner for j in jobs]

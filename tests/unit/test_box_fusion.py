@@ -138,7 +138,8 @@ def test_the_trials_fitted_pull_maps_a_held_box_onto_the_fit(monkeypatch):
     dropped cannot be simulated (None)."""
     from clutterbench.perception import fitted_scenes as fitted
     from clutterbench.sim import pull
-    from clutterbench.trials.ch6 import planners
+    from clutterbench.trials.ch6 import truth_maps
+    from clutterbench.trials.ch6.planners import box as planners
 
     asked = []
 
@@ -160,7 +161,7 @@ def test_the_trials_fitted_pull_maps_a_held_box_onto_the_fit(monkeypatch):
     scene = types.SimpleNamespace(spec=types.SimpleNamespace(meta={"ids": [0, 2]}))
     monkeypatch.setattr(fitted, "make_estimator", lambda *a: lambda obs: None)
     monkeypatch.setattr(fitted, "scene_of", lambda *a: scene)
-    monkeypatch.setattr(planners, "TruthCollapseMaps", Fit)
+    monkeypatch.setattr(truth_maps, "TruthCollapseMaps", Fit)
     monkeypatch.setattr(pull, "SceneState", types.SimpleNamespace(start=lambda spec: None))
     from clutterbench.trials.config import Ch6TrialParams
 

@@ -135,10 +135,11 @@ def _trials_fitted_pull(monkeypatch, fit_maps: type):
     """The trials' fitted pull on two fits (`_two_scenes`), each fit's maps a `fit_maps`, and
     an observation to ask it of."""
     from clutterbench.sim import pull
-    from clutterbench.trials.ch6 import planners
+    from clutterbench.trials.ch6 import truth_maps
+    from clutterbench.trials.ch6.planners import box as planners
     from clutterbench.trials.config import Ch6TrialParams
 
-    monkeypatch.setattr(planners, "TruthCollapseMaps", fit_maps)
+    monkeypatch.setattr(truth_maps, "TruthCollapseMaps", fit_maps)
     monkeypatch.setattr(pull, "SceneState", types.SimpleNamespace(start=lambda spec: None))
     job = types.SimpleNamespace(
         params=Ch6TrialParams(fit_hypotheses=2),

@@ -254,16 +254,16 @@ def test_a_deletion_network_records_no_heads_and_has_no_pull_head(data, tmp_path
 
 
 def test_pull_planners_read_the_pull_heads_thresholds():
-    from clutterbench.trials.ch6.planners import PLANNERS as REGISTERED
-    from clutterbench.trials.config import PLANNERS, support_method
+    from clutterbench.trials.ch6.planners import planner_info
 
-    for planner in ("multi_step_pull", "bimanual_pull"):
-        assert planner in PLANNERS and planner in REGISTERED
-        assert support_method(planner, "coverage_gap") == "pull_coverage_gap"
-        assert support_method(planner, "coverage", "collapse") == "pull_collapse_coverage"
-    for planner in ("multi_step", "bimanual", "multi_step_pull_truth"):
-        assert support_method(planner, "coverage_gap") == "coverage_gap"
-        assert support_method(planner, "coverage_gap", "collapse") == "coverage_gap"
+    for name in ("multi_step_pull", "bimanual_pull", "multi_step_box", "bimanual_box_physics"):
+        planner = planner_info(name)
+        assert planner.support_method("coverage_gap") == "pull_coverage_gap"
+        assert planner.support_method("coverage", "collapse") == "pull_collapse_coverage"
+    for name in ("multi_step", "bimanual", "multi_step_pull_truth"):
+        planner = planner_info(name)
+        assert planner.support_method("coverage_gap") == "coverage_gap"
+        assert planner.support_method("coverage_gap", "collapse") == "coverage_gap"
 
 
 def test_a_method_name_says_its_head_and_rule():

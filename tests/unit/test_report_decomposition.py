@@ -106,13 +106,25 @@ def test_the_robust_oracles_gap_is_beside_the_decomposition(tmp_path):
 
 
 def test_every_planner_that_may_hold_is_measured_against_the_holding_oracle():
-    from clutterbench.report.decomposition import ORACLE_OF
-    from clutterbench.report.table_6_3 import MATCHING_ORACLE
-    from clutterbench.trials.config import PLANNERS
+    from clutterbench.report.table_6_3 import ceiling
+    from clutterbench.trials.ch6.planners import BUILT_IN, planner_info
 
-    holding = [p for p in PLANNERS if p.startswith("bimanual") or p.endswith("_hold")]
-    assert {"bimanual_box", "bimanual_box_physics", "physics_from_depth_hold"} <= set(holding)
-    for planner in holding:
-        assert MATCHING_ORACLE.get(planner, "oracle") == "oracle_hold", planner
-    for planner, oracle in ORACLE_OF.items():
-        assert oracle == ("oracle_hold" if planner in holding else "oracle"), planner
+    holding = [p for p in BUILT_IN if planner_info(p).holds]
+    assert set(holding) == {
+        "single_step",
+        "bimanual",
+        "bimanual_truth",
+        "bimanual_pull_truth",
+        "bimanual_pull",
+        "bimanual_box",
+        "bimanual_box_physics",
+        "oracle_hold",
+        "physics_from_depth_hold",
+    }
+    for planner in BUILT_IN:
+        assert ceiling(planner) == ("oracle_hold" if planner in holding else "oracle"), planner
+    # a planner's truth row and its baseline hold exactly when it does
+    for planner in BUILT_IN:
+        for other in (planner_info(planner).truth, planner_info(planner).baseline):
+            if other is not None:
+                assert planner_info(other).holds == (planner in holding), (planner, other)

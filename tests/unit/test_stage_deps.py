@@ -72,6 +72,9 @@ ch. 6's steps; the noise stage replays ch. 6's episodes and runs its search orac
 support layer stands below the trials: its physics-from-depth model is perception's)."""
 SUPPORT_READS = {"planning/ch6/support.py"}
 BOX_HEAD_READS = {"planning/ch6/support.py"}
+REPORT_READS = "trials/ch6/planners/"
+"""The report reads the ch. 6 planners' declarations (their labels, ceilings, truth rows and
+baselines), which live in each planner's module."""
 
 
 def stages_depending_on(path: str) -> set[str]:
@@ -94,5 +97,6 @@ def test_an_edit_of_one_chapter_reruns_only_its_stages(chapter):
         rel = str(f.relative_to(ROOT / "src" / "clutterbench"))
         want = CHAPTER_STAGES[chapter] | ({"support"} if rel in SUPPORT_READS else set())
         want |= {"box_head", "testset"} if rel in BOX_HEAD_READS else set()
+        want |= {"report"} if rel.startswith(REPORT_READS) else set()
         got = stages_depending_on(f"src/clutterbench/{rel}")
         assert got == want, f"an edit of {rel} reruns {sorted(got)}, not {sorted(want)}"

@@ -54,16 +54,15 @@ def scale_params(scale: str) -> dict[str, Any]:
     return {**params, "base": {**params["base"], "scale": scale}}
 
 
-NETWORK_PLANNERS = ("single_step", "multi_step", "bimanual", "multi_step_pull", "bimanual_pull")
-"""The ch. 6 planners that read a trained network: left out of the bench's trials mix (the
-bench runs before, or without, any training)."""
-
 J = TypeVar("J")
 
 
 def mix_conditions(trials: Any) -> list[str]:
-    """The trials stage's conditions whose planner needs no trained network, in params order."""
-    return [k for k, c in trials.conditions.items() if c.planner not in NETWORK_PLANNERS]
+    """The trials stage's conditions whose planner needs no trained network (its declared
+    networks: the bench runs before, or without, any training), in params order."""
+    from clutterbench.trials.ch6.planners import planner_info
+
+    return [k for k, c in trials.conditions.items() if not planner_info(c.planner).networks]
 
 
 def job_conditions(jobs: list[Any]) -> list[str]:

@@ -221,14 +221,12 @@ def check_support(p: Resolved) -> list[str]:
 def ch6_planners(p: Resolved) -> tuple[list[str], list[str]]:
     """(the ch. 6 planners a condition may name, problems importing trials.planner_modules):
     the built-in ones, and with planner_modules those their import registers (as the trials
-    stage does it; the registry imports the simulator, so only then)."""
-    from clutterbench.trials.config import PLANNERS
+    stage does it)."""
+    from clutterbench.trials.ch6.planners import PLANNERS as REGISTERED
 
     modules = _at(p, "trials.planner_modules")
     if not modules or not isinstance(modules, list):
-        return list(PLANNERS), []
-    from clutterbench.trials.ch6.planners import PLANNERS as REGISTERED
-
+        return list(REGISTERED), []
     out = []
     for module in modules:
         try:
@@ -283,6 +281,12 @@ def check_arm_conditions(p: Resolved) -> list[str]:
     return out
 
 
+def _is_oracle(planner: str) -> bool:
+    from clutterbench.trials.ch6.planners import planner_info
+
+    return planner_info(planner).role == "oracle"
+
+
 def check_noise(p: Resolved) -> list[str]:
     conditions = _entries(p, "trials.conditions")
     planners, _ = ch6_planners(p)
@@ -300,7 +304,7 @@ def check_noise(p: Resolved) -> list[str]:
         key = f"noise.robust.{name}"
         found = _ref(p, key, of, "trials.conditions", "condition")
         planner = conditions.get(of, {}).get("planner")
-        if planner in planners and planner not in ("oracle", "oracle_hold"):
+        if planner in planners and not _is_oracle(planner):
             found.append(f"{key}: '{of}' is not a search oracle's")
         if name in conditions:
             found.append(f"{key}: the name is a trials condition")

@@ -87,7 +87,7 @@ def plan(
         # (and to print the inferred graph); oracle, random and pull_target run without them.
         model_path = default_path(model, f"models/{trials.ch6.model}/best.pt")
         thresholds_path = default_path(thresholds, "reports/support/thresholds.json")
-        use_cp = planner in ("multi_step", "bimanual") or (
+        use_cp = _reads_deletion_maps(planner) or (
             model is not None or (model_path.exists() and thresholds_path.exists())
         )
         obs, out = _observed(spec, physics, trials, target)
@@ -104,6 +104,13 @@ def plan(
                 spec, spec_path, target, planner, trials, physics, support, cp_max, model_path, mcap
             )
         typer.echo(json.dumps(out))
+
+
+def _reads_deletion_maps(planner: str) -> bool:
+    """Whether the planner plans on the collapse predictor's deletion maps (its declaration)."""
+    from clutterbench.trials.ch6.planners import planner_info
+
+    return planner_info(planner).maps == "deletion"
 
 
 def _check_options(planner: str, rule: str, mcap: Path | None) -> None:

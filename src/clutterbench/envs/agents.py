@@ -18,13 +18,26 @@ import numpy as np
 from clutterbench.envs.plan import NO_BOX, as_observation
 from clutterbench.errors import ClutterbenchError
 
-CP_AGENTS = ("multi_step", "bimanual", "multi_step_pull", "bimanual_pull")
-"""The agents on the collapse predictor: its deletion head, or its pull head (`*_pull`)
-with the support thresholds chosen for that head (trials.config.support_method)."""
 
-OBSERVATION_PLANNERS = ("pull_target", "single_step", *CP_AGENTS, "random")
-"""The built-in planners that read only what the robot sees (the oracles and the *_truth
-planners read the world, so they cannot be agents)."""
+def agent_planners() -> list[str]:
+    """The registered planners that can be agents (Planner.agent: they read only what the
+    robot sees, and no network but the collapse predictor and the ch. 4 network)."""
+    from clutterbench.trials.ch6.planners import PLANNERS
+
+    return [name for name, p in PLANNERS.items() if p.agent]
+
+
+def agent_planner(name: str) -> Any:
+    """The declaration of planner `name`, one line if it cannot be an agent."""
+    from clutterbench.trials.ch6.planners import PLANNERS, declared
+
+    found = declared(name)
+    if name not in PLANNERS or not found.agent:
+        raise ClutterbenchError(
+            f"planner {name!r}: not one that reads only observations "
+            f"({', '.join(agent_planners())})"
+        )
+    return found
 
 
 class PlannerAgent:
@@ -46,23 +59,18 @@ class PlannerAgent:
         """`support`, `cp_max`, `model_path`, `ch4_model_path`: instead of the project's
         (the support stage's thresholds, trials.ch6.cp_max, models/<trials.ch6.model>/...)."""
         from clutterbench.trials.ch6.planners import chosen_support
-        from clutterbench.trials.config import support_method
 
-        if planner not in OBSERVATION_PLANNERS:
-            raise ClutterbenchError(
-                f"planner {planner!r}: not one that reads only observations "
-                f"({', '.join(OBSERVATION_PLANNERS)})"
-            )
+        declared = agent_planner(planner)
         self.env = env.unwrapped
         src = self.env.source
         root = _project_root()
         ch6 = src.trials.ch6
         job = dataclasses.replace(self.env.job(0), planner=planner, rule=rule)
         self.cp_max = np.inf
-        if planner in CP_AGENTS:
+        if "cp" in declared.networks:
             if support is None:
                 thresholds = root / "reports/support/thresholds.json"
-                method = support_method(planner, rule, ch6.pull_map_meaning)
+                method = declared.support_method(rule, ch6.pull_map_meaning)
                 support = chosen_support(thresholds, method)
             if cp_max is None:
                 cp_max = ch6.cp_max if ch6.cp_max is not None else support.score_threshold
@@ -73,7 +81,7 @@ class PlannerAgent:
                 cp_max=cp_max,
                 model_path=model_path or _require(root / f"models/{ch6.model}/best.pt", ch6.model),
             )
-        if planner == "single_step":
+        if "ch4" in declared.networks:
             job = dataclasses.replace(
                 job,
                 ch4_model_path=ch4_model_path

@@ -17,7 +17,6 @@ import pandas as pd
 from clutterbench.report.tables import Column, write_raw_csv, write_table
 
 TABLE = "box_estimation"
-PLANNERS = ("physics_from_depth", "physics_from_depth_hold")
 
 COLUMNS = [
     Column("stream", "stream", "{}"),
@@ -52,7 +51,7 @@ def estimation_rows(
     repair: dict[str, np.ndarray] = {}
     for recs in records_by_condition.values():
         for r in recs:
-            if r.get("planner") not in PLANNERS or r.get("estimate_start") is None:
+            if r.get("estimate_start") is None:  # only physics from depth records its estimates
                 continue
             stream = str(r["stream"])
             rest.setdefault(stream, []).extend(

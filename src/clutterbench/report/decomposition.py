@@ -34,42 +34,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from clutterbench.report.table_6_3 import MATCHING_ORACLE
 from clutterbench.report.tables import Column, write_raw_csv, write_table
+from clutterbench.trials.ch6 import planners
 from clutterbench.trials.config import PULL_MAP_HEADS
 from clutterbench.trials.core.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
 
 TABLE = "table_6_3_decomposition"
-
-TRUTH_OF = {
-    "multi_step": "multi_step_truth",
-    "bimanual": "bimanual_truth",
-    "multi_step_pull": "multi_step_pull_truth",
-    "bimanual_pull": "bimanual_pull_truth",
-    "multi_step_box": "multi_step_pull_truth",
-    "bimanual_box": "bimanual_pull_truth",
-    "multi_step_box_physics": "multi_step_pull_truth",
-    "bimanual_box_physics": "bimanual_pull_truth",
-}
-"""CP planner -> the same planner on physics-truth maps of what its maps mean (deletion for
-the deletion head, the trials' pull for the pull head and the box head: PULL_CHAIN)."""
-
-PULL_CHAIN = (
-    "multi_step_pull",
-    "bimanual_pull",
-    "multi_step_box",
-    "bimanual_box",
-    "multi_step_box_physics",
-    "bimanual_box_physics",
-)
-"""CP planners on the pull head (per pixel, or per box through the box head): their truth row
-is of the pull (shown in its column)."""
-
-PULL_TRUTH_OF = {"multi_step": "multi_step_pull_truth", "bimanual": "bimanual_pull_truth"}
-"""CP planner -> the same planner on physics-truth maps of the trials' pull."""
-
-ORACLE_OF = {planner: MATCHING_ORACLE.get(planner, "oracle") for planner in TRUTH_OF}
-"""CP planner -> its matching search oracle (the one its Table 6.3 row is measured against)."""
 
 CRITERIA = {"success": "collapse-free", "strict_success": "strict"}
 
@@ -160,12 +130,13 @@ def decompose(
     index = by_planner_stream(records_by_condition)
     rows = []
     for (planner, stream), (cond, recs) in index.items():
-        if planner not in TRUTH_OF:
+        declared = planners.declared(planner)
+        if declared.truth is None:
             continue
-        truth = index.get((TRUTH_OF[planner], stream))
-        oracle = index.get((ORACLE_OF[planner], stream))
-        chain = planner in PULL_CHAIN  # its truth row is already of the pull: two ways
-        pull = None if chain else index.get((PULL_TRUTH_OF[planner], stream))
+        truth = index.get((declared.truth, stream))
+        oracle = index.get((declared.ceiling, stream))
+        chain = declared.of_the_pull  # its truth row is already of the pull: two ways
+        pull = None if chain else index.get((str(declared.pull_truth), stream))
         if truth is None or oracle is None:
             continue
         for key, criterion in CRITERIA.items():
@@ -196,7 +167,7 @@ def decompose(
             }
             row |= paired_parts(o, t, c, pull_truth=p[0] if p else None)
             rows.append(
-                row | robust_gap(index.get((f"{ORACLE_OF[planner]}_robust", stream)), recs, key)
+                row | robust_gap(index.get((f"{declared.ceiling}_robust", stream)), recs, key)
             )
     return rows
 

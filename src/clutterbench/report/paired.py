@@ -26,21 +26,10 @@ from clutterbench.report.decomposition import (
     shared_outcomes,
 )
 from clutterbench.report.tables import Column, write_raw_csv, write_table
+from clutterbench.trials.ch6 import planners
 from clutterbench.trials.core.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
 
 TABLE = "table_6_3_paired"
-
-BASELINE_OF = {
-    "multi_step": "physics_from_depth",
-    "multi_step_pull": "physics_from_depth",
-    "bimanual": "physics_from_depth_hold",
-    "bimanual_pull": "physics_from_depth_hold",
-    "multi_step_box": "physics_from_depth",
-    "bimanual_box": "physics_from_depth_hold",
-    "multi_step_box_physics": "physics_from_depth",
-    "bimanual_box_physics": "physics_from_depth_hold",
-}
-"""CP planner -> the physics-from-depth planner it is compared with (one arm, or may hold)."""
 
 COLUMNS = [
     Column("criterion", "criterion", "{}"),
@@ -75,7 +64,10 @@ def paired_rows(
     index = by_planner_stream(records_by_condition)
     rows = []
     for (planner, stream), (cond, recs) in index.items():
-        baseline = index.get((BASELINE_OF.get(planner, ""), stream))
+        declared = planners.declared(planner)
+        if declared.baseline is None:
+            continue
+        baseline = index.get((declared.baseline, stream))
         if baseline is None:
             continue
         for key, criterion in CRITERIA.items():

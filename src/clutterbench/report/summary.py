@@ -249,7 +249,7 @@ def _table_6_3(frames: Mapping[str, pd.DataFrame], figures: Mapping[str, Any]) -
     for thesis in _thesis_rows(figures, table_6_3.TABLE):
         method, objects = thesis["method"], str(thesis["n_objects"])
         ours = _by(frames["table_6_3"], "table_6_3", row=f"{method}/{objects}")
-        who = f"{table_6_3.METHODS[method].split(':')[0].split(' (')[0]}, {objects} boxes"
+        who = f"{table_6_3.row_label(method).split(':')[0].split(' (')[0]}, {objects} boxes"
         if thesis["rate_unit"] == "per_step":
             cells = (
                 table_6_3.step_rate_text(ours, "success"),

@@ -27,6 +27,7 @@ from clutterbench.report.tables import (
     write_raw_csv,
     write_table,
 )
+from clutterbench.trials.ch6 import planners
 from clutterbench.trials.core.stats import aggregate
 
 if TYPE_CHECKING:
@@ -35,38 +36,22 @@ if TYPE_CHECKING:
 TABLE = "table_6_3"
 FAMILIES_TABLE = f"{TABLE}_families"
 
-METHODS = {
-    "single_step": "single-step: pull the target, holding the support of least risk (ch. 4)",
-    "pull_target": "pull the target at once, nothing held (naive)",
-    "multi_step": "multi-step extraction (CPG order, one arm)",
-    "bimanual": "multi-step + bimanual hold",
-    "multi_step_truth": "multi-step on physics-truth collapse maps (perception ceiling)",
-    "bimanual_truth": "multi-step + bimanual hold on physics-truth maps (perception ceiling)",
-    "multi_step_pull_truth": "multi-step on physics-truth maps of the trials' pull",
-    "bimanual_pull_truth": "multi-step + bimanual hold on physics-truth maps of the pull",
-    "multi_step_pull": "multi-step on the CP's pull head (maps of the trials' pull)",
-    "bimanual_pull": "multi-step + bimanual hold on the CP's pull head",
-    "oracle": "search oracle, one arm (ceiling)",
-    "oracle_hold": "search oracle, may hold one box (ceiling)",
-    "random": "random (floor)",
-    "physics_from_depth": "physics from depth: search on boxes fitted to the depth image, one arm",
-    "physics_from_depth_hold": "physics from depth, may hold one box",
-}
-"""Planner (the `planner` of a trial record) -> how its row reads."""
 
-MATCHING_ORACLE = {
-    "single_step": "oracle_hold",
-    "bimanual": "oracle_hold",
-    "bimanual_truth": "oracle_hold",
-    "bimanual_pull_truth": "oracle_hold",
-    "bimanual_pull": "oracle_hold",
-    "bimanual_box": "oracle_hold",
-    "bimanual_box_physics": "oracle_hold",
-    "oracle_hold": "oracle_hold",
-    "physics_from_depth_hold": "oracle_hold",
-}
-"""The ceiling a planner is measured against: the holding search for planners that hold a
-box, the one-arm search for every other (default)."""
+def row_label(planner: str) -> str:
+    """How a planner's row reads: its declared label (trials/ch6/planners), else its name."""
+    return planners.declared(planner).row_label
+
+
+def ceiling(planner: str) -> str:
+    """The search oracle a planner is measured against: the holding search for planners that
+    hold a box, the one-arm search for every other (its declaration; a planner no module
+    declares: the one-arm search)."""
+    return planners.declared(planner).ceiling
+
+
+def is_oracle(planner: str) -> bool:
+    return planners.declared(planner).role == "oracle"
+
 
 COLUMNS = [
     Column("objects", "objects", "{}"),
@@ -144,12 +129,12 @@ def oracle_gaps(
     oracles: dict[tuple[str, str], str] = {}
     for cond, recs in records_by_condition.items():
         planner, stream = str(recs[0].get("planner")), str(recs[0].get("stream"))
-        if planner in ("oracle", "oracle_hold"):
+        if is_oracle(planner):
             oracles[(planner, stream)] = cond
     out: dict[str, dict[str, Any]] = {}
     for cond, recs in records_by_condition.items():
         planner, stream = str(recs[0].get("planner")), str(recs[0].get("stream"))
-        oracle = oracles.get((MATCHING_ORACLE.get(planner, "oracle"), stream))
+        oracle = oracles.get((ceiling(planner), stream))
         if oracle is None:
             continue
         if any(key not in r for r in [*recs, *records_by_condition[oracle]]):
@@ -209,7 +194,7 @@ def _parse_row(row: str) -> tuple[str, str]:
     if not sep or not method or not objects:
         raise ClutterbenchError(
             f"report.{TABLE}: row '{row}' must read '<method>/<objects>' with method a planner "
-            f"name (built in: {', '.join(METHODS)})"
+            f"name (built in: {', '.join(planners.BUILT_IN)})"
         )
     return method, objects
 
@@ -342,7 +327,7 @@ def extraction_table(
             "episodes": a["episodes"],
         }
         thesis = thesis_figures_for(figures, method, objects)
-        shown.append((f"{METHODS.get(method, method)} [{condition}]", ours, thesis))
+        shown.append((f"{row_label(method)} [{condition}]", ours, thesis))
         extra = _raw_extra(gaps.get(condition), strict_gaps.get(condition), noise, condition)
         raw.append(
             {"row": row, "method": method, **a, **extra, **_thesis_counts(figures, method, objects)}
@@ -405,7 +390,7 @@ def extraction_families_table(
         method, _ = _parse_row(row)
         records = _condition_records(records_by_condition, row, condition)
         _check_planner(records, row, method)
-        label = f"{METHODS.get(method, method)} [{condition}]"
+        label = f"{row_label(method)} [{condition}]"
         by_family = aggregate(records, "family").to_dict("records")
         for a in sorted(by_family, key=lambda a: str(a["family"])):
             ours = {
@@ -461,11 +446,10 @@ def rule_note(
     """The support rule the CP planners ran with (their records' `rule`), its Table 6.2 row
     and the thresholds the support stage chose for it on validation scenes."""
     from clutterbench.report.table_6_2 import thresholds_text
-    from clutterbench.trials.config import support_method
 
     methods = sorted(
         {
-            r.get("support_method") or support_method(str(r.get("planner")), str(r["rule"]))
+            r.get("support_method") or _support_method(str(r.get("planner")), str(r["rule"]))
             for recs in used.values()
             for r in recs
             if r.get("rule")
@@ -562,3 +546,8 @@ def aborts_text(a: Mapping[str, Any]) -> str | None:
     if pd.isna(a.get("aborts_moved", pd.NA)) or pd.isna(a.get("aborts_before_motion", pd.NA)):
         return text
     return f"{text} ({int(a['aborts_before_motion'])} / {int(a['aborts_moved'])})"
+
+
+def _support_method(planner: str, rule: str) -> str:
+    """The support method of a record written before records named theirs."""
+    return planners.declared(planner).support_method(rule)

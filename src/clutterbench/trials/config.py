@@ -13,68 +13,11 @@ from typing import Literal
 
 from clutterbench.config import bounded, cores_field
 from clutterbench.criteria import CollapseFreeConfig
-from clutterbench.data.trial_params import PULL_MAP_HEADS, SceneStreamConfig
+from clutterbench.data.trial_params import PULL_MAP_HEADS, SceneStreamConfig  # noqa: F401 (re-exported)
 from clutterbench.maniskill.config import ArmConfig
 
 DEV_PREFIX = "dev_"
 """Every dev stream's name starts with it (experiments/params.yaml), and no table stream's does."""
-
-PLANNERS = (
-    "pull_target",
-    "single_step",
-    "multi_step",
-    "bimanual",
-    "multi_step_truth",
-    "bimanual_truth",
-    "multi_step_pull_truth",
-    "bimanual_pull_truth",
-    "multi_step_pull",
-    "bimanual_pull",
-    "oracle",
-    "oracle_hold",
-    "random",
-    "physics_from_depth",
-    "physics_from_depth_hold",
-    "multi_step_box",
-    "bimanual_box",
-    "multi_step_box_physics",
-    "bimanual_box_physics",
-)
-"""The built-in ch. 6 trial policies (registered in trials.ch6.PLANNERS): pull the
-target at once, nothing held; the thesis' single-step method (its previous work, ch. 4: pull
-the target while holding the support of least risk); Algorithm 1 with one arm; Algorithm 1
-with the bimanual option (Fig. 6.7); the same two fed physics-truth collapse maps instead of
-the predictor's (the perception ceiling, trials/ch6/truth_maps.py), of deletion (the labels'
-meaning) and of the trials' own pull; the same two on the collapse predictor's pull head
-(`*_pull`: maps of the trials' pull, learnt from pull labels); the search oracles with one
-arm and with a holding arm; a uniformly random visible box each step; the search on boxes
-fitted to each observation instead of the true scene, one arm and holding
-(planning/ch6/physics_depth.py); Algorithm 1 on the box head's per-box predictions
-(`*_box`: no pixel rule, collapse/box_predict.py) and on those predictions fused per box with
-each pull simulated on the fitted boxes (`*_box_physics`: learned plus physics)."""
-
-
-PULL_HEAD_PLANNERS = ("multi_step_pull", "bimanual_pull")
-"""The CP planners that read a pull head of the collapse predictor (train.models.<m>.labels;
-which one: PULL_MAP_HEADS), with the support thresholds the support stage chose for that
-head (`<head>_<rule>`)."""
-BOX_PLANNERS = ("multi_step_box", "bimanual_box", "multi_step_box_physics", "bimanual_box_physics")
-"""The CP planners that read the box head (stage box_head) on the head of pull_map_meaning,
-with the thresholds the support stage chose for it on validation scenes (`box_head`; the
-`*_box_physics` ones the fusion's, support/box_fusion.json)."""
-BOX_PHYSICS_PLANNERS = ("multi_step_box_physics", "bimanual_box_physics")
-"""The box planners that fuse the box head with physics from depth (collapse/box_predict.py
-FusedBoxMaps)."""
-
-
-def support_method(planner: str, rule: str, meaning: str = "moved") -> str:
-    """The support stage's method (reports/support/thresholds.json `chosen`) whose thresholds
-    a CP planner runs with: its rule, chosen on the deletion maps, or for the pull-head
-    planners on the maps of the head of pull_map_meaning `meaning` (`pull_<rule>`,
-    `pull_collapse_<rule>`)."""
-    if planner not in PULL_HEAD_PLANNERS + BOX_PLANNERS:
-        return rule
-    return f"{PULL_MAP_HEADS[meaning]}_{rule}"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,8 +25,8 @@ class ConditionConfig:
     """One chapter 6 trials condition (run by stage trials with every other)."""
 
     planner: str
-    """Policy: a name registered in trials.ch6.PLANNERS (the built-in ones: PLANNERS here;
-    more from trials.planner_modules), checked when the trials stage starts."""
+    """Policy: a name registered in trials.ch6.planners (the built-in ones are that package's
+    modules; more from trials.planner_modules), checked when the trials stage starts."""
     stream: str
     """Scene stream (a key of trials.streams): conditions on one stream see the same scenes
     and the same targets."""
@@ -172,7 +115,7 @@ class Ch6TrialParams:
     planners do); learn also takes the box the score feared for as carried by it, so the
     plan removes that box first or, bimanual, holds it (planning/ch6/extraction.py)."""
     pull_prob_threshold: float | None = bounded(None, gt=0.0, le=1.0)
-    """The pull-head CP planners' (PULL_HEAD_PLANNERS) collapse area R_C = heatmap > this;
+    """The pull-head CP planners' (maps: pull) collapse area R_C = heatmap > this;
     null: the support stage's choice on validation scenes (the support graph's F-measure
     against pull truth). Chosen on dev streams for the trials' own outcome
     (make dev-ch6-pull, docs/design-choices.md)."""

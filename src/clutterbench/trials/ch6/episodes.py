@@ -34,26 +34,21 @@ from clutterbench.trials.ch6.jobs import Ch6Job
 from clutterbench.trials.ch6.oracle import SearchOracle
 from clutterbench.trials.ch6.planners import (  # noqa: F401  (register_planner, PLANNERS: the documented entry points)
     BOX_HEAD,
-    CP_PLANNERS,
     PLANNERS,
     box_fusion,
     box_thresholds,
     chosen_support,
     load_planners,
     make_planner,
-    reads_truth_maps,
+    planner_info,
     register_planner,
     truth_maps_of,
 )
+from clutterbench.trials.ch6.planners import declared as planner_declared
 from clutterbench.trials.config import (
-    BOX_PHYSICS_PLANNERS,
-    BOX_PLANNERS,
-    PULL_HEAD_PLANNERS,
-    PULL_MAP_HEADS,
     Ch6TrialParams,
     ConditionConfig,
     TrialsConfig,
-    support_method,
 )
 from clutterbench.trials.core.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
 from clutterbench.trials.core.jobs import shelf_fields
@@ -323,6 +318,7 @@ class Extraction:
         assert self.done, "the episode has not ended"
         job, params, spec, state, steps = self.job, self.params, self.spec, self.state, self.steps
         truth = truth_maps_of(planner)
+        declared = planner_declared(job.planner)  # an agent's episodes: no registered planner
         log = self.log
         log.poses(self.t, state.poses, state.removed)
         touched = {s["box"] for s in steps}
@@ -344,27 +340,11 @@ class Extraction:
             "target": self.target,
             "planner": job.planner,
             "perception": "instance",
-            "rule": job.rule if job.planner in CP_PLANNERS else None,
-            "support_method": support_method(job.planner, job.rule, job.params.pull_map_meaning)
-            if job.planner in CP_PLANNERS
+            "rule": job.rule if declared.algorithm1 else None,
+            "support_method": declared.support_method(job.rule, job.params.pull_map_meaning)
+            if declared.algorithm1
             else None,
-            "collapse_maps": None
-            if job.planner not in CP_PLANNERS
-            else (
-                (
-                    f"predicted by the {PULL_MAP_HEADS[job.params.pull_map_meaning]} head"
-                    + (" per box (box head)" if job.planner in BOX_PLANNERS else "")
-                    + (
-                        ", fused with each pull simulated on the fitted boxes"
-                        if job.planner in BOX_PHYSICS_PLANNERS
-                        else ""
-                    )
-                    if job.planner in PULL_HEAD_PLANNERS + BOX_PLANNERS
-                    else "predicted"
-                )
-                if truth is None
-                else ("physics truth of the pull" if truth.pull else "physics truth")
-            ),
+            "collapse_maps": declared.maps_text(job.params.pull_map_meaning),
             "rejected_starts": dict(spec.meta.get("rejected", {})),
             "collapse_free_params": {
                 "drop_m": job.collapse_free.drop_m,
@@ -389,7 +369,7 @@ class Extraction:
                 "search_found": bool(planner.found.get("success", False)),
             }
         simulated = getattr(getattr(planner, "predict", None), "simulated", None)
-        if job.planner in BOX_PLANNERS and simulated is not None:
+        if declared.reads_box_head and simulated is not None:
             record["box_pulls_simulated"] = int(simulated)  # the fused planners' physics calls
         if hasattr(planner, "first") and hasattr(planner, "steps"):  # physics from depth
             from clutterbench.trials.ch6.physics_model import estimate_record
@@ -407,11 +387,12 @@ def planner_support(
     thresholds: Path, planner: str, rule: str, ch6: Any
 ) -> tuple[SupportParams, float]:
     """A CP planner's support thresholds and its abort threshold cp_max: the support stage's
-    choice on validation scenes for its method (trials.config.support_method), the pull-head
+    choice on validation scenes for its method (Planner.support_method), the pull-head
     planners' overridden by trials.ch6.pull_prob_threshold / pull_score_threshold where set
     (chosen on dev streams); cp_max: trials.ch6.cp_max, else the score threshold."""
-    support = chosen_support(thresholds, support_method(planner, rule, ch6.pull_map_meaning))
-    if planner in PULL_HEAD_PLANNERS:
+    declared = planner_info(planner)
+    support = chosen_support(thresholds, declared.support_method(rule, ch6.pull_map_meaning))
+    if declared.maps == "pull":
         over = {
             "prob_threshold": ch6.pull_prob_threshold,
             "score_threshold": ch6.pull_score_threshold,
@@ -426,11 +407,12 @@ def box_fields(thresholds: Path, planner: str, ch6: Any) -> tuple[dict[str, Any]
     validation scenes by the support stage, cp_max overridden by trials.ch6.box_cp_max where
     set (chosen on dev streams); ({}, None) for any other planner. One line when the box
     head is missing."""
-    if planner not in BOX_PLANNERS:
+    declared = planner_info(planner)
+    if not declared.reads_box_head:
         return {}, None
     if not BOX_HEAD.exists():
         raise ClutterbenchError(f"{BOX_HEAD} missing (planner {planner} reads it); run box_head")
-    if planner in BOX_PHYSICS_PLANNERS:
+    if declared.maps == "box_physics":
         edge, outcome, weights, contact = box_fusion(
             thresholds, ch6.pull_map_meaning, ch6.box_contact
         )
@@ -454,10 +436,15 @@ def condition_jobs(
     """Condition `cond`'s episode jobs, with its support rule's thresholds (chosen on
     validation scenes by the support stage, `thresholds`) and its abort threshold cp_max;
     one-line errors when a network is missing."""
-    for model in {trials.ch6.model, trials.ch6.ch4_model}:
+    declared = planner_info(cond.planner)
+    networks = {"cp": trials.ch6.model, "ch4": trials.ch6.ch4_model}
+    for model in sorted({networks[n] for n in declared.networks if n in networks}):
         if not Path(f"models/{model}/best.pt").exists():
-            raise ClutterbenchError(f"models/{model}/best.pt missing; run train@{model}")
-    if cond.executor == "arm" and reads_truth_maps(cond.planner):
+            raise ClutterbenchError(
+                f"models/{model}/best.pt missing (planner {cond.planner} reads it); run "
+                f"train@{model}"
+            )
+    if cond.executor == "arm" and declared.reads_truth_maps:
         raise ClutterbenchError(
             f"trials.conditions.{name}: planner {cond.planner} reads physics-truth maps, which "
             "run on the kinematic executor only (executor: kinematic)"

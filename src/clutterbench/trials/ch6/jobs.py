@@ -20,7 +20,7 @@ class Ch6Job(ShelfJob):
     """One ch. 6 extraction episode: scene `index` of stream `stream`, one planner."""
 
     planner: str
-    """The planner's name in the registry (trials/ch6/planners.py)."""
+    """The planner's name in the registry (trials/ch6/planners/)."""
     rule: str | None
     """The condition's support rule (CP planners' support method)."""
     stream: str

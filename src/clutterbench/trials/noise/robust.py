@@ -59,7 +59,8 @@ def register_robust(cfg: NoiseConfig, seed: int) -> None:
     """Register `<oracle>_robust` for each search oracle the robust conditions mirror, its draws
     seeded by `seed`, the job's stream and episode (again in each worker: RobustEpisode)."""
     for base in sorted(set(cfg.robust.values())):
-        factory = PLANNERS[base]
+        declared = PLANNERS[base]
+        factory = declared.factory
 
         def make(job: Ch6Job, spec: Any, factory: Any = factory) -> RobustSearchOracle:
             oracle = factory(job, spec)
@@ -76,7 +77,11 @@ def register_robust(cfg: NoiseConfig, seed: int) -> None:
                 draws=draws,
             )
 
-        register_planner(f"{base}_robust")(make)
+        register_planner(
+            f"{base}_robust",
+            **{f: getattr(declared, f) for f in ("world", "holds", "role", "cost")},
+            oracle=declared.ceiling,
+        )(make)
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True, repr=False)

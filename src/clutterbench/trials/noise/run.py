@@ -19,6 +19,7 @@ from clutterbench.parallel import ParallelConfig, map_in_workers
 from clutterbench.sim.config import SimConfig
 from clutterbench.trials.ch6.episodes import ch6_jobs, job_spec
 from clutterbench.trials.ch6.jobs import Ch6Job
+from clutterbench.trials.ch6.planners import planner_info
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.core.harness import run_episodes, write_condition
 from clutterbench.trials.core.records import read_records
@@ -73,7 +74,7 @@ def conditions_of(cfg: NoiseConfig, trials: TrialsConfig) -> list[str]:
     for name, base in cfg.robust.items():
         if base not in trials.conditions:
             raise ClutterbenchError(f"noise.robust.{name}: '{base}' is no trials.conditions entry")
-        if trials.conditions[base].planner not in ("oracle", "oracle_hold"):
+        if planner_info(trials.conditions[base].planner).role != "oracle":
             raise ClutterbenchError(f"noise.robust.{name}: '{base}' is not a search oracle's")
         if name in trials.conditions:
             raise ClutterbenchError(f"noise.robust.{name}: the name is a trials condition")

@@ -1,0 +1,104 @@
+"""What several ch. 6 planner modules share: the thresholds the support stage chose on
+validation scenes (a support rule's, the box head's, the fusion's), the pull planners'
+levers beyond Algorithm 1, and the truth maps a planner reads."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from clutterbench.data.trial_params import PULL_MAP_HEADS
+from clutterbench.errors import ClutterbenchError
+
+if TYPE_CHECKING:
+    from clutterbench.planning.ch6.support import SupportParams
+    from clutterbench.trials.ch6.truth_maps import TruthCollapseMaps
+    from clutterbench.trials.config import Ch6TrialParams
+
+BOX_HEAD = Path("models/box_head/best.pt")
+"""The box planners' per-box head (stage box_head)."""
+
+
+def chosen_support(thresholds: Path, rule: str) -> SupportParams:
+    """The support rule's thresholds chosen on validation scenes by the support stage."""
+    from clutterbench.io import read_json
+    from clutterbench.planning.ch6.support import SupportParams
+
+    chosen = read_json(thresholds)
+    try:
+        return SupportParams(**chosen["chosen"][rule])
+    except (KeyError, TypeError) as exc:
+        # pull_<rule>, pull_collapse_<rule>: chosen only where the support model has that head
+        hint = " with a support.model that has that pull head" if rule.startswith("pull_") else ""
+        raise ClutterbenchError(
+            f"{thresholds}: no usable thresholds for rule '{rule}' ({exc}); rerun the support "
+            f"stage{hint}"
+        ) from None
+
+
+def box_thresholds(thresholds: Path, meaning: str) -> tuple[float, float]:
+    """(edge, outcome) thresholds of the box head on the head of pull_map_meaning `meaning`:
+    an edge above the first, a pull rejected or aborted when some box's probability is above
+    the second; both chosen on validation scenes by the support stage."""
+    from clutterbench.io import read_json
+
+    head = PULL_MAP_HEADS[meaning]
+    try:
+        chosen = read_json(thresholds)["box_head"][head]
+        return float(chosen["edge"]), float(chosen["outcome"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ClutterbenchError(
+            f"{thresholds}: no box-head thresholds for the {head} head ({exc}); rerun the support "
+            "stage after box_head"
+        ) from None
+
+
+def box_fusion(
+    thresholds: Path, meaning: str, contact: str = "head"
+) -> tuple[float, float, tuple[float, ...], tuple[float, ...] | None]:
+    """(edge, outcome, weights, contact weights) of the box head fused with physics from
+    depth on the head of pull_map_meaning `meaning`: its support-edge and outcome thresholds,
+    its logistic weights and, for `contact` learned (trials.ch6.box_contact), the learned
+    contact's weights (None: the head's contact), chosen on validation scenes by the support
+    stage, which writes them beside `thresholds` (box_fusion.json)."""
+    from clutterbench.io import read_json
+
+    head = PULL_MAP_HEADS[meaning]
+    path = thresholds.with_name("box_fusion.json")
+    try:
+        chosen = read_json(path)["chosen"][head]
+        weights = tuple(float(w) for w in chosen["weights"])
+        learned = None
+        if contact == "learned":
+            learned = tuple(float(w) for w in chosen["contact_weights"])
+        return float(chosen["edge"]), float(chosen["outcome"]), weights, learned
+    except (OSError, KeyError, TypeError, ValueError) as exc:
+        raise ClutterbenchError(
+            f"{path}: no box-head fusion for the {head} head with the {contact} contact "
+            f"({exc}); rerun the support stage after box_head"
+        ) from None
+
+
+def pull_levers(params: Ch6TrialParams) -> dict[str, Any]:
+    """The pull planners' choices beyond Algorithm 1 (trials.ch6; the thesis-faithful
+    planners take CollapseGraphPlanner's defaults): clear the held box's load first, learn
+    from aborts, watch the pull, the no-plan response, the idle hold, whose shares the score
+    takes, and holding a feared box."""
+    return {
+        "clear_hold_load": True,
+        "learn_from_aborts": params.abort_response == "learn",
+        "watch_m": params.pull_watch_m,
+        "when_no_plan": params.when_no_plan,
+        "idle_hold_share": params.idle_hold_share,
+        "idle_hold_prob": params.idle_hold_prob,
+        "score_over": params.score_over,
+        "hold_feared": params.hold_feared,
+    }
+
+
+def truth_maps_of(planner: Any) -> TruthCollapseMaps | None:
+    """The physics-truth maps a planner reads instead of the collapse predictor, if any."""
+    from clutterbench.trials.ch6.truth_maps import TruthCollapseMaps
+
+    maps = getattr(planner, "predict", None)
+    return maps if isinstance(maps, TruthCollapseMaps) else None
