@@ -59,7 +59,14 @@ def camera_model(world: BoxWorld, cam: CameraConfig) -> CameraModel:
     )
 
 
-def observe(world: BoxWorld, cam: CameraConfig) -> Observation:
-    """What the robot sees now: depth, instance ids and the camera model."""
+def observe(world: BoxWorld, cam: CameraConfig, sensing: str = "ideal") -> Observation:
+    """What the robot sees now: depth (through the `sensing` preset's sensor model,
+    sim/sensor.py, seeded by the picture itself so a rerun sees the same; ideal: the exact
+    depth), instance ids and the camera model."""
     depth_m, instance = render_depth_instance(world, cam)
-    return Observation(depth_m=depth_m, instance=instance, camera=camera_model(world, cam))
+    model = camera_model(world, cam)
+    if sensing != "ideal":
+        from clutterbench.sim.sensor import observation_rng, preset, sense
+
+        depth_m = sense(depth_m, model, preset(sensing), observation_rng(0, depth_m))
+    return Observation(depth_m=depth_m, instance=instance, camera=model)

@@ -38,6 +38,9 @@ class ConditionConfig:
     pseudo-direct contact (`_gap`, ours)."""
     perception: Literal["instance"] = "instance"
     """Where object masks come from (the simulator's instance image)."""
+    sensing: Literal["ideal", "structured_light", "d415"] = "ideal"
+    """The depth sensor its planner's pictures pass through (sim.camera.sensing for this
+    condition: sim/sensor.py, docs/sensing.md); ideal: the renderer's exact depth."""
     executor: Literal["kinematic", "arm"] = "kinematic"
     """Who executes a pull: the box moved kinematically (BoxWorld), or Pandas in a ManiSkill
     scene (trials.arm); the same judge and records either way."""

@@ -69,6 +69,7 @@ def execute_decision(
     cf: CollapseFreeConfig,
     t0: float = 0.0,
     arm: tuple[SceneSpec, SceneState, ArmConfig] | None = None,
+    sensing: str = "ideal",
 ) -> tuple[dict[str, Any], SceneState, float]:
     """Execute one decision from the step's canonical start (`world`, fresh) and judge it:
     pull in increments, checking the planner's collapse score before each (the first check
@@ -106,7 +107,7 @@ def execute_decision(
             params.grasp_lift_m,
             go_on=lambda done: score(
                 done,
-                observe(world, camera) if done and monitor else None,
+                observe(world, camera, sensing) if done and monitor else None,
                 t0 + world.steps_taken * dt,
             ),
             **params.release(),
@@ -114,7 +115,7 @@ def execute_decision(
         state, elapsed = SceneState.of(world), world.steps_taken * dt
     else:
         result, arm_fields, state, elapsed = _execute_by_arm(
-            world, box, hold, camera, params, log, t0, arm, score
+            world, box, hold, camera, params, log, t0, arm, score, sensing
         )
     step = _judge(result, box, hold, gone, params, cf, by_arm=arm is not None)
     record = {
@@ -136,6 +137,7 @@ def _execute_by_arm(
     t0: float,
     arm: tuple[SceneSpec, SceneState, ArmConfig],
     score: Callable[[int, Observation | None, float], bool],
+    sensing: str = "ideal",
 ) -> tuple[Any, dict[str, Any], SceneState, float]:
     """execute_decision's pull executed arm-level (trials/core/executors.py), checked by
     `score` -> the pull's result, the arm's record fields, the state it left, its duration."""
@@ -155,6 +157,7 @@ def _execute_by_arm(
         t0,
         go_on=lambda done, now: score(done, now, t0),
         camera=camera,
+        sensing=sensing,
     )
     result, arm_fields = done_by_arm.result, done_by_arm.fields
     state, elapsed = done_by_arm.state, done_by_arm.elapsed_s
@@ -231,7 +234,7 @@ class Extraction:
         self.state = SceneState.start(spec)
         self.world = world_at(spec, self.state, self.physics, render=True)
         self.log = EpisodeLog(record_images=job.record_images)
-        self.obs = observe(self.world, self.camera)
+        self.obs = observe(self.world, self.camera, job.sensing)
         self.log.scene(
             0.0, spec.sizes_m, spec.shelf.boards(), self.obs.camera, self.obs.depth_m.shape
         )
@@ -294,6 +297,7 @@ class Extraction:
             job.collapse_free,
             t,
             arm=(spec, self.state, job.arm) if arm else None,
+            sensing=job.sensing,
         )
         self.steps.append(step)
         self.t = t + elapsed
@@ -308,7 +312,7 @@ class Extraction:
         if self.end is None:
             # the next step's canonical start
             self.world = world_at(spec, self.state, self.physics, render=True)
-            self.obs = observe(self.world, self.camera)
+            self.obs = observe(self.world, self.camera, self.job.sensing)
             if len(self.steps) >= params.max_steps:
                 self.end = "max_steps"
         return step
@@ -357,6 +361,8 @@ class Extraction:
         } | judge_episode(steps, self.end, self.target)
         if job.executor == "arm":  # kinematic records keep their old fields
             record["executor"] = "arm"
+        if job.sensing != "ideal":  # ... and so do ideal ones
+            record["sensing"] = job.sensing
         if truth is not None:
             record["truth_simulations"] = truth.simulations
         if isinstance(planner, SearchOracle):
@@ -496,6 +502,7 @@ def ch6_jobs(
             ch4_model_path=Path(f"models/{trials.ch6.ch4_model}/best.pt"),
             executor=cond.executor,
             arm=trials.arm,
+            sensing=cond.sensing,
             **fields,
         )
         for i in range(cond.episodes)

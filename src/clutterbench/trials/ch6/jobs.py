@@ -39,6 +39,8 @@ class Ch6Job(ShelfJob):
     """Who executes the pulls: 'kinematic' or 'arm' (the Pandas)."""
     arm: ArmConfig
     """The Pandas' configuration (trials.arm), read by the arm executor."""
+    sensing: str = "ideal"
+    """The depth sensor model its pictures pass through (sim/sensor.py PRESETS)."""
     box_head_path: Path | None = None
     """The box head's checkpoint, for the box planners (None: none)."""
     box_edge_threshold: float | None = None

@@ -77,6 +77,7 @@ def arm_pull(
     t0_s: float,
     go_on: Callable[[int, Observation | None], bool] | None = None,
     camera: CameraConfig | None = None,
+    sensing: str = "ideal",
 ) -> ArmPull:
     """Pull `box` (holding `hold`) with the Pandas from a fresh scene at `state`; before each
     increment k > 0, `go_on(k, picture)` sees an arm-free picture of the boxes where they are
@@ -92,7 +93,7 @@ def arm_pull(
             return go_on(0, None)
         removed = frozenset(executor.u.removed)
         world = world_at(spec, SceneState(poses, removed), physics, render=True)
-        return go_on(k, observe(world, camera))
+        return go_on(k, observe(world, camera, sensing))
 
     result, step, end = executor.execute_pull(
         spec, state, box, hold, increment_m, lift_m, go_on=monitor
