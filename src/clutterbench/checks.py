@@ -86,6 +86,9 @@ def parse_problems(
     fields run as a stage meets them; a caller that checks those itself passes False."""
     if not isinstance(data, Mapping):
         return [f"{key}: expected a mapping, got {type(data).__name__}"]
+    prepare = getattr(cls, "prepare_params", None)
+    if prepare is not None:  # as config.parse: a section's defaults of its entries
+        data = prepare(data)
     hints = _type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
     allowed = ", ".join(fields)

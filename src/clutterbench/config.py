@@ -151,6 +151,9 @@ def parse(cls: type[T], data: Any, key: str, cores: int | None = None) -> T:
     machine's count)."""
     if not isinstance(data, Mapping):
         raise ClutterbenchError(f"{key}: expected a mapping, got {type(data).__name__}")
+    prepare = getattr(cls, "prepare_params", None)
+    if prepare is not None:  # a section's defaults of its entries (TrialsConfig's episodes)
+        data = prepare(data)
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
     unknown = sorted(set(data) - set(fields))

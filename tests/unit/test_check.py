@@ -88,8 +88,8 @@ MISTAKES: dict[str, tuple[Callable[[dict[str, Any]], None], str]] = {
         "error: generate.datasets.ch5.n_scenes: 0 is out of range (must be >= 1) (scale tiny)",
     ),
     "a network's field": (
-        lambda p: _rename(p["train"]["models"]["cp_focal"]["net"], "encoder", "encodr"),
-        "error: train.models.cp_focal.net.encodr: unknown key (allowed: ",
+        lambda p: _rename(p["train"]["models"]["cp_focal"]["net"], "output_stride", "outpt_stride"),
+        "error: train.models.cp_focal.net.outpt_stride: unknown key (allowed: ",
     ),
 }
 

@@ -272,7 +272,9 @@ def check_arm_conditions(p: Resolved) -> list[str]:
         )
         out += found
         kinematic = {**ch6, **ch4}.get(of, {})
-        episodes, most = arm.get("episodes"), kinematic.get("episodes")
+        chapter = "ch4" if of in ch4 else "ch6"  # a condition naming none has its chapter's
+        most = kinematic.get("episodes", _at(p, f"trials.{chapter}.episodes"))
+        episodes = arm.get("episodes")
         if not found and isinstance(episodes, int) and isinstance(most, int) and episodes > most:
             out.append(
                 f"{key}.episodes: {episodes} is more than the {most} episodes of '{of}' it is "

@@ -117,6 +117,9 @@ def check_labels(m: TrainModelConfig, key: str) -> None:
 class TrainConfig:
     models: Mapping[str, TrainModelConfig] = dataclasses.field(default_factory=dict)
     """Model name -> its training run; each becomes stage train@<name>, output models/<name>/."""
+    model_defaults: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    """What every train.models entry takes unless it says otherwise (its `net` key by key):
+    params.yaml states the shared encoder, decoder and schedule once."""
     focal: FocalConfig = FocalConfig()
     """Focal loss parameters (thesis 6.2.1: alpha_1 0.25, alpha_0 0.75, gamma 2)."""
     noise: DepthNoiseConfig = DepthNoiseConfig()
@@ -128,6 +131,24 @@ class TrainConfig:
     (clutterbench.precision; both timed in reports/bench/models.md)."""
     val_threshold: float = bounded(0.5, gt=0.0, le=1.0)
     """Probability above which a pixel counts as collapse in validation metrics."""
+
+    @staticmethod
+    def prepare_params(data: Mapping[str, Any]) -> Mapping[str, Any]:
+        """The raw section with model_defaults merged under every model's own keys."""
+        defaults = data.get("model_defaults")
+        models = data.get("models")
+        if not isinstance(defaults, Mapping) or not isinstance(models, Mapping):
+            return data
+        merged = {}
+        for name, m in models.items():
+            if not isinstance(m, Mapping):
+                merged[name] = m
+                continue
+            m = {**defaults, **m}
+            if isinstance(defaults.get("net"), Mapping) and isinstance(m.get("net"), Mapping):
+                m["net"] = {**defaults["net"], **m["net"]}
+            merged[name] = m
+        return {**data, "models": merged}
 
     def __post_init__(self) -> None:
         check_precision(self.precision, "train.precision")

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from typing import Literal
+from typing import Any, Literal
 
 from clutterbench.config import bounded, cores_field
 from clutterbench.criteria import CollapseFreeConfig
@@ -31,7 +31,7 @@ class ConditionConfig:
     """Scene stream (a key of trials.streams): conditions on one stream see the same scenes
     and the same targets."""
     episodes: int = bounded(200, ge=1)
-    """Number of episodes."""
+    """Number of episodes (absent in params.yaml: trials.ch6.episodes)."""
     rule: Literal["iou", "coverage", "iou_gap", "coverage_gap"] = "coverage_gap"
     """Support rule of the CP-based planners (thresholds chosen on val by the support stage):
     the thesis' IoU rule, the coverage rule of eq. 6.2, or either with the surface-gap test on
@@ -49,6 +49,9 @@ class ConditionConfig:
 @dataclasses.dataclass(frozen=True)
 class Ch6TrialParams:
     """How an extraction is executed and judged (thesis 6.2.3, Algorithm 1)."""
+
+    episodes: int = bounded(200, ge=1)
+    """The episodes of a ch. 6 condition that names none."""
 
     model: str = "cp_focal"
     """Collapse predictor of the CP-based planners."""
@@ -231,7 +234,7 @@ class Ch4ConditionConfig:
     stream: str
     """Scene stream (a key of trials.streams)."""
     episodes: int = bounded(100, ge=1)
-    """Number of trials."""
+    """Number of trials (absent in params.yaml: trials.ch4.episodes)."""
     mode: Literal["pair", "target"] = "pair"
     """"pair": choose the safest ordered (extract, support) pair (thesis 4.2.3 (1));
     "target": the target is given, choose its support (4.2.3 (2))."""
@@ -255,6 +258,9 @@ class Ch4ConditionConfig:
 @dataclasses.dataclass(frozen=True)
 class Ch4TrialParams:
     """How a chapter 4 pull is judged (thesis 4.3.3)."""
+
+    episodes: int = bounded(100, ge=1)
+    """The episodes of a ch. 4 condition that names none."""
 
     moved_threshold_m: float = bounded(0.005, gt=0.0)
     """Strict success: no box other than the pulled and the held one moved more than this."""
@@ -288,7 +294,7 @@ class Ch5ConditionConfig:
     stream: str
     """Scene stream (a key of trials.streams)."""
     episodes: int = bounded(100, ge=1)
-    """Number of trials."""
+    """Number of trials (absent in params.yaml: trials.ch5.episodes)."""
     perception: Literal["detector", "clusters"] = "detector"
     """Arrangement clusters from the trained detector (models/detector), or the generator's
     ground-truth clusters (the detector's share of the failures)."""
@@ -297,6 +303,9 @@ class Ch5ConditionConfig:
 @dataclasses.dataclass(frozen=True)
 class Ch5TrialParams:
     """How a replenishment is planned, executed and judged (thesis 5.2.3, 5.3.2)."""
+
+    episodes: int = bounded(100, ge=1)
+    """The episodes of a ch. 5 condition that names none."""
 
     model: str = "cmn_bs32"
     """Collapse map network of the planner (a key of train.models; thesis 5.2.2)."""
@@ -373,6 +382,25 @@ class TrialsConfig:
     """Condition name -> a kinematic condition repeated arm-level; stage trials_arm runs them
     all and compares each with its kinematic row, episode by episode."""
 
+    @staticmethod
+    def prepare_params(data: Mapping[str, Any]) -> Mapping[str, Any]:
+        """The raw section with every condition that names no `episodes` given its chapter's
+        (trials.ch6/ch4/ch5.episodes, else their defaults), as params.yaml states it once."""
+        out = dict(data)
+        for group, chapter in EPISODE_DEFAULTS.items():
+            conditions = data.get(group)
+            if not isinstance(conditions, Mapping):
+                continue
+            section = data.get(chapter)
+            default = section.get("episodes") if isinstance(section, Mapping) else None
+            if default is None:
+                default = CHAPTER_PARAMS[chapter]().episodes
+            out[group] = {
+                name: {"episodes": default, **c} if isinstance(c, Mapping) else c
+                for name, c in conditions.items()
+            }
+        return out
+
     def __post_init__(self) -> None:
         for group in ("conditions", "ch4_conditions", "ch5_conditions"):
             for name, cond in getattr(self, group).items():
@@ -398,3 +426,8 @@ class TrialsConfig:
                 raise ValueError(
                     f"arm_conditions.{name}.of: '{arm.of}' names a ch. 6 and a ch. 4 condition"
                 )
+
+
+EPISODE_DEFAULTS = {"conditions": "ch6", "ch4_conditions": "ch4", "ch5_conditions": "ch5"}
+"""A condition group -> the chapter section whose `episodes` its conditions default to."""
+CHAPTER_PARAMS = {"ch6": Ch6TrialParams, "ch4": Ch4TrialParams, "ch5": Ch5TrialParams}

@@ -14,7 +14,7 @@ dev_dir, local_jsonl, ref_dir = sys.argv[1], sys.argv[2], sys.argv[3]
 COMMITTED_CSV = "reports/support/scenes.csv"
 COMMITTED_TRUTH = os.path.join(ref_dir, "data/support/truth.json")
 REF_SHARDS = os.path.join(ref_dir, "data/support/scenes")
-labels = yaml.safe_load(open("params.yaml"))["report"]["table_6_2_methods"]
+from clutterbench.report.config import TABLE_6_2_METHODS as labels  # noqa: E402
 
 def jl(p):
     return {r["scene"]: r for r in map(json.loads, open(p))}
