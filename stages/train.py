@@ -9,6 +9,7 @@ from clutterbench.config import BaseConfig, load_section
 from clutterbench.criteria import label_thresholds
 from clutterbench.data.config import GenerateConfig
 from clutterbench.errors import ClutterbenchError
+from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
 
 
@@ -31,7 +32,10 @@ def train(params: dict, base: BaseConfig) -> None:
         timing_file=Path(f"reports/timing/train_{name}.json"),
     )
     threshold_m = gen.datasets[dataset].moved_threshold_m
-    summary = train_model(name, cfg, threshold_m, base.seed, paths, label_thresholds(params))
+    fovy_deg = load_section(SimConfig, "sim", params).camera.fovy_deg
+    summary = train_model(
+        name, cfg, threshold_m, base.seed, paths, label_thresholds(params), fovy_deg
+    )
     print(f"{name}: best epoch {summary['best']['epoch']} of {summary['epochs_run']}")
 
 

@@ -127,7 +127,7 @@ def test_the_holding_planner_searches_with_oracle_hold_s_actions(stack3):
     for name, holds_any in (("physics_from_depth", False), ("physics_from_depth_hold", True)):
         model = PLANNERS[name].factory(_job(name), stack3).search
         search = model.search_cls(
-            stack3, model.physics, model.camera, model.params, model.holding, model.cf
+            stack3, model.physics, model.camera, model.pull, model.limits, model.holding, model.cf
         )
         assert (search.holding, search.hold_any_pull) == (holds_any, holds_any), name
 

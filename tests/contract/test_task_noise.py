@@ -73,7 +73,7 @@ def test_a_replay_in_the_tables_world_gives_every_record(spec_path, planner):
         rec = run_extraction(spec, job, target=target).record
         aborted += sum(s["aborted_after_motion"] for s in rec["steps"])
         got = replay_episode(
-            rec, spec, Draw.none(spec.n), job.physics, job.params, job.collapse_free
+            rec, spec, Draw.none(spec.n), job.physics, job.params.pull, job.collapse_free
         )
         want = (rec["success"], rec["strict_success"], rec["end"], len(rec["steps"]))
         assert (got.success, got.strict_success, got.end, got.steps) == want, (planner, target)
@@ -89,10 +89,14 @@ def test_a_replay_runs_the_recorded_actions_not_the_planners():
     step = {"box": 0, "hold": None, "increments": 0}
     step |= {"aborted_before_motion": False, "aborted_after_motion": False}
     rec = {"target": 2, "steps": [step]}
-    got = replay_episode(rec, spec, Draw.none(spec.n), job.physics, job.params, job.collapse_free)
+    got = replay_episode(
+        rec, spec, Draw.none(spec.n), job.physics, job.params.pull, job.collapse_free
+    )
     assert got.end == "collapse" and not got.success
     rec = {"target": 0, "steps": [step | {"box": 2}]}
-    got = replay_episode(rec, spec, Draw.none(spec.n), job.physics, job.params, job.collapse_free)
+    got = replay_episode(
+        rec, spec, Draw.none(spec.n), job.physics, job.params.pull, job.collapse_free
+    )
     assert got.end == "gave_up" and not got.success and got.steps == 1
 
 
@@ -115,7 +119,8 @@ class Dropped:
 def test_the_robust_oracle_needs_its_steps_clean_in_every_world_it_searched():
     spec = SceneSpec.load(STACK3)
     job = _job("oracle")
-    args = (spec, job.physics, job.camera, job.params, False, job.collapse_free)
+    p = job.params
+    args = (spec, job.physics, job.camera, p.pull, p.search, False, job.collapse_free)
     start = SceneState.start(spec)
     plain, _, _ = SearchOracle(*args).search(start, 0)
     same, _, _ = RobustSearchOracle(*args, draws=[Draw.none(spec.n)]).search(start, 0)

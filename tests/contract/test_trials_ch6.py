@@ -197,7 +197,9 @@ def test_the_search_oracle_finds_a_clean_sequence_whenever_one_exists(
     spec_path, targets, camera = BRUTE_FORCE_CASES[case]
     spec = SceneSpec.load(spec_path)
     for target in range(spec.n) if targets is None else targets:
-        oracle = SearchOracle(spec, physics, camera, PARAMS, holding, CF, hold_any_pull=any_pull)
+        oracle = SearchOracle(
+            spec, physics, camera, PARAMS.pull, PARAMS.search, holding, CF, hold_any_pull=any_pull
+        )
         plan, _, exhausted = oracle.search(SceneState.start(spec), target, key)
         assert not exhausted
         assert (plan is not None) == _clean_sequence_exists(
@@ -212,7 +214,7 @@ def test_the_one_arm_oracle_finds_the_sequence_another_order_of_the_same_boxes_h
     first by other orders, whose boxes stood elsewhere, and proved no sequence in 24 nodes."""
     spec = SceneSpec.load(EPISODE121)
     camera = CameraConfig()  # the default scale's camera: what the planners see there
-    oracle = SearchOracle(spec, physics, camera, PARAMS, False, CF)
+    oracle = SearchOracle(spec, physics, camera, PARAMS.pull, PARAMS.search, False, CF)
     plan, found, info = oracle.plan_from(SceneState.start(spec), 1)
     assert plan is not None and found["success"], info
     assert not info.get("success_exhausted") and not info.get("strict_success_exhausted")
@@ -229,7 +231,7 @@ def test_the_holding_oracle_may_hold_a_box_the_pull_leaves_in_place(physics):
     run, so an oracle that held only the boxes the pull disturbs was beaten there."""
     spec = SceneSpec.load(HOLD_QUIET)
     start = SceneState.start(spec)
-    oracle = SearchOracle(spec, physics, CAM, PARAMS, True, CF)
+    oracle = SearchOracle(spec, physics, CAM, PARAMS.pull, PARAMS.search, True, CF)
     alone, _, disp = oracle.simulate(start, (7, None), cut_short=False)
     assert not alone["strict_success"] and alone["success"]  # a 9 mm slide: no collapse
     plan, _, exhausted = oracle.search(start, 7)

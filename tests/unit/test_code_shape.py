@@ -19,9 +19,6 @@ ONE_CONCEPT = {
     "src/clutterbench/sim/labelling.py": "one labelled scene: place, settle, render, act",
     "src/clutterbench/report/table_6_3.py": "Table 6.3 and its per-family companion",
     "src/clutterbench/sim/pile.py": "the chapter 3 pile world: pieces, slide, judge, cameras",
-    # at 510 lines; its condition-to-jobs functions (planner_support onwards) are the part to
-    # move out, at the next change that reruns the trials stage anyway
-    "src/clutterbench/trials/ch6/episodes.py": "one ch. 6 episode: its jobs, run, judge, record",
 }
 """Modules over MAX_MODULE_LINES that hold one concept, and which."""
 

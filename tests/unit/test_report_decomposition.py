@@ -128,3 +128,27 @@ def test_every_planner_that_may_hold_is_measured_against_the_holding_oracle():
         for other in (planner_info(planner).truth, planner_info(planner).baseline):
             if other is not None:
                 assert planner_info(other).holds == (planner in holding), (planner, other)
+
+
+def test_a_sensed_cp_row_adds_the_sensing_part(tmp_path):
+    sensed = [
+        r | {"sensing": "d415", "perception": "depth"} for r in _records("multi_step", "s", 1)
+    ]
+    by_condition = {
+        "multi_step": _records("multi_step", "s", 3),
+        "multi_step_truth": _records("multi_step_truth", "s", 6),
+        "oracle": _records("oracle", "s", 8),
+        "multi_step_d415": sensed,
+    }
+    (free,) = [r for r in decompose(by_condition) if r["key"] == "success"]
+    assert free["condition"] == "multi_step" and free["sensed_condition"] == "multi_step_d415"
+    assert free["gap"] == pytest.approx(50.0) and free["perception"] == pytest.approx(30.0)
+    assert free["sensing"] == pytest.approx(20.0) and free["sensed_pct"] == pytest.approx(10.0)
+    assert free["sensed_gap"] == pytest.approx(free["gap"] + free["sensing"])
+    decomposition_table(by_condition, tmp_path, "tiny")
+    text = (tmp_path / "table_6_3_decomposition.md").read_text()
+    assert "sensing part" in text and "sensed multi_step_d415" in text
+    # without the sensed row the table is as before: no sensing column
+    del by_condition["multi_step_d415"]
+    decomposition_table(by_condition, tmp_path, "tiny")
+    assert "sensing part" not in (tmp_path / "table_6_3_decomposition.md").read_text()

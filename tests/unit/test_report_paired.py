@@ -56,3 +56,27 @@ def test_mcnemar_p_by_hand():
     assert mcnemar_p(0, 0) == 1.0
     assert mcnemar_p(5, 0) == pytest.approx(2 / 32)
     assert mcnemar_p(13, 10) == mcnemar_p(10, 13) > 0.5
+
+
+def _sensed(records, sensing="d415", perception="depth"):
+    return [r | {"sensing": sensing, "perception": perception} for r in records]
+
+
+def test_sensed_rows_meet_the_baseline_that_saw_alike():
+    by_condition = {
+        "multi_step_pull": _records("multi_step_pull", "s", {0, 1, 2}),
+        "physics_from_depth": _records("physics_from_depth", "s", {0}),
+        "multi_step_pull_d415": _sensed(_records("multi_step_pull", "s", {0, 1, 5, 6})),
+        "physics_from_depth_d415": _sensed(_records("physics_from_depth", "s", {5})),
+        # under another sensor: no baseline saw alike
+        "bimanual_pull_sl": _sensed(_records("bimanual_pull", "s", {0}), "structured_light"),
+        "physics_from_depth_hold_d415": _sensed(_records("physics_from_depth_hold", "s", {0})),
+    }
+    rows = [r for r in paired_rows(by_condition) if r["key"] == "success"]
+    assert [(r["condition"], r["baseline_condition"]) for r in rows] == [
+        ("multi_step_pull", "physics_from_depth"),
+        ("multi_step_pull_d415", "physics_from_depth_d415"),
+    ]
+    ideal, sensed = rows
+    assert "seen" not in ideal and sensed["seen"] == ("d415", "depth")
+    assert (sensed["only_cp"], sensed["only_baseline"]) == (3, 0)

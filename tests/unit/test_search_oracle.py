@@ -22,8 +22,9 @@ def _state(removed=(), poses=None) -> SimpleNamespace:
 def _toy_oracle(clean, after=None, holding=True, hold_any_pull=True) -> SearchOracle:
     """Boxes 0 (the target), 1 and 2; `clean(state, action)` says whether a step is clean,
     `after(state, action)` the poses it leaves (default: where they stood)."""
+    params = Ch6TrialParams()
     oracle = SearchOracle(
-        None, None, None, Ch6TrialParams(), holding, None, hold_any_pull=hold_any_pull
+        None, None, None, params.pull, params.search, holding, None, hold_any_pull=hold_any_pull
     )
 
     def simulate(state, action, cut_short=True):

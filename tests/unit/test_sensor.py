@@ -322,3 +322,36 @@ def test_randomized_scales_the_noise_within_the_spread_and_keeps_the_geometry():
         assert b.step_missing + b.step_flying <= 1.0 + 1e-9
     with pytest.raises(ClutterbenchError):
         randomized(D415, np.random.default_rng(0), 1.0)
+
+
+def _train_config(preset_name: str, noise: bool = True):
+    from clutterbench.collapse.config import TrainConfig, TrainSensingConfig
+    from clutterbench.config import parse
+
+    model = {"arch": "collapse_map", "dataset": "d", "batch_size": 2, "lr": 1e-3, "epochs": 1}
+    model |= {"noise": noise, "net": {"input_size": 64}}
+    cfg = parse(TrainConfig, {"models": {"m": model}}, "train")
+    return dataclasses.replace(cfg, sensing=TrainSensingConfig(preset=preset_name))
+
+
+def test_training_augmentation_is_the_noise_unless_a_sensor_is_named():
+    from clutterbench.sim.noise import add_depth_noise
+    from clutterbench.sim.sensor import SensedAugmentation, focal_px
+
+    depth = np.full((64, 64), 0.6, np.float32)
+    depth[20:40, 20:40] = 0.5
+    cfg = _train_config("ideal")
+    aug = cfg.augmentation("m", 42.0)
+    assert aug is cfg.noise
+    a = aug.apply(depth, np.random.default_rng(3))
+    assert np.array_equal(a, add_depth_noise(depth, cfg.noise, np.random.default_rng(3)))
+    assert _train_config("d415", noise=False).augmentation("m", 42.0) is None
+    sensed = _train_config("d415").augmentation("m", 42.0)
+    assert isinstance(sensed, SensedAugmentation) and sensed.sensor == preset("d415")
+    assert sensed.fx_px == pytest.approx(focal_px(64, 42.0))
+    assert focal_px(128, 42.0) == pytest.approx(64 / math.tan(math.radians(21.0)))
+    one = sensed.apply(depth, np.random.default_rng(5))
+    assert np.array_equal(one, sensed.apply(depth, np.random.default_rng(5)))
+    assert not np.array_equal(one, sensed.apply(depth, np.random.default_rng(6)))
+    assert one.dtype == np.float32 and np.isfinite(one).all()
+    assert (one == 0).any() and not np.array_equal(one, depth)  # shadows, steps: sensed

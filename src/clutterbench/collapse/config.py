@@ -12,7 +12,7 @@ from clutterbench.data.labels import LABEL_KINDS, OUTPUT_CHANNELS
 from clutterbench.errors import ClutterbenchError
 from clutterbench.models import ARCHS, parse_net_config
 from clutterbench.precision import check_precision, resolve_precision
-from clutterbench.sim.noise import DepthNoiseConfig
+from clutterbench.sim.noise import DepthAugmentation, DepthNoiseConfig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,6 +114,18 @@ def check_labels(m: TrainModelConfig, key: str) -> None:
 
 
 @dataclasses.dataclass(frozen=True)
+class TrainSensingConfig:
+    """The depth sensor the networks train on (sim/sensor.py, docs/sensing.md)."""
+
+    preset: Literal["ideal", "structured_light", "d415"] = "ideal"
+    """A preset of sim/sensor.py PRESETS: its model replaces the parametric noise (train.noise)
+    on every training image of a model with `noise: true`; ideal: the parametric noise."""
+    spread: float = bounded(0.2, ge=0.0, le=0.95)
+    """Each image's sensor noise is the preset's, each randomised field scaled by a factor
+    drawn in [1 - spread, 1 + spread] (sim.sensor.randomized)."""
+
+
+@dataclasses.dataclass(frozen=True)
 class TrainConfig:
     models: Mapping[str, TrainModelConfig] = dataclasses.field(default_factory=dict)
     """Model name -> its training run; each becomes stage train@<name>, output models/<name>/."""
@@ -124,6 +136,8 @@ class TrainConfig:
     """Focal loss parameters (thesis 6.2.1: alpha_1 0.25, alpha_0 0.75, gamma 2)."""
     noise: DepthNoiseConfig = DepthNoiseConfig()
     """Depth noise augmentation."""
+    sensing: TrainSensingConfig = TrainSensingConfig()
+    """A sensor model as the depth augmentation instead (ideal: the noise above)."""
     channels_last: bool = True
     """NHWC memory format (measured ~2x faster on this CPU; reports/bench/models.md)."""
     precision: str = "auto"
@@ -131,6 +145,20 @@ class TrainConfig:
     (clutterbench.precision; both timed in reports/bench/models.md)."""
     val_threshold: float = bounded(0.5, gt=0.0, le=1.0)
     """Probability above which a pixel counts as collapse in validation metrics."""
+
+    def augmentation(self, name: str, fovy_deg: float) -> DepthAugmentation | None:
+        """What model `name`'s training images pass through: None (noise: false), the
+        parametric noise, or the sensor preset's model (sim.camera's fovy_deg at the
+        network's input size gives our focal length)."""
+        if not self.models[name].noise:
+            return None
+        if self.sensing.preset == "ideal":
+            return self.noise
+        from clutterbench.sim.sensor import SensedAugmentation, focal_px, preset
+
+        size = self.models[name].net.input_size
+        sensor = preset(self.sensing.preset)
+        return SensedAugmentation(sensor, focal_px(size, fovy_deg), self.sensing.spread)
 
     @staticmethod
     def prepare_params(data: Mapping[str, Any]) -> Mapping[str, Any]:

@@ -35,6 +35,7 @@ from clutterbench.logs.mcap_episode import EpisodeWriter
 from clutterbench.models import build_model
 from clutterbench.models.checkpoint import DEFAULT_HEADS, save_checkpoint
 from clutterbench.progress import progress_bar
+from clutterbench.sim.noise import DepthAugmentation
 
 DEVICE_ENV = "CLUTTERBENCH_TRAIN_DEVICE"
 """Where training runs: cpu (the default), cuda, or auto (cuda when torch sees a GPU). It
@@ -189,14 +190,17 @@ def train_model(
     base_seed: int,
     paths: TrainPaths,
     collapse_free: tuple[float, float] | None = None,
+    fovy_deg: float = 42.0,
 ) -> dict[str, Any]:
     """Train train.models[name]; returns the summary also written to summary.json.
-    `collapse_free`: (drop_m, tilt_deg) of trials.collapse_free, for pull_collapse labels."""
+    `collapse_free`: (drop_m, tilt_deg) of trials.collapse_free, for pull_collapse labels;
+    `fovy_deg`: sim.camera's, for a sensor model's augmentation (train.sensing)."""
     mcfg = cfg.models[name]
     seed = model_seed(base_seed, name)
     torch.manual_seed(seed)
     heads = tuple(mcfg.labels)
-    train_ds, val_ds, size = _open_splits(name, cfg, threshold_m, seed, paths, collapse_free)
+    noise = cfg.augmentation(name, fovy_deg)
+    train_ds, val_ds, size = _open_splits(name, cfg, threshold_m, seed, paths, collapse_free, noise)
     device = train_device()
     precision = ("bf16" if cfg.bf16 else "fp32") if device.type == "cpu" else "fp32"
     model = build_model(mcfg.arch, mcfg.net).to(device)
@@ -244,6 +248,8 @@ def train_model(
                 if stale >= mcfg.patience:
                     break
         summary = _summary(name, mcfg, epoch, best, (train_ds, val_ds), model, precision)
+        if mcfg.noise and cfg.sensing.preset != "ideal":  # the sensor its images passed through
+            summary["sensing"] = {"preset": cfg.sensing.preset, "spread": cfg.sensing.spread}
         mcap.set_outcome({"best_epoch": best["epoch"], "best_val_loss": best["val_loss"]})
     write_json(paths.report_dir / "summary.json", summary)
     timing = {"model": name, "seconds": time.perf_counter() - started, "epoch_seconds": epoch_s}
@@ -258,11 +264,11 @@ def _open_splits(
     seed: int,
     paths: TrainPaths,
     collapse_free: tuple[float, float] | None,
+    noise: DepthAugmentation | None,
 ) -> tuple[PairDataset, PairDataset, int]:
     """The model's train and val pairs (train with noise and flips) and their image size;
     a one-line error when a split is empty or the images do not fit the network."""
     mcfg = cfg.models[name]
-    noise = cfg.noise if mcfg.noise else None
     n_masks, heads = mcfg.net.n_masks, tuple(mcfg.labels)
     train_ds = open_pairs(
         n_masks,

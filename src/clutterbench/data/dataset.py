@@ -28,7 +28,7 @@ from clutterbench.data.labels import (
 )
 from clutterbench.data.shards import SceneColumns, ShardStore, load_split
 from clutterbench.errors import ClutterbenchError
-from clutterbench.sim.noise import DepthNoiseConfig, add_depth_noise
+from clutterbench.sim.noise import DepthAugmentation
 
 CACHE_SHARDS = 4
 """Shards kept decompressed per dataset; also the shuffle window of SceneGroupBatchSampler."""
@@ -99,7 +99,7 @@ class _ShardPairs(Dataset):
         split_file: Path,
         split: str,
         threshold_m: float,
-        noise: DepthNoiseConfig | None = None,
+        noise: DepthAugmentation | None = None,
         flip: bool = False,
         seed: int = 0,
         min_target_pixels: int = 10,
@@ -181,7 +181,7 @@ class _ShardPairs(Dataset):
         """Append `depth_m` to `depths`, noised (if configured) and flipped left-right with
         probability 1/2 (if configured); returns whether it was flipped."""
         if self.noise is not None:
-            depth_m = add_depth_noise(depth_m, self.noise, self.rng)
+            depth_m = self.noise.apply(depth_m, self.rng)
         flip = bool(self.flip and self.rng.random() < 0.5)
         depths.append(depth_m[..., ::-1] if flip else depth_m)
         return flip

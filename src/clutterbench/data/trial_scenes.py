@@ -10,8 +10,10 @@ test stream) draws the same scenes and targets as the trials and stands below th
 
 from __future__ import annotations
 
+import dataclasses
 import zlib
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -81,6 +83,45 @@ def draw_target(
     target = _draw_target(seed, stream, index, obs, min_pixels)
     benchmark.remember(key, "target", stream_key(stream), index, {"target": target})
     return target
+
+
+@dataclasses.dataclass(frozen=True)
+class StreamStart:
+    """One episode's start on a trials stream: what its settled scene (draw_trial_spec) and
+    its target (draw_target) are drawn from."""
+
+    stream: str
+    """The stream's name (its seed streams are keyed by it)."""
+    cfg: SceneStreamConfig
+    """The stream's scene distribution (trials.streams[stream])."""
+    seed: int
+    """The base seed its scene and target streams are drawn from."""
+    index: int
+    """The episode's scene within the stream."""
+    physics: PhysicsConfig
+    """The physics the scene settles under."""
+    camera: CameraConfig
+    """The camera of the start's observation."""
+    max_attempts: int
+    """How many draws the scene may take to settle before the stream gives up."""
+
+    def spec(self, **options: Any) -> SceneSpec:
+        """The settled scene (draw_trial_spec; `options`: its shelf, keep_groups, accept,
+        accept_key)."""
+        return draw_trial_spec(
+            self.stream,
+            self.cfg,
+            self.seed,
+            self.index,
+            self.physics,
+            self.camera,
+            self.max_attempts,
+            **options,
+        )
+
+    def target(self, obs: Observation, min_pixels: int, spec: SceneSpec | None = None) -> int:
+        """The episode's target, drawn from the start's observation `obs` (draw_target)."""
+        return draw_target(self.seed, self.stream, self.index, obs, min_pixels, spec)
 
 
 def target_fields(

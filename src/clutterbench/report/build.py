@@ -219,7 +219,7 @@ def table_6_2_support(r: Report) -> None:
 
 def table_6_3_extraction(r: Report) -> None:
     records, scale = r.ch6_records, r.base.scale
-    trial_note = trial_params_note(r.trials.ch6)
+    trial_note = trial_params_note(r.trials.ch6.pull, r.trials.ch6.max_steps)
     rules = rule_note(records, r.chosen, r.cfg.table_6_2_methods)
     noise = r.noise["conditions"]
     extraction_table(

@@ -23,6 +23,12 @@ against the planner on truth maps of the pull:
 
     oracle - pull CP  =  (oracle - pull truth) + (pull truth - pull CP)
                            planning               perception
+
+Where the stream also has the same CP planner under a depth sensor (and masks from depth: a
+condition whose records name `sensing` or `perception: depth`), a fourth part stands beside:
+
+    oracle - sensed CP  =  (oracle - CP)  +  (CP - sensed CP)
+                             the gap above    sensing
 """
 
 from __future__ import annotations
@@ -56,6 +62,12 @@ COLUMNS = [
     Column("perception_text", "perception part (truth - CP)", "{}"),
     Column("episodes", "episodes", "{:d}"),
 ]
+SENSED_COLUMNS = [
+    Column("sensed_pct", "sensed CP %", "{:.1f}"),
+    Column("sensing_text", "sensing part (CP - sensed CP)", "{}"),
+    Column("sensed_gap_text", "sensed CP's points below the oracle", "{}"),
+]
+"""Shown where a CP planner also ran under a sensor on the row's stream."""
 ROBUST_COLUMNS = [
     Column("robust_pct", "robust oracle %", "{:.1f}"),
     Column("robust_gap_text", "points below the robust oracle", "{}"),
@@ -64,12 +76,19 @@ ROBUST_COLUMNS = [
 """Shown where the noise stage's robust search oracles ran on the row's stream."""
 
 
+def sensed(record: Mapping[str, Any]) -> bool:
+    """Whether a record's planner saw other than exact depth and the simulator's masks."""
+    return "sensing" in record or record.get("perception", "instance") != "instance"
+
+
 def by_planner_stream(
-    records_by_condition: Mapping[str, Sequence[Mapping[str, Any]]],
+    records_by_condition: Mapping[str, Sequence[Mapping[str, Any]]], of_sensed: bool = False
 ) -> dict[tuple[str, str], tuple[str, Sequence[Mapping[str, Any]]]]:
+    """(planner, stream) -> the first condition of it (and its records) that saw exact depth
+    and the simulator's masks; with `of_sensed`, the first that did not."""
     out: dict[tuple[str, str], tuple[str, Sequence[Mapping[str, Any]]]] = {}
     for cond, recs in records_by_condition.items():
-        if recs:
+        if recs and sensed(recs[0]) == of_sensed:
             out.setdefault((str(recs[0].get("planner")), str(recs[0].get("stream"))), (cond, recs))
     return out
 
@@ -81,10 +100,12 @@ def paired_parts(
     resamples: int = BOOTSTRAP_RESAMPLES,
     seed: int = BOOTSTRAP_SEED,
     pull_truth: Sequence[bool] | None = None,
+    sensed_cp: Sequence[bool] | None = None,
 ) -> dict[str, Any]:
     """Points (100 x mean difference) of the gap, planning and perception parts over paired
-    episodes (with `pull_truth`, also the map-meaning part), each with a 95% percentile
-    interval from one seeded bootstrap over episodes."""
+    episodes (with `pull_truth`, also the map-meaning part; with `sensed_cp`, the sensing part
+    and the sensed row's gap), each with a 95% percentile interval from one seeded bootstrap
+    over episodes."""
     o, t, c = (np.asarray(x, dtype=np.float64) for x in (oracle, truth, cp))
     assert len(o) == len(t) == len(c) > 0, "paired outcomes of the same episodes"
     diffs = {"gap": o - c, "planning": o - t, "perception": t - c}
@@ -92,6 +113,10 @@ def paired_parts(
         p = np.asarray(pull_truth, dtype=np.float64)
         assert len(p) == len(o), "paired outcomes of the same episodes"
         diffs |= {"planning": o - p, "meaning": p - t}
+    if sensed_cp is not None:
+        s = np.asarray(sensed_cp, dtype=np.float64)
+        assert len(s) == len(o), "paired outcomes of the same episodes"
+        diffs |= {"sensing": c - s, "sensed_gap": o - s}
     return paired_points(diffs, resamples, seed)
 
 
@@ -128,6 +153,7 @@ def decompose(
     """One row per (CP planner, stream, criterion) where the CP row, its truth row and its
     oracle all ran on that stream; sorted as the conditions were given."""
     index = by_planner_stream(records_by_condition)
+    sensed_index = by_planner_stream(records_by_condition, of_sensed=True)
     rows = []
     for (planner, stream), (cond, recs) in index.items():
         declared = planners.declared(planner)
@@ -139,12 +165,14 @@ def decompose(
         pull = None if chain else index.get((str(declared.pull_truth), stream))
         if truth is None or oracle is None:
             continue
+        seen = sensed_index.get((planner, stream))
         for key, criterion in CRITERIA.items():
             runs = [oracle[1], truth[1], recs] + ([pull[1]] if pull is not None else [])
-            shared, outcomes = shared_outcomes(runs, key)
+            shared, outcomes = shared_outcomes(runs + ([seen[1]] if seen else []), key)
             if not shared:
                 continue
             o, t, c, *p = outcomes
+            sc = p.pop() if seen else None
             truth_pct = 100.0 * float(np.mean(t))
             row = {
                 "planner": planner,
@@ -165,7 +193,9 @@ def decompose(
                 "truth_pct": None if chain else truth_pct,
                 "cp_pct": 100.0 * float(np.mean(c)),
             }
-            row |= paired_parts(o, t, c, pull_truth=p[0] if p else None)
+            if seen is not None:
+                row |= {"sensed_condition": seen[0], "sensed_pct": 100.0 * float(np.mean(sc))}
+            row |= paired_parts(o, t, c, pull_truth=p[0] if p else None, sensed_cp=sc)
             rows.append(
                 row | robust_gap(index.get((f"{declared.ceiling}_robust", stream)), recs, key)
             )
@@ -219,20 +249,40 @@ def decomposition_table(
     for r in rows:
         truths = " / ".join(c for c in (r["truth_condition"], r["pull_truth_condition"]) if c)
         label = f"{r['planner']} [{r['condition']} / {truths} / {r['oracle_condition']}]"
-        parts = ("gap", "planning", "meaning", "perception", "robust_gap")
+        if "sensed_condition" in r:
+            label = label[:-1] + f" / sensed {r['sensed_condition']}]"
+        parts = ("gap", "planning", "meaning", "perception", "robust_gap", "sensing", "sensed_gap")
         shown.append(
             {"row": label}
-            | {c.key: r.get(c.key) for c in COLUMNS + ROBUST_COLUMNS}
+            | {c.key: r.get(c.key) for c in COLUMNS + SENSED_COLUMNS + ROBUST_COLUMNS}
             | {f"{p}_text": _text(r, p) if p in r else None for p in parts}
         )
     head = "CP planner [CP / truth (/ pull truth) / oracle condition]"
-    columns = COLUMNS + (
-        [c for c in ROBUST_COLUMNS] if any("robust_pct" in r for r in rows) else []
+    columns = (
+        COLUMNS
+        + (SENSED_COLUMNS if any("sensed_pct" in r for r in rows) else [])
+        + (ROBUST_COLUMNS if any("robust_pct" in r for r in rows) else [])
     )
     frame = pd.DataFrame([{head: s["row"]} | s for s in shown])
     frame = frame[[head, *[c.key for c in columns]]].rename(
         columns={c.key: c.header for c in columns}
     )
+    notes = _notes(rows, scale, pull_map_meaning)
+    write_table(
+        frame,
+        columns,
+        out_dir,
+        TABLE,
+        "Table 6.3 decomposed: points below the oracle, planning vs perception",
+        notes,
+    )
+    raw = write_raw_csv(rows, out_dir / f"{TABLE}.csv")
+    _figure(rows, out_dir / f"{TABLE}.png")
+    return raw
+
+
+def _notes(rows: Sequence[Mapping[str, Any]], scale: str, pull_map_meaning: str) -> list[str]:
+    """The decomposition table's notes: how each part is taken, and its intervals."""
     notes = [
         f"{scale} scale. Each CP planner's points below its search oracle (Table 6.3), split "
         "over the episodes all three rows ran (same scenes, same targets): planning = oracle - "
@@ -262,23 +312,20 @@ def decomposition_table(
         "deletion head's thresholds (they are the three-way split's rows too), so this "
         "perception part also holds the change of support thresholds.",
     ]
+    if any("sensed_pct" in r for r in rows):
+        notes.append(
+            "Sensing (the same CP planner under a depth sensor model and, where its condition "
+            "says perception: depth, masks from the sensed depth; docs/sensing.md): sensing = "
+            "CP row - sensed CP row, and the sensed row's points below the oracle = the gap + "
+            "sensing, over the same paired episodes and bootstrap."
+        )
     if any("robust_pct" in r for r in rows):
         notes.append(
             "Robust oracle (noise stage, table_6_3_noise): the matching search oracle whose "
             "every simulated step must also be clean in perturbed worlds; its gap to the CP "
             "row over the episodes both ran, with a paired 95% bootstrap interval."
         )
-    write_table(
-        frame,
-        columns,
-        out_dir,
-        TABLE,
-        "Table 6.3 decomposed: points below the oracle, planning vs perception",
-        notes,
-    )
-    raw = write_raw_csv(rows, out_dir / f"{TABLE}.csv")
-    _figure(rows, out_dir / f"{TABLE}.png")
-    return raw
+    return notes
 
 
 def _figure(rows: Sequence[Mapping[str, Any]], path: Path) -> None:

@@ -60,41 +60,66 @@ def paired_rows(
     seed: int = BOOTSTRAP_SEED,
 ) -> list[dict[str, Any]]:
     """One row per (CP planner, stream, criterion) where the CP row and its physics-from-depth
-    row both ran on that stream, over the episodes both ran; in the conditions' order."""
-    index = by_planner_stream(records_by_condition)
+    row both ran on that stream and saw alike (exact depth and the simulator's masks, or the
+    same sensor and masks), over the episodes both ran; in the conditions' order, the rows
+    under a sensor after."""
     rows = []
-    for (planner, stream), (cond, recs) in index.items():
-        declared = planners.declared(planner)
-        if declared.baseline is None:
-            continue
-        baseline = index.get((declared.baseline, stream))
-        if baseline is None:
-            continue
-        for key, criterion in CRITERIA.items():
-            shared, outcomes = shared_outcomes([recs, baseline[1]], key)
-            if not shared:
-                continue
-            cp, base = (np.array(x, dtype=np.float64) for x in outcomes)
-            d = cp - base
-            only_cp, only_base = int((d > 0).sum()), int((d < 0).sum())
-            rows.append(
-                {
-                    "planner": planner,
-                    "condition": cond,
-                    "baseline_condition": baseline[0],
-                    "stream": stream,
-                    "criterion": criterion,
-                    "key": key,
-                    "episodes": len(shared),
-                    "cp_pct": 100.0 * float(cp.mean()),
-                    "baseline_pct": 100.0 * float(base.mean()),
-                    "only_cp": only_cp,
-                    "only_baseline": only_base,
-                }
-                | paired_points({"difference": d}, resamples, seed)
-                | {"p": mcnemar_p(only_cp, only_base)}
-            )
+    for of_sensed in (False, True):
+        index = by_planner_stream(records_by_condition, of_sensed)
+        for (planner, stream), (cond, recs) in index.items():
+            baseline = index.get((str(planners.declared(planner).baseline), stream))
+            if baseline is not None and _seen(baseline[1][0]) == _seen(recs[0]):
+                rows += _pair(planner, stream, (cond, recs), baseline, resamples, seed)
     return rows
+
+
+def _seen(record: Mapping[str, Any]) -> tuple[str, str]:
+    return str(record.get("sensing", "ideal")), str(record.get("perception", "instance"))
+
+
+def _pair(
+    planner: str,
+    stream: str,
+    cp_run: tuple[str, Sequence[Mapping[str, Any]]],
+    baseline: tuple[str, Sequence[Mapping[str, Any]]],
+    resamples: int,
+    seed: int,
+) -> list[dict[str, Any]]:
+    """The CP run against its baseline run under each criterion."""
+    (cond, recs), rows = cp_run, []
+    for key, criterion in CRITERIA.items():
+        shared, outcomes = shared_outcomes([recs, baseline[1]], key)
+        if not shared:
+            continue
+        cp, base = (np.array(x, dtype=np.float64) for x in outcomes)
+        d = cp - base
+        only_cp, only_base = int((d > 0).sum()), int((d < 0).sum())
+        rows.append(
+            {
+                "planner": planner,
+                "condition": cond,
+                "baseline_condition": baseline[0],
+                "stream": stream,
+                "criterion": criterion,
+                "key": key,
+                "episodes": len(shared),
+                "cp_pct": 100.0 * float(cp.mean()),
+                "baseline_pct": 100.0 * float(base.mean()),
+                "only_cp": only_cp,
+                "only_baseline": only_base,
+            }
+            | paired_points({"difference": d}, resamples, seed)
+            | {"p": mcnemar_p(only_cp, only_base)}
+            | ({} if _seen(recs[0]) == ("ideal", "instance") else {"seen": _seen(recs[0])})
+        )
+    return rows
+
+
+def _seen_note(row: Mapping[str, Any]) -> str:
+    if "seen" not in row:
+        return ""
+    sensing, perception = row["seen"]
+    return f" ({sensing}, {'masks from depth' if perception == 'depth' else 'simulator masks'})"
 
 
 def paired_table(
@@ -107,7 +132,7 @@ def paired_table(
         return None
     head = "CP planner [CP / physics-from-depth condition]"
     shown = [
-        {head: f"{r['planner']} [{r['condition']} / {r['baseline_condition']}]"}
+        {head: f"{r['planner']} [{r['condition']} / {r['baseline_condition']}]{_seen_note(r)}"}
         | {c.key: r.get(c.key) for c in COLUMNS}
         | {
             "difference_text": f"{r['difference']:+.1f} "

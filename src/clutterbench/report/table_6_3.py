@@ -31,7 +31,7 @@ from clutterbench.trials.ch6 import planners
 from clutterbench.trials.core.stats import aggregate
 
 if TYPE_CHECKING:
-    from clutterbench.trials.config import Ch6TrialParams
+    from clutterbench.trials.ch6_groups import PullExecution
 
 TABLE = "table_6_3"
 FAMILIES_TABLE = f"{TABLE}_families"
@@ -55,6 +55,7 @@ def is_oracle(planner: str) -> bool:
 
 COLUMNS = [
     Column("objects", "objects", "{}"),
+    Column("seen", "depth image, object masks", "{}"),
     Column("step_success", "collapse-free success per step", "{}"),
     Column("success", "collapse-free success per episode", "{}"),
     Column("task_noise", "collapse-free in perturbed worlds: mean ± sd (successes kept)", "{}"),
@@ -190,13 +191,34 @@ def _gap_text(gap: Mapping[str, Any] | None, condition: str) -> str | None:
 
 
 def _parse_row(row: str) -> tuple[str, str]:
-    method, sep, objects = row.partition("/")
+    """'<method>/<objects>' or '<method>/<objects>/<tag>' (a second row of one method and
+    object count, e.g. under a sensor) -> (method, objects)."""
+    method, sep, rest = row.partition("/")
+    objects = rest.partition("/")[0]
     if not sep or not method or not objects:
         raise ClutterbenchError(
-            f"report.{TABLE}: row '{row}' must read '<method>/<objects>' with method a planner "
-            f"name (built in: {', '.join(planners.BUILT_IN)})"
+            f"report.{TABLE}: row '{row}' must read '<method>/<objects>[/<tag>]' with method a "
+            f"planner name (built in: {', '.join(planners.BUILT_IN)})"
         )
     return method, objects
+
+
+IDEAL_SEEN = ("ideal", "instance")
+"""What a record without `sensing` saw: the renderer's exact depth, the simulator's masks."""
+
+
+def seen_of(records: Sequence[Mapping[str, Any]]) -> tuple[str, str]:
+    """(sensing, perception) of a condition's records (trials/ch6/seeing.py)."""
+    seen = {(str(r.get("sensing", "ideal")), str(r.get("perception", "instance"))) for r in records}
+    if len(seen) != 1:
+        raise ClutterbenchError(f"report.{TABLE}: one condition's records saw {sorted(seen)}")
+    return seen.pop()
+
+
+def seen_text(seen: tuple[str, str]) -> str:
+    sensing, perception = seen
+    masks = "simulator's masks" if perception == "instance" else "masks from depth"
+    return f"{'exact depth' if sensing == 'ideal' else sensing}, {masks}"
 
 
 def _thesis_rows(figures: Mapping[str, Any], method: str, objects: str) -> list[dict[str, Any]]:
@@ -292,6 +314,8 @@ def extraction_table(
     condition (its task-noise column; None: no such column)."""
     shown, raw, used = [], [], {}
     by_row = {c: _condition_records(records_by_condition, r, c) for r, c in rows.items()}
+    # the depth and masks column, once any row saw other than exact depth and the sim's masks
+    any_seen = any(seen_of(recs) != IDEAL_SEEN for recs in by_row.values())
     gaps = oracle_gaps(by_row)
     strict_gaps = oracle_gaps(by_row, "strict_success")
     for row, condition in rows.items():
@@ -308,6 +332,7 @@ def extraction_table(
         gap = gaps.get(condition)
         ours = {
             "objects": _objects_text(records, row),
+            "seen": seen_text(seen_of(records)) if any_seen else None,
             "step_success": step_rate_text(a),
             "success": rate_text(a, "success"),
             "task_noise": noise_text(noise[condition]["success"])
@@ -329,6 +354,8 @@ def extraction_table(
         thesis = thesis_figures_for(figures, method, objects)
         shown.append((f"{row_label(method)} [{condition}]", ours, thesis))
         extra = _raw_extra(gaps.get(condition), strict_gaps.get(condition), noise, condition)
+        if any_seen:
+            extra |= dict(zip(("sensing", "perception"), seen_of(records)))
         raw.append(
             {"row": row, "method": method, **a, **extra, **_thesis_counts(figures, method, objects)}
         )
@@ -423,18 +450,19 @@ def _mm(metres: float) -> str:
     return f"{1000.0 * metres:.1f} mm"
 
 
-def trial_params_note(ch6: Ch6TrialParams) -> str:
+def trial_params_note(pull: PullExecution, max_steps: int) -> str:
     """The ch. 6 trial params that judge and execute an extraction, in words (a table
-    note): the moved threshold, the grasp lift, the pull increment and the attempt cap."""
+    note): the moved threshold, the grasp lift, the pull increment (trials.ch6's `pull`)
+    and the attempt cap (trials.ch6.max_steps)."""
     lift = (
-        f"the gripper raises the grasped box by {_mm(ch6.grasp_lift_m)} before pulling it out"
-        if ch6.grasp_lift_m > 0
+        f"the gripper raises the grasped box by {_mm(pull.grasp_lift_m)} before pulling it out"
+        if pull.grasp_lift_m > 0
         else "the gripper pulls the grasped box out without raising it"
     )
-    attempts = f"{ch6.max_steps} attempt{'s' if ch6.max_steps != 1 else ''}"
+    attempts = f"{max_steps} attempt{'s' if max_steps != 1 else ''}"
     return (
-        f"a box moved: its centre moved more than {_mm(ch6.moved_threshold_m)}; {lift} in "
-        f"{_mm(ch6.pull_increment_m)} increments; an episode gives up after {attempts}."
+        f"a box moved: its centre moved more than {_mm(pull.moved_threshold_m)}; {lift} in "
+        f"{_mm(pull.increment_m)} increments; an episode gives up after {attempts}."
     )
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import Protocol
 
 import numpy as np
 
@@ -18,6 +19,10 @@ class DepthNoiseConfig:
     dropout: float = bounded(0.005, ge=0.0, le=1.0)
     """Fraction of pixels set to 0 (missing returns)."""
 
+    def apply(self, depth_m: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The training augmentation's call: `add_depth_noise` with this configuration."""
+        return add_depth_noise(depth_m, self, rng)
+
 
 def add_depth_noise(
     depth_m: np.ndarray, cfg: DepthNoiseConfig, rng: np.random.Generator
@@ -30,3 +35,10 @@ def add_depth_noise(
     noisy[rng.random(depth_m.shape) < cfg.dropout] = 0.0
     noisy[~valid] = 0.0
     return noisy.astype(np.float32)
+
+
+class DepthAugmentation(Protocol):
+    """What the training datasets call on each depth image they serve: the parametric noise
+    above (`DepthNoiseConfig`) or a depth sensor's model (`sim.sensor.SensedAugmentation`)."""
+
+    def apply(self, depth_m: np.ndarray, rng: np.random.Generator) -> np.ndarray: ...

@@ -177,6 +177,30 @@ def randomized(
     return dataclasses.replace(cfg, **new)
 
 
+@dataclasses.dataclass(frozen=True)
+class SensedAugmentation:
+    """The training augmentation of a sensor preset: each depth image passes through `sense`
+    with the preset's noise randomised around it (`randomized`, `spread`), so a network sees
+    the sensor it will meet and not one fixed instance of it. `fx_px`: our images' focal
+    length (pixels), from the camera they were rendered with."""
+
+    sensor: SensorConfig
+    fx_px: float
+    spread: float = 0.2
+
+    def apply(self, depth_m: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        h, w = depth_m.shape[-2:]
+        K = np.array([[self.fx_px, 0.0, w / 2], [0.0, self.fx_px, h / 2], [0.0, 0.0, 1.0]])
+        camera = CameraModel(K=K, T_world_from_cam=np.eye(4))
+        return sense(depth_m, camera, randomized(self.sensor, rng, self.spread), rng)
+
+
+def focal_px(image_size: int, fovy_deg: float) -> float:
+    """The focal length (pixels) of a square image `image_size` wide seen over `fovy_deg`, as
+    the renderer makes it (f = (H / 2) / tan(fovy / 2))."""
+    return (image_size / 2) / math.tan(math.radians(fovy_deg) / 2)
+
+
 def observation_rng(seed: int, depth_m: np.ndarray) -> np.random.Generator:
     """A generator seeded by `seed` and a hash of the image (its dtype, shape and bytes): the
     same observation always gets the same noise, different observations different noise."""

@@ -34,10 +34,11 @@ def benchmark_start(
     """(LabelledScene, target) of episode `index` of the seed stream `stream` drawn with `cfg`
     (a SceneStreamConfig): one test-set scene, also what `clutterbench evaluate-predictor
     --fresh` labels on streams of its own (data/testset_fresh.py)."""
-    from clutterbench.data.trial_scenes import draw_target, draw_trial_spec
+    from clutterbench.data.trial_scenes import StreamStart
 
     pull = (trials.ch6.pull_increment_m, trials.ch6.grasp_lift_m)
-    spec = draw_trial_spec(stream, cfg, seed, index, sim.physics, sim.camera, trials.max_attempts)
+    start = StreamStart(stream, cfg, seed, index, sim.physics, sim.camera, trials.max_attempts)
+    spec = start.spec()
     obs = observe(world_at(spec, SceneState.start(spec), sim.physics, True), sim.camera)
-    target = draw_target(seed, stream, index, obs, trials.ch6.min_target_pixels, spec)
+    target = start.target(obs, trials.ch6.min_target_pixels, spec)
     return label_spec(spec, sim.physics, sim.camera, pull), target

@@ -15,6 +15,7 @@ from clutterbench.config import bounded, cores_field
 from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.data.trial_params import PULL_MAP_HEADS, SceneStreamConfig  # noqa: F401 (re-exported)
 from clutterbench.maniskill.config import ArmConfig
+from clutterbench.trials.ch6_groups import PullExecution, PullLevers, SearchLimits
 
 DEV_PREFIX = "dev_"
 """Every dev stream's name starts with it (experiments/params.yaml), and no table stream's does."""
@@ -36,8 +37,11 @@ class ConditionConfig:
     """Support rule of the CP-based planners (thresholds chosen on val by the support stage):
     the thesis' IoU rule, the coverage rule of eq. 6.2, or either with the surface-gap test on
     pseudo-direct contact (`_gap`, ours)."""
-    perception: Literal["instance"] = "instance"
-    """Where object masks come from (the simulator's instance image)."""
+    perception: Literal["instance", "depth"] = "instance"
+    """Where its planner's object masks come from: the simulator's instance image, or region
+    growing on the (sensed) depth image, each segment named by the box its grasp takes
+    (depth: trials/ch6/seeing.py, docs/sensing.md; planners that read only what a robot sees,
+    on the kinematic executor)."""
     sensing: Literal["ideal", "structured_light", "d415"] = "ideal"
     """The depth sensor its planner's pictures pass through (sim.camera.sensing for this
     condition: sim/sensor.py, docs/sensing.md); ideal: the renderer's exact depth."""
@@ -102,13 +106,6 @@ class Ch6TrialParams:
     """The second arm lets go of the box it held where it holds it (drop: in mid-air when the
     pull took what it rested on), or first sets it down onto what is below it (lower).
     Executed steps, the search oracles and the truth maps of the pull alike."""
-
-    def release(self) -> dict[str, bool]:
-        """execute_pull's options for releasing a pulled or held box (sim/pull.py)."""
-        return {
-            "return_aborted": self.abort_release == "back",
-            "lower_held": self.held_release == "lower",
-        }
 
     ch4_model: str = "ch4_various"
     """The chapter 4 network (a key of train.models) of the single-step rows: the thesis'
@@ -217,6 +214,42 @@ class Ch6TrialParams:
     head); collapse, only the boxes that collapse by the collapse-free criterion (off the
     shelf, dropped or tipped beyond trials.collapse_free), the thesis' trial notion (the
     pull_collapse head)."""
+
+    @property
+    def pull(self) -> PullExecution:
+        """How a pull is executed and judged (executed steps, search oracles, replays)."""
+        return PullExecution(
+            increment_m=self.pull_increment_m,
+            grasp_lift_m=self.grasp_lift_m,
+            return_aborted=self.abort_release == "back",
+            lower_held=self.held_release == "lower",
+            moved_threshold_m=self.moved_threshold_m,
+        )
+
+    @property
+    def search(self) -> SearchLimits:
+        """How far the search oracles search."""
+        return SearchLimits(
+            node_budget=self.search_node_budget,
+            same_m=self.search_same_m,
+            same_deg=self.search_same_deg,
+            cut_m=self.search_cut_m,
+            min_pixels=self.min_pixels,
+        )
+
+    @property
+    def levers(self) -> PullLevers:
+        """The pull planners' choices beyond Algorithm 1 (`*_pull*`, `*_box*` planners)."""
+        return PullLevers(
+            clear_hold_load=True,
+            learn_from_aborts=self.abort_response == "learn",
+            watch_m=self.pull_watch_m,
+            when_no_plan=self.when_no_plan,
+            idle_hold_share=self.idle_hold_share,
+            idle_hold_prob=self.idle_hold_prob,
+            score_over=self.score_over,
+            hold_feared=self.hold_feared,
+        )
 
 
 CH4_PLANNERS = ("risk", "random", "oracle")

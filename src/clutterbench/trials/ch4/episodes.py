@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from clutterbench.data.trial_scenes import draw_target, draw_trial_spec, policy_rng
+from clutterbench.data.trial_scenes import policy_rng
 from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.perception.depth_segmentation import shelf_roi
@@ -81,15 +81,8 @@ def run_ch4_episode(job: Ch4Job) -> EpisodeResult:
     cond: Ch4ConditionConfig = job.cond
     params: Ch4TrialParams = job.params
     physics: PhysicsConfig = job.physics
-    spec = draw_trial_spec(
-        cond.stream,
-        job.stream_cfg,
-        job.seed,
-        job.index,
-        physics,
-        job.camera,
-        job.max_attempts,
-    )
+    start = job.start
+    spec = start.spec()
     world = BoxWorld.from_spec(spec, physics, render=True)
     obs, seg = observe_and_segment(world, spec, job)
     log = EpisodeLog(record_images=job.record_images)
@@ -99,9 +92,7 @@ def run_ch4_episode(job: Ch4Job) -> EpisodeResult:
     boxes = match_segments(seg, obs.instance)  # the harness's, never the planner's
     target_box = target_k = None
     if cond.mode == "target":
-        target_box = draw_target(
-            job.seed, cond.stream, job.index, obs, params.min_target_pixels, spec
-        )
+        target_box = start.target(obs, params.min_target_pixels, spec)
         target_k = target_segment(seg, obs.instance, target_box)
     decision, chosen, risk, ties = _choose(job, spec, obs, seg, boxes, target_k)
     x_box = boxes[chosen[0]] if chosen[0] is not None else None

@@ -150,7 +150,6 @@ def draw_figure(job: Any, out_path: Path) -> None:
     target, the network's E / S / C for the supports of least risk (run in this process).
     The simulator and the trials' helpers load only when it is called: drawing a figure of
     given maps (`risk_figure`) loads no SAPIEN."""
-    from clutterbench.data.trial_scenes import draw_target, draw_trial_spec
     from clutterbench.errors import ClutterbenchError
     from clutterbench.planning.ch4.risk_planner import plan_risk
     from clutterbench.sim.physics import BoxWorld
@@ -160,18 +159,11 @@ def draw_figure(job: Any, out_path: Path) -> None:
 
     cond, params = job.cond, job.params
     ensure_renderer()
-    spec = draw_trial_spec(
-        cond.stream,
-        job.stream_cfg,
-        job.seed,
-        job.index,
-        job.physics,
-        job.camera,
-        job.max_attempts,
-    )
+    start = job.start
+    spec = start.spec()
     world = BoxWorld.from_spec(spec, job.physics, render=True)
     obs, seg = observe_and_segment(world, spec, job)
-    box = draw_target(job.seed, cond.stream, job.index, obs, params.min_target_pixels, spec)
+    box = start.target(obs, params.min_target_pixels, spec)
     k = target_segment(seg, obs.instance, box)
     if k is None or len(seg.ids) < 2:
         raise ClutterbenchError(f"figure: episode {job.index} has no target segment to draw")

@@ -10,6 +10,7 @@ from clutterbench.trials.core.jobs import ShelfJob
 if TYPE_CHECKING:
     from pathlib import Path
 
+    from clutterbench.data.trial_scenes import StreamStart
     from clutterbench.maniskill.config import ArmConfig
     from clutterbench.trials.config import Ch4ConditionConfig, Ch4TrialParams
 
@@ -26,3 +27,8 @@ class Ch4Job(ShelfJob):
     """The risk network's checkpoint (None: the condition's planner reads none)."""
     arm: ArmConfig
     """The Pandas' configuration (trials.arm), read by the arm executor."""
+
+    @property
+    def start(self) -> StreamStart:
+        """Its start: scene `index` of the condition's stream and its target's draw."""
+        return self.start_on(self.cond.stream)

@@ -18,17 +18,13 @@ from typing import Any
 import numpy as np
 
 from clutterbench.criteria import CollapseFreeConfig
-from clutterbench.data.trial_scenes import draw_target, draw_trial_spec
 from clutterbench.errors import ClutterbenchError
-from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.planning.ch6.extraction import Decision
 from clutterbench.planning.ch6.support import SupportParams
 from clutterbench.sim import benchmark
 from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
-from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.pull import SceneState, execute_pull, world_at
-from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch6.jobs import Ch6Job
 from clutterbench.trials.ch6.oracle import SearchOracle
@@ -45,123 +41,13 @@ from clutterbench.trials.ch6.planners import (  # noqa: F401  (register_planner,
     truth_maps_of,
 )
 from clutterbench.trials.ch6.planners import declared as planner_declared
-from clutterbench.trials.config import (
-    Ch6TrialParams,
-    ConditionConfig,
-    TrialsConfig,
-)
+from clutterbench.trials.ch6.seeing import Eyes
+from clutterbench.trials.ch6_groups import PullExecution
+from clutterbench.trials.config import Ch6TrialParams, ConditionConfig, TrialsConfig
 from clutterbench.trials.core.harness import DECISION_TOPIC, EpisodeLog, EpisodeResult
 from clutterbench.trials.core.jobs import shelf_fields
 from clutterbench.trials.core.judge import disturbance
 from clutterbench.trials.core.protocol import episode_end, judge_episode, judge_pull, step_notes
-
-
-def execute_decision(
-    world: BoxWorld,
-    obs: Observation,
-    decision: Decision,
-    planner: Any,
-    camera: CameraConfig,
-    params: Ch6TrialParams,
-    cp_max: float,
-    gone: frozenset[int],
-    log: EpisodeLog,
-    cf: CollapseFreeConfig,
-    t0: float = 0.0,
-    arm: tuple[SceneSpec, SceneState, ArmConfig] | None = None,
-    sensing: str = "ideal",
-) -> tuple[dict[str, Any], SceneState, float]:
-    """Execute one decision from the step's canonical start (`world`, fresh) and judge it:
-    pull in increments, checking the planner's collapse score before each (the first check
-    reads the observation the planner decided on, so a box its own rule rejects is never
-    picked and then aborted before motion), release, settle, judge. `arm`: (spec, state,
-    Pandas) to execute it arm-level instead (trials/arm/episodes.py; `world` then only pictures).
-    -> the step's record, the state it left, its duration (s)."""
-    box, hold = decision.pull, decision.hold
-    dt = world.cfg.timestep_s
-    monitor = getattr(planner, "collapse_score", None)
-    max_cp = 0.0
-
-    truth = truth_maps_of(planner)
-    limit = cp_max if decision.cp_max is None else decision.cp_max  # a least-risk pull's own
-
-    def score(done: int, now: Observation | None, t: float) -> bool:
-        nonlocal max_cp
-        if monitor is None:
-            return True
-        if truth is not None and done:  # truth maps of the present, mid-pull state
-            assert arm is None and now is not None, "truth maps run on the kinematic executor"
-            truth.at(SceneState.of(world), now.instance, world.held())
-        cp = float(monitor(obs if done == 0 else now, box, hold))
-        max_cp = max(max_cp, cp)
-        log.json(t, DECISION_TOPIC, {"box": box, "cp": round(cp, 4)})
-        return cp <= limit
-
-    arm_fields: dict[str, Any] = {}
-    if arm is None:
-        result = execute_pull(
-            world,
-            box,
-            hold,
-            params.pull_increment_m,
-            params.grasp_lift_m,
-            go_on=lambda done: score(
-                done,
-                observe(world, camera, sensing) if done and monitor else None,
-                t0 + world.steps_taken * dt,
-            ),
-            **params.release(),
-        )
-        state, elapsed = SceneState.of(world), world.steps_taken * dt
-    else:
-        result, arm_fields, state, elapsed = _execute_by_arm(
-            world, box, hold, camera, params, log, t0, arm, score, sensing
-        )
-    step = _judge(result, box, hold, gone, params, cf, by_arm=arm is not None)
-    record = {
-        "box": box,
-        "hold": hold,
-        "increments": result.increments,
-        "max_cp": round(max_cp, 4),
-    } | step
-    return record | step_notes(decision.state) | arm_fields, state, elapsed
-
-
-def _execute_by_arm(
-    world: BoxWorld,
-    box: int,
-    hold: int | None,
-    camera: CameraConfig,
-    params: Ch6TrialParams,
-    log: EpisodeLog,
-    t0: float,
-    arm: tuple[SceneSpec, SceneState, ArmConfig],
-    score: Callable[[int, Observation | None, float], bool],
-    sensing: str = "ideal",
-) -> tuple[Any, dict[str, Any], SceneState, float]:
-    """execute_decision's pull executed arm-level (trials/core/executors.py), checked by
-    `score` -> the pull's result, the arm's record fields, the state it left, its duration."""
-    from clutterbench.trials.core.executors import arm_pull
-
-    spec, start, arm_cfg = arm
-    done_by_arm = arm_pull(
-        spec,
-        start,
-        box,
-        hold,
-        params.pull_increment_m,
-        params.grasp_lift_m,
-        world.cfg,
-        arm_cfg,
-        log,
-        t0,
-        go_on=lambda done, now: score(done, now, t0),
-        camera=camera,
-        sensing=sensing,
-    )
-    result, arm_fields = done_by_arm.result, done_by_arm.fields
-    state, elapsed = done_by_arm.state, done_by_arm.elapsed_s
-    return result, arm_fields, state, elapsed
 
 
 def _judge(
@@ -169,30 +55,22 @@ def _judge(
     box: int,
     hold: int | None,
     gone: frozenset[int],
-    params: Ch6TrialParams,
+    pull: PullExecution,
     cf: CollapseFreeConfig,
     *,
     by_arm: bool,
 ) -> dict[str, Any]:
     """The executed pull judged: by the kinematic judge, or the arm's."""
     if not by_arm:
-        return judge_pull(result, box, hold, gone, params.moved_threshold_m, cf)
+        return judge_pull(result, box, hold, gone, pull.moved_threshold_m, cf)
     from clutterbench.trials.core.executors import judge_arm_step
 
-    return judge_arm_step(result, box, hold, gone, params.moved_threshold_m, cf)
+    return judge_arm_step(result, box, hold, gone, pull.moved_threshold_m, cf)
 
 
 def job_spec(job: Ch6Job) -> SceneSpec:
     """The settled scene `job.index` of the job's stream."""
-    return draw_trial_spec(
-        job.stream,
-        job.stream_cfg,
-        job.seed,
-        job.index,
-        job.physics,
-        job.camera,
-        job.max_attempts,
-    )
+    return job.start.spec()
 
 
 def run_ch6_episode(job: Ch6Job) -> EpisodeResult:
@@ -209,7 +87,8 @@ def run_extraction(spec: SceneSpec, job: Ch6Job, target: int | None = None) -> E
     while not episode.done:
         episode.before_decision(planner)
         try:
-            decision = planner.decide(episode.obs, episode.target, frozenset(episode.blocked))
+            target = episode.eyes.pointed(episode.target)
+            decision = planner.decide(episode.obs, target, frozenset(episode.blocked))
         except ValueError:  # every action the planner would take is rejected by its own rule
             episode.give_up()
             break
@@ -234,19 +113,13 @@ class Extraction:
         self.state = SceneState.start(spec)
         self.world = world_at(spec, self.state, self.physics, render=True)
         self.log = EpisodeLog(record_images=job.record_images)
-        self.obs = observe(self.world, self.camera, job.sensing)
+        self.eyes = Eyes(job, spec)
+        self.obs = self.eyes.look(self.world)
         self.log.scene(
             0.0, spec.sizes_m, spec.shelf.boards(), self.obs.camera, self.obs.depth_m.shape
         )
-        if target is None:
-            target = draw_target(
-                job.seed,
-                job.stream,
-                job.index,
-                self.obs,
-                self.params.min_target_pixels,
-                spec,
-            )
+        if target is None:  # drawn from the simulator's masks: the same under every perception
+            target = job.start.target(self.eyes.truth, self.params.min_target_pixels, spec)
         self.target = target
         self.steps: list[dict[str, Any]] = []
         self.blocked: set[int] = set()
@@ -278,27 +151,15 @@ class Extraction:
         """Execute `decision` from the step's canonical start, judge it, and decide whether
         the episode goes on (then the next step's canonical start is built) -> the step."""
         assert not self.done, "the episode has ended"
-        job, params, spec = self.job, self.params, self.spec
+        params, spec = self.params, self.spec
         t = self.t
         self.log.json(
             t, DECISION_TOPIC, {"pull": decision.pull, "hold": decision.hold} | decision.state
         )
-        arm = job.executor == "arm"
-        step, self.state, elapsed = execute_decision(
-            self.world,
-            self.obs,
-            decision,
-            planner,
-            self.camera,
-            params,
-            job.cp_max,
-            self.state.removed,
-            self.log,
-            job.collapse_free,
-            t,
-            arm=(spec, self.state, job.arm) if arm else None,
-            sensing=job.sensing,
-        )
+        grasped = self.eyes.grasped(decision.pull), self.eyes.grasped(decision.hold)
+        if grasped[0] is None or (decision.hold is not None and grasped[1] is None):
+            return self._missed_grasp(decision)
+        step, self.state, elapsed = self.execute_decision(decision, planner, grasped)
         self.steps.append(step)
         self.t = t + elapsed
         if step["aborted_before_motion"] or step["aborted_after_motion"]:
@@ -312,10 +173,116 @@ class Extraction:
         if self.end is None:
             # the next step's canonical start
             self.world = world_at(spec, self.state, self.physics, render=True)
-            self.obs = observe(self.world, self.camera, self.job.sensing)
+            self.obs = self.eyes.look(self.world)
             if len(self.steps) >= params.max_steps:
                 self.end = "max_steps"
         return step
+
+    def _missed_grasp(self, decision: Decision) -> dict[str, Any]:
+        """A decision whose grasp takes no box (a segment on no box): a failed step that moved
+        nothing; the episode ends there."""
+        step = judge_pull(None, -1, None, self.state.removed, 0.0, self.job.collapse_free)
+        step |= {"aborted_before_motion": False, "judged": True, "counted": True}
+        step |= {"strict_counted": True, "success": False, "strict_success": False}
+        step |= {"success_held": False, "grasp": "no box"}
+        seen = {"seen_pull": decision.pull, "seen_hold": decision.hold}
+        step = {"box": None, "hold": None, "increments": 0, "max_cp": 0.0} | step | seen
+        self.steps.append(step)
+        self.end = "missed_grasp"
+        return step
+
+    def execute_decision(
+        self, decision: Decision, planner: Any, grasped: tuple[int, int | None] | None = None
+    ) -> tuple[dict[str, Any], SceneState, float]:
+        """Execute one decision from the step's canonical start (`self.world`, fresh) and
+        judge it: pull in increments, checking the planner's collapse score before each (the
+        first check reads the observation the planner decided on, so a box its own rule
+        rejects is never picked and then aborted before motion), release, settle, judge.
+        With the job's executor `arm`, executed arm-level by Pandas from the step's start
+        (trials/arm/episodes.py; `self.world` then only pictures).
+        `grasped`: the boxes the grasps of the decision's pull and hold take (None: the
+        decision's ids, the simulator's masks).
+        -> the step's record, the state it left, its duration (s)."""
+        job, world, obs, pull = self.job, self.world, self.obs, self.params.pull
+        seen_box, seen_hold = decision.pull, decision.hold  # what the planner's monitor reads
+        box, hold = grasped or (seen_box, seen_hold)
+        by_arm, t0, gone = job.executor == "arm", self.t, self.state.removed
+        dt = world.cfg.timestep_s
+        monitor = getattr(planner, "collapse_score", None)
+        max_cp = 0.0
+
+        truth = truth_maps_of(planner)
+        # the job's abort threshold, or a least-risk pull's own
+        limit = job.cp_max if decision.cp_max is None else decision.cp_max
+
+        def score(done: int, now: Observation | None, t: float) -> bool:
+            nonlocal max_cp
+            if monitor is None:
+                return True
+            if truth is not None and done:  # truth maps of the present, mid-pull state
+                assert not by_arm and now is not None, "truth maps run on the kinematic executor"
+                truth.at(SceneState.of(world), now.instance, world.held())
+            cp = float(monitor(obs if done == 0 else now, seen_box, seen_hold))
+            max_cp = max(max_cp, cp)
+            self.log.json(t, DECISION_TOPIC, {"box": seen_box, "cp": round(cp, 4)})
+            return cp <= limit
+
+        arm_fields: dict[str, Any] = {}
+        if not by_arm:
+            result = execute_pull(
+                world,
+                box,
+                hold,
+                pull.increment_m,
+                pull.grasp_lift_m,
+                go_on=lambda done: score(
+                    done,
+                    self.eyes.look(world) if done and monitor else None,
+                    t0 + world.steps_taken * dt,
+                ),
+                **pull.release(),
+            )
+            state, elapsed = SceneState.of(world), world.steps_taken * dt
+        else:
+            result, arm_fields, state, elapsed = self._execute_by_arm(decision, score)
+        step = _judge(result, box, hold, gone, pull, job.collapse_free, by_arm=by_arm)
+        record = {
+            "box": box,
+            "hold": hold,
+            "increments": result.increments,
+            "max_cp": round(max_cp, 4),
+        } | step
+        if (seen_box, seen_hold) != (box, hold):  # the planner's names of what it grasped
+            record |= {"seen_pull": seen_box, "seen_hold": seen_hold}
+        return record | step_notes(decision.state) | arm_fields, state, elapsed
+
+    def _execute_by_arm(
+        self, decision: Decision, score: Callable[[int, Observation | None, float], bool]
+    ) -> tuple[Any, dict[str, Any], SceneState, float]:
+        """execute_decision's pull executed arm-level (trials/core/executors.py) from the
+        step's start, checked by `score` -> the pull's result, the arm's record fields, the
+        state it left, its duration."""
+        from clutterbench.trials.core.executors import arm_pull
+
+        pull, t0 = self.params.pull, self.t
+        done_by_arm = arm_pull(
+            self.spec,
+            self.state,
+            decision.pull,
+            decision.hold,
+            pull.increment_m,
+            pull.grasp_lift_m,
+            self.world.cfg,
+            self.job.arm,
+            self.log,
+            t0,
+            go_on=lambda done, now: score(done, now, t0),
+            camera=self.camera,
+            sensing=self.job.sensing,
+        )
+        result, arm_fields = done_by_arm.result, done_by_arm.fields
+        state, elapsed = done_by_arm.state, done_by_arm.elapsed_s
+        return result, arm_fields, state, elapsed
 
     def result(self, planner: Any) -> EpisodeResult:
         """The episode's record (trials/core/records.py) and its MCAP events."""
@@ -343,7 +310,7 @@ class Extraction:
             "n_objects": spec.n,
             "target": self.target,
             "planner": job.planner,
-            "perception": "instance",
+            "perception": job.perception,
             "rule": job.rule if declared.algorithm1 else None,
             "support_method": declared.support_method(job.rule, job.params.pull_map_meaning)
             if declared.algorithm1
@@ -363,6 +330,7 @@ class Extraction:
             record["executor"] = "arm"
         if job.sensing != "ideal":  # ... and so do ideal ones
             record["sensing"] = job.sensing
+        record |= self.eyes.record_fields()
         if truth is not None:
             record["truth_simulations"] = truth.simulations
         if isinstance(planner, SearchOracle):
@@ -455,6 +423,12 @@ def condition_jobs(
             f"trials.conditions.{name}: planner {cond.planner} reads physics-truth maps, which "
             "run on the kinematic executor only (executor: kinematic)"
         )
+    if cond.perception == "depth" and (declared.world == "truth" or cond.executor == "arm"):
+        raise ClutterbenchError(
+            f"trials.conditions.{name}: perception depth is for planners that read what a "
+            f"robot sees ({cond.planner} reads the world: {declared.world}) on the kinematic "
+            f"executor ({cond.executor})"
+        )
     support, cp_max = planner_support(thresholds, cond.planner, cond.rule, trials.ch6)
     box, box_cp_max = box_fields(thresholds, cond.planner, trials.ch6)
     cp_max = box_cp_max if box_cp_max is not None else cp_max
@@ -503,6 +477,7 @@ def ch6_jobs(
             executor=cond.executor,
             arm=trials.arm,
             sensing=cond.sensing,
+            perception=cond.perception,
             **fields,
         )
         for i in range(cond.episodes)

@@ -10,6 +10,7 @@ from clutterbench.trials.core.jobs import ShelfJob
 if TYPE_CHECKING:
     from pathlib import Path
 
+    from clutterbench.data.trial_scenes import StreamStart
     from clutterbench.maniskill.config import ArmConfig
     from clutterbench.planning.ch6.support import SupportParams
     from clutterbench.trials.config import Ch6TrialParams
@@ -41,6 +42,9 @@ class Ch6Job(ShelfJob):
     """The Pandas' configuration (trials.arm), read by the arm executor."""
     sensing: str = "ideal"
     """The depth sensor model its pictures pass through (sim/sensor.py PRESETS)."""
+    perception: str = "instance"
+    """Its planner's object masks: the simulator's instance image, or segments of the sensed
+    depth (depth; trials/ch6/seeing.py)."""
     box_head_path: Path | None = None
     """The box head's checkpoint, for the box planners (None: none)."""
     box_edge_threshold: float | None = None
@@ -54,3 +58,8 @@ class Ch6Job(ShelfJob):
     """Their learned contact's weights (trials.ch6.box_contact learned: head contact logit,
     fitted and touching, fitted and not, bias; the support stage's fit on validation
     scenes); None: the edges take the box head's contact."""
+
+    @property
+    def start(self) -> StreamStart:
+        """Its start: scene `index` of stream `stream` and its target's draw."""
+        return self.start_on(self.stream)

@@ -19,7 +19,7 @@ from clutterbench.sim.config import CameraConfig, PhysicsConfig
 from clutterbench.sim.pull import SceneState, execute_pull, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.config import Ch6TrialParams
+from clutterbench.trials.ch6_groups import PullExecution, SearchLimits
 from clutterbench.trials.core.protocol import judge_pull
 
 Action = tuple[int, "int | None"]
@@ -31,8 +31,8 @@ class SearchOracle:
     present state with the trials' own step (`protocol.execute_pull` in a world built by
     `protocol.world_at`, released and judged as an executed step is), for a sequence of
     clean steps that ends with the target out. A state is what the next step depends on:
-    the boxes out and where the rest stand, two states within `search_same_m` and
-    `search_same_deg` of each other taken for one (`SeenStates`); every clean action from a
+    the boxes out and where the rest stand, two states within `limits.same_m` and
+    `limits.same_deg` of each other taken for one (`SeenStates`); every clean action from a
     state is searched, every clean hold of a pull included, so up to the node budget and
     that tolerance the search finds a clean sequence whenever one exists.
 
@@ -54,12 +54,14 @@ class SearchOracle:
         spec: SceneSpec,
         physics: PhysicsConfig,
         camera: CameraConfig,
-        params: Ch6TrialParams,
+        pull: PullExecution,
+        limits: SearchLimits,
         holding: bool,
         cf: CollapseFreeConfig,
         hold_any_pull: bool = False,
     ):
-        self.spec, self.physics, self.camera, self.params = spec, physics, camera, params
+        self.spec, self.physics, self.camera = spec, physics, camera
+        self.pull, self.limits = pull, limits
         self.holding, self.cf = holding, cf
         self.hold_any_pull = holding and hold_any_pull
         self.state: SceneState | None = None  # set by the harness before each decision
@@ -74,17 +76,17 @@ class SearchOracle:
     ) -> tuple[dict[str, Any], SceneState | None, np.ndarray | None]:
         """One step from `state` as the harness executes it -> (its judgement, the state it
         leaves, (N,) displacements). With `cut_short`, a pull during which another box (not
-        held) has already moved more than `search_cut_m` is stopped there and judged a
+        held) has already moved more than `limits.cut_m` is stopped there and judged a
         failure (no state, no displacements): that box does not come back within the moved
         threshold, and most simulated pulls in a pile fail, so this is most of the search's
         saving."""
         world = world_at(self.spec, state, self.physics)
-        p = self.params
+        p = self.pull
         box, hold = action
         watch = [k for k in range(self.spec.n) if k not in state.removed and k not in action]
 
         def go_on(done: int) -> bool:
-            if done and watch and np.max(world.displacements()[watch]) > p.search_cut_m:
+            if done and watch and np.max(world.displacements()[watch]) > self.limits.cut_m:
                 raise _CutShort
             return True
 
@@ -93,7 +95,7 @@ class SearchOracle:
                 world,
                 box,
                 hold,
-                p.pull_increment_m,
+                p.increment_m,
                 p.grasp_lift_m,
                 go_on if cut_short else None,
                 **p.release(),
@@ -106,7 +108,7 @@ class SearchOracle:
     def candidates(self, state: SceneState, target: int) -> list[int]:
         """What a planner could pull in `state`: the visible boxes and the target."""
         obs = observe(world_at(self.spec, state, self.physics, render=True), self.camera)
-        ids, _ = visible_objects(obs, self.params.min_pixels)
+        ids, _ = visible_objects(obs, self.limits.min_pixels)
         return sorted(set(ids) | {target})
 
     def search(
@@ -114,20 +116,20 @@ class SearchOracle:
     ) -> tuple[list | None, int, bool]:
         """(plan: [(action, state after it)] or None, nodes expanded, budget exhausted): a
         sequence of steps each clean under the criterion `key` ("strict_success", pulls cut
-        short once another box moved `search_cut_m`; or "success", collapse-free, pulls never
+        short once another box moved `limits.cut_m`; or "success", collapse-free, pulls never
         cut short: a box that slid far may still be collapse-free).
 
         Complete up to the node budget and the state tolerance: every clean action from a
         state is a child (every clean hold of a pull, not only the first), tried in order,
         and a state is skipped only when one seen before has the same boxes out and every
-        other box within `search_same_m` / `search_same_deg` of where it stands here
+        other box within `limits.same_m` / `limits.same_deg` of where it stands here
         (`SeenStates`): two orders that take out the same boxes may leave the rest standing
         differently, and the next step depends on that."""
         cut = key == "strict_success"
-        seen = SeenStates(self.params.search_same_m, self.params.search_same_deg)
+        seen = SeenStates(self.limits.same_m, self.limits.same_deg)
         seen.add(state)
         nodes = 0
-        budget = self.params.search_node_budget
+        budget = self.limits.node_budget
 
         def visit(now: SceneState) -> list | None:
             nonlocal nodes
@@ -140,7 +142,7 @@ class SearchOracle:
                 return [((target, None), after)]
             # The boxes the target's pull disturbed: what stands in its way, and the holds
             # most likely to save it, so they are tried first.
-            in_way = np.nan_to_num(disp, nan=0.0) > self.params.moved_threshold_m
+            in_way = np.nan_to_num(disp, nan=0.0) > self.pull.moved_threshold_m
             if self.holding:
                 others = sorted((b for b in boxes if b != target), key=lambda b: (not in_way[b], b))
                 for h in others:

@@ -53,16 +53,15 @@ class EstimatedWorldModel:
         self.search_cls = search_cls
         """The search: trials.ch6.SearchOracle, passed in (trials/ch6/episodes.py imports this
         module; importing it back would be a loop)."""
+        self.pull, self.settle_s = params.pull, params.physics_depth_settle_s
         # the search's node budget is the planner's own (a robot's time per decision)
-        self.params = dataclasses.replace(
-            params, search_node_budget=params.physics_depth_node_budget
+        self.limits = dataclasses.replace(
+            params.search, node_budget=params.physics_depth_node_budget
         )
         self.last: EstimatedScene | None = None
 
     def scene(self, est: BoxEstimate) -> EstimatedScene:
-        self.last = scene_of(
-            est, self.shelf, self.camera, self.physics, self.params.physics_depth_settle_s
-        )
+        self.last = scene_of(est, self.shelf, self.camera, self.physics, self.settle_s)
         return self.last
 
     def __call__(self, est: BoxEstimate, target: int) -> tuple[list | None, dict[str, Any]]:
@@ -72,7 +71,7 @@ class EstimatedWorldModel:
             return None, info | {"target_dropped": True}
         t = scene.kept.index(target)
         oracle = self.search_cls(
-            scene.spec, self.physics, self.camera, self.params, self.holding, self.cf
+            scene.spec, self.physics, self.camera, self.pull, self.limits, self.holding, self.cf
         )
         plan, found, search_info = oracle.plan_from(SceneState.start(scene.spec), t)
         info |= search_info | {"found": found}
@@ -107,9 +106,15 @@ def box_errors(
 def estimate_errors(est: BoxEstimate, spec: SceneSpec, poses: np.ndarray) -> dict[str, Any]:
     """The estimate of one observation against the true boxes at `poses` (all in the scene):
     per estimated box [box, centre mm, size mm, tilt deg, yaw deg], and the boxes missing
-    (not estimated: hidden, or too few pixels)."""
+    (not estimated: hidden, or too few pixels). Under depth perception an estimate may stand
+    on a segment that names no box's own id (perception/seen.py: a second piece of a box, or
+    no box): those are counted as `spurious`, compared with nothing."""
     rows = []
+    spurious = 0
     for j, box in enumerate(est.ids):
+        if not 0 <= box < spec.n:
+            spurious += 1
+            continue
         e = box_errors(est.sizes_m[j], est.poses[j], spec.sizes_m[box], poses[box])
         rows.append(
             [
@@ -120,7 +125,8 @@ def estimate_errors(est: BoxEstimate, spec: SceneSpec, poses: np.ndarray) -> dic
                 round(e["yaw_deg"], 2),
             ]
         )
-    return {"n_boxes": spec.n, "missing": spec.n - est.n, "boxes": rows}
+    out = {"n_boxes": spec.n, "missing": spec.n - len(rows), "boxes": rows}
+    return out | ({"spurious": spurious} if spurious else {})
 
 
 def estimate_record(planner: Any, spec: SceneSpec) -> dict[str, Any]:

@@ -55,7 +55,7 @@ class TruthCollapseMaps:
         self.pull = pull
         """(increment_m, lift_m) of the trials' pull: maps of pulling; None: of deleting."""
         self.release = dict(release or {})
-        """execute_pull's release options (trials.ch6.release()): as the trials execute."""
+        """execute_pull's release options (trials.ch6's pull.release()): as the trials execute."""
         self.collapse = collapse
         """With `pull`: mark only the boxes the pull collapses by this collapse-free
         criterion (criteria.py), not every box it moves (None)."""

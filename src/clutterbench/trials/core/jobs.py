@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from clutterbench.criteria import CollapseFreeConfig
+    from clutterbench.data.trial_scenes import StreamStart
     from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
     from clutterbench.trials.config import SceneStreamConfig, TrialsConfig
 
@@ -56,6 +57,20 @@ class ShelfJob(EpisodeJob):
     """The camera the episode observes with."""
     max_attempts: int
     """How many draws a scene may take to settle before the stream gives up."""
+
+    def start_on(self, stream: str) -> StreamStart:
+        """The episode's start: scene `index` of the stream named `stream`, as drawn here."""
+        from clutterbench.data.trial_scenes import StreamStart
+
+        return StreamStart(
+            stream,
+            self.stream_cfg,
+            self.seed,
+            self.index,
+            self.physics,
+            self.camera,
+            self.max_attempts,
+        )
 
 
 def shelf_fields(

@@ -58,10 +58,11 @@ nothing under it (neither a success nor a failure: the episode goes on). `others
 the strict criterion's, `collapse_free` the other's; `*_held` is the strict judgement while
 the second arm still held. `box_motion`: per box, its motion over the step (criteria.py)."""
 
-EPISODE_ENDS = ("target_out", "collapse", "target_fell", "gave_up", "max_steps")
+EPISODE_ENDS = ("target_out", "collapse", "target_fell", "gave_up", "max_steps", "missed_grasp")
 """Why an episode ended: the target left the shelf after a clean step; a step moved another
 box beyond the threshold; the target left the shelf without being pulled; the planner had no
-action left; the attempt cap."""
+action left; the attempt cap; the planner pulled (or held) a segment of depth perception whose
+grasp takes no box."""
 
 
 def judge_pull(

@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from clutterbench.config import (
     BaseConfig,
@@ -28,6 +28,9 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.config import SceneStreamConfig, TrialsConfig
+
+if TYPE_CHECKING:
+    from clutterbench.data.trial_scenes import StreamStart
 
 DEFAULT_STREAM = "ch6_3_10"
 """The environments' default: Table 6.3's 3-10 box mix."""
@@ -48,39 +51,40 @@ class StreamSource:
     camera: CameraConfig
     trials: TrialsConfig
 
+    def start(self, index: int) -> StreamStart:
+        """Episode `index`'s start on the stream (its scene's and its target's draws)."""
+        from clutterbench.data.trial_scenes import StreamStart
+
+        return StreamStart(
+            self.name,
+            self.cfg,
+            self.seed,
+            index,
+            self.physics,
+            self.camera,
+            self.trials.max_attempts,
+        )
+
     def spec(self, index: int) -> SceneSpec:
         """Scene `index` of the stream, settled: its canonical start (cached per process)."""
         if not isinstance(index, int) or index < 0:
             raise ClutterbenchError(f"episode {index!r}: an episode index is an integer >= 0")
         key = (self.name, repr(self.cfg), self.seed, self.physics, self.camera, index)
         if key not in _SPECS:
-            from clutterbench.data.trial_scenes import draw_trial_spec
-
             if len(_SPECS) > 256:
                 _SPECS.clear()
-            _SPECS[key] = draw_trial_spec(
-                self.name,
-                self.cfg,
-                self.seed,
-                index,
-                self.physics,
-                self.camera,
-                self.trials.max_attempts,
-            )
+            _SPECS[key] = self.start(index).spec()
         return _SPECS[key]
 
     def episode(self, index: int) -> tuple[SceneSpec, int]:
         """Scene `index` of the stream and its target (the trials' target stream, drawn from
         the canonical start's observation)."""
-        from clutterbench.data.trial_scenes import draw_target
         from clutterbench.sim.pull import SceneState, world_at
         from clutterbench.sim.render import observe
 
         spec = self.spec(index)  # the episode's canonical start, as trials.ch6.Extraction's
         obs = observe(world_at(spec, SceneState.start(spec), self.physics, True), self.camera)
-        target = draw_target(
-            self.seed, self.name, index, obs, self.trials.ch6.min_target_pixels, spec
-        )
+        target = self.start(index).target(obs, self.trials.ch6.min_target_pixels, spec)
         return spec, target
 
 

@@ -14,7 +14,7 @@ from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.sim.config import PhysicsConfig
 from clutterbench.sim.pull import SceneState, execute_pull, world_at
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.config import Ch6TrialParams
+from clutterbench.trials.ch6_groups import PullExecution
 from clutterbench.trials.core.protocol import episode_end, judge_episode, judge_pull
 from clutterbench.trials.noise.draws import Draw
 
@@ -34,7 +34,7 @@ def replay_episode(
     spec: SceneSpec,
     draw: Draw,
     physics: PhysicsConfig,
-    params: Ch6TrialParams,
+    pull: PullExecution,
     cf: CollapseFreeConfig,
 ) -> Replayed:
     """`record`'s steps (box, hold, increments) replayed from `spec`'s start in the world of
@@ -48,7 +48,7 @@ def replay_episode(
     end = None
     for i, rec in enumerate(record["steps"]):
         world = world_at(spec_d, draw.start(state, i), physics_d)
-        step = replay_step(world, rec, state.removed, params, cf)
+        step = replay_step(world, rec, state.removed, pull, cf)
         steps.append(step)
         state = SceneState.of(world)
         out = target in state.removed
@@ -66,7 +66,7 @@ def replay_step(
     world: Any,
     rec: Mapping[str, Any],
     gone: frozenset[int],
-    params: Ch6TrialParams,
+    pull: PullExecution,
     cf: CollapseFreeConfig,
 ) -> dict[str, Any]:
     """One recorded step in `world` (freshly built): its pull stopped after the recorded
@@ -79,12 +79,12 @@ def replay_step(
         world,
         box,
         hold,
-        params.pull_increment_m,
-        params.grasp_lift_m,
+        pull.increment_m,
+        pull.grasp_lift_m,
         (lambda done: done < k) if aborted else None,
-        **params.release(),
+        **pull.release(),
     )
-    step = judge_pull(result, box, hold, gone, params.moved_threshold_m, cf)
+    step = judge_pull(result, box, hold, gone, pull.moved_threshold_m, cf)
     return {"box": box, "hold": hold} | step
 
 

@@ -68,7 +68,9 @@ def register_robust(cfg: NoiseConfig, seed: int) -> None:
                 draw(cfg, seed, job.stream, job.index, k, spec.n, SEARCH)
                 for k in range(cfg.robust_draws)
             ]
-            fields = {f: getattr(oracle, f) for f in ("spec", "physics", "camera", "params")}
+            fields = {
+                f: getattr(oracle, f) for f in ("spec", "physics", "camera", "pull", "limits")
+            }
             return RobustSearchOracle(
                 **fields,
                 holding=oracle.holding,

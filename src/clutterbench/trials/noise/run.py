@@ -55,7 +55,7 @@ def replay_job(job: ReplayJob) -> list[tuple[bool, bool]]:
     out = []
     for k in range(job.noise.draws):
         d = draw(job.noise, ep.seed, ep.stream, ep.index, k, spec.n, REPLAY)
-        r = replay_episode(job.record, spec, d, ep.physics, ep.params, ep.collapse_free)
+        r = replay_episode(job.record, spec, d, ep.physics, ep.params.pull, ep.collapse_free)
         out.append((r.success, r.strict_success))
     return out
 

@@ -16,7 +16,6 @@ from clutterbench.trials.ch6.planners._common import (
     box_fusion,
     box_thresholds,
     chosen_support,
-    pull_levers,
     truth_maps_of,
 )
 from clutterbench.trials.ch6.planners._registry import (
@@ -43,7 +42,6 @@ __all__ = [
     "load_planners",
     "make_planner",
     "planner_info",
-    "pull_levers",
     "register_planner",
     "truth_maps_of",
 ]

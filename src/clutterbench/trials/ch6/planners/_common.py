@@ -1,6 +1,6 @@
 """What several ch. 6 planner modules share: the thresholds the support stage chose on
-validation scenes (a support rule's, the box head's, the fusion's), the pull planners'
-levers beyond Algorithm 1, and the truth maps a planner reads."""
+validation scenes (a support rule's, the box head's, the fusion's) and the truth maps a
+planner reads (the pull planners' levers beyond Algorithm 1: trials.ch6's `levers`)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,6 @@ from clutterbench.errors import ClutterbenchError
 if TYPE_CHECKING:
     from clutterbench.planning.ch6.support import SupportParams
     from clutterbench.trials.ch6.truth_maps import TruthCollapseMaps
-    from clutterbench.trials.config import Ch6TrialParams
 
 BOX_HEAD = Path("models/box_head/best.pt")
 """The box planners' per-box head (stage box_head)."""
@@ -77,23 +76,6 @@ def box_fusion(
             f"{path}: no box-head fusion for the {head} head with the {contact} contact "
             f"({exc}); rerun the support stage after box_head"
         ) from None
-
-
-def pull_levers(params: Ch6TrialParams) -> dict[str, Any]:
-    """The pull planners' choices beyond Algorithm 1 (trials.ch6; the thesis-faithful
-    planners take CollapseGraphPlanner's defaults): clear the held box's load first, learn
-    from aborts, watch the pull, the no-plan response, the idle hold, whose shares the score
-    takes, and holding a feared box."""
-    return {
-        "clear_hold_load": True,
-        "learn_from_aborts": params.abort_response == "learn",
-        "watch_m": params.pull_watch_m,
-        "when_no_plan": params.when_no_plan,
-        "idle_hold_share": params.idle_hold_share,
-        "idle_hold_prob": params.idle_hold_prob,
-        "score_over": params.score_over,
-        "hold_feared": params.hold_feared,
-    }
 
 
 def truth_maps_of(planner: Any) -> TruthCollapseMaps | None:

@@ -9,13 +9,11 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from clutterbench.data.trial_params import PULL_MAP_HEADS
-from clutterbench.trials.ch6.planners._common import pull_levers
 from clutterbench.trials.ch6.planners._registry import register_planner
 
 if TYPE_CHECKING:
     from clutterbench.sim.spec import SceneSpec
     from clutterbench.trials.ch6.jobs import Ch6Job
-    from clutterbench.trials.config import Ch6TrialParams
 
 ONE_ARM = {"baseline": "physics_from_depth"}
 HOLDING = {"holds": True, "baseline": "physics_from_depth_hold"}
@@ -40,18 +38,19 @@ def cpg_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec | None = None, pull
     from clutterbench.planning.ch6.extraction import CollapseGraphPlanner
     from clutterbench.trials.ch6.truth_maps import TruthCollapseMaps
 
-    params: Ch6TrialParams = job.params
+    params = job.params
     if spec is None:
         head = PULL_MAP_HEADS[params.pull_map_meaning] if pull else "deletion"
         predictor: Any = load_predictor(job.model_path, job.camera.image_size, head)
     else:
-        action = (params.pull_increment_m, params.grasp_lift_m) if pull else None
+        how = params.pull
+        action = (how.increment_m, how.grasp_lift_m) if pull else None
         falls = job.collapse_free if pull and params.pull_map_meaning == "collapse" else None
         predictor = TruthCollapseMaps(
-            spec, job.physics, params.moved_threshold_m, action, falls, params.release()
+            spec, job.physics, how.moved_threshold_m, action, falls, how.release()
         )
     simulate_hold = spec is not None and pull and bimanual and params.truth_hold == "simulate"
-    levers = pull_levers(params) if pull else {}
+    levers = params.levers.kwargs() if pull else {}
     if pull and spec is not None:
         levers["watch_m"] = None  # truth maps already know the pull in progress
     return CollapseGraphPlanner(

@@ -10,13 +10,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from clutterbench.data.trial_params import PULL_MAP_HEADS
-from clutterbench.trials.ch6.planners._common import pull_levers
 from clutterbench.trials.ch6.planners._registry import register_planner
 
 if TYPE_CHECKING:
     from clutterbench.sim.spec import SceneSpec
     from clutterbench.trials.ch6.jobs import Ch6Job
-    from clutterbench.trials.config import Ch6TrialParams
 
 BOX = {"networks": frozenset({"cp", "box_head"}), "cost": "network"}
 FUSED = {"networks": frozenset({"cp", "box_head"}), "world": "fitted", "cost": "search"}
@@ -34,7 +32,7 @@ def box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = Fa
     from clutterbench.collapse.box_predict import BoxMaps, FusedBoxMaps
     from clutterbench.planning.ch6.extraction import CollapseGraphPlanner
 
-    params: Ch6TrialParams = job.params
+    params = job.params
     assert job.box_head_path is not None and job.box_edge_threshold is not None, job.planner
     head = PULL_MAP_HEADS[params.pull_map_meaning]
     args = (job.model_path, job.box_head_path, job.camera, head, job.box_edge_threshold)
@@ -53,7 +51,12 @@ def box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = Fa
     else:
         maps = BoxMaps.from_paths(*args)
     return CollapseGraphPlanner(
-        maps, job.support, job.cp_max, params.min_pixels, bimanual=bimanual, **pull_levers(params)
+        maps,
+        job.support,
+        job.cp_max,
+        params.min_pixels,
+        bimanual=bimanual,
+        **params.levers.kwargs(),
     )
 
 
@@ -74,9 +77,9 @@ def fitted_pull(job: Ch6Job, spec: SceneSpec, head: str):
     from clutterbench.sim.pull import SceneState
     from clutterbench.trials.ch6.truth_maps import TruthCollapseMaps
 
-    params: Ch6TrialParams = job.params
+    params, how = job.params, job.params.pull
     estimate = make_estimator(job.stream_cfg.catalogue, params.min_pixels)
-    action = (params.pull_increment_m, params.grasp_lift_m)
+    action = (how.increment_m, how.grasp_lift_m)
     falls = job.collapse_free if head == "pull_collapse" else None
     cache: dict[int, list[tuple[list[int], Any]]] = {}  # the last observation's fits and maps
     touching: dict[int, list[list[tuple[int, int]]]] = {}  # and their settled contacts
@@ -98,12 +101,7 @@ def fitted_pull(job: Ch6Job, spec: SceneSpec, head: str):
                 params.fit_noise_mm / 1000.0,
             ):
                 maps = TruthCollapseMaps(
-                    scene.spec,
-                    job.physics,
-                    params.moved_threshold_m,
-                    action,
-                    falls,
-                    params.release(),
+                    scene.spec, job.physics, how.moved_threshold_m, action, falls, how.release()
                 )
                 maps.at(SceneState.start(scene.spec), np.zeros(obs.depth_m.shape, np.uint8))
                 fits.append(([int(b) for b in scene.spec.meta["ids"]], maps))

@@ -12,7 +12,10 @@ ORACLE = {"world": "truth", "role": "oracle", "cost": "search"}
 def _oracle(job, spec):
     from clutterbench.trials.ch6.oracle import SearchOracle
 
-    return SearchOracle(spec, job.physics, job.camera, job.params, False, job.collapse_free)
+    params = job.params
+    return SearchOracle(
+        spec, job.physics, job.camera, params.pull, params.search, False, job.collapse_free
+    )
 
 
 @register_planner(
@@ -27,7 +30,8 @@ def _oracle_hold(job, spec):
         spec,
         job.physics,
         job.camera,
-        job.params,
+        job.params.pull,
+        job.params.search,
         True,
         job.collapse_free,
         hold_any_pull=True,

@@ -12,7 +12,6 @@ from clutterbench.trials.ch6.planners._registry import register_planner
 if TYPE_CHECKING:
     from clutterbench.sim.spec import SceneSpec
     from clutterbench.trials.ch6.jobs import Ch6Job
-    from clutterbench.trials.config import Ch6TrialParams
 
 FITTED = {"world": "fitted", "cost": "search"}
 
@@ -28,7 +27,7 @@ def physics_from_depth_planner(job: Ch6Job, spec: SceneSpec, holding: bool):
     from clutterbench.trials.ch6.oracle import SearchOracle
     from clutterbench.trials.ch6.physics_model import EstimatedWorldModel
 
-    params: Ch6TrialParams = job.params
+    params = job.params
     model = EstimatedWorldModel(
         spec.shelf,
         job.camera,
