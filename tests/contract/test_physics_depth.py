@@ -63,6 +63,28 @@ def test_a_box_seen_head_on_is_fitted_in_place(physics):
         assert e["size_m"] <= 1e-9, (box, e)
 
 
+def test_a_fit_a_sensed_image_defeats_leaves_that_box_out_not_an_exception(physics, monkeypatch):
+    """A box whose fit fails (SVD that does not converge on noisy points) is not estimated;
+    the others are."""
+    from clutterbench.perception import box_fit
+
+    d1, d3 = VARIOUS[1], VARIOUS[3]
+    spec = _spec(
+        [d1, d3], [[0.10, 0.08, d1[2] / 2, *IDENTITY], [0.14, -0.07, d3[2] / 2, *IDENTITY]]
+    )
+    obs = _observe(spec, physics)
+    real_axes = box_fit._axes
+
+    def axes(pts, normals, face_px, ok, *rest):
+        if face_px[obs.instance == 1].any():  # box 0's face
+            raise np.linalg.LinAlgError("SVD did not converge")
+        return real_axes(pts, normals, face_px, ok, *rest)
+
+    monkeypatch.setattr(box_fit, "_axes", axes)
+    est = fit_boxes(obs, VARIOUS, min_pixels=20)
+    assert est.ids == (1,)
+
+
 def test_a_hidden_box_is_missing_from_the_estimate(physics):
     """A flat box behind a tall panel is not seen at all: it is not estimated."""
     spec = _spec(

@@ -97,7 +97,12 @@ def fit_boxes(
         ok = mask & np.isfinite(pts[..., 0])
         if ok.sum() < 3:
             continue
-        R, extents, lohi = _axes(pts, normals, mask & same, ok, eye, face_min_pixels)
+        try:  # a sensed image may defeat a fit (no face, degenerate points): not estimated
+            R, extents, lohi = _axes(pts, normals, mask & same, ok, eye, face_min_pixels)
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+            continue
+        if not (np.all(np.isfinite(R)) and np.all(np.isfinite(lohi))):
+            continue
         occ = _occluder_coords(obs, pts, mask, R, lohi[0, 0], eye)
         ends = _occluded_ends(occ, lohi)
         t, dims = _nearest_type(extents, catalogue_m, ends.any(axis=1))

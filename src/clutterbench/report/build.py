@@ -102,10 +102,21 @@ class Report:
         return {name: run.model for name, run in self.evaluate.runs.items()}
 
     @functools.cached_property
+    def table_6_3_rows(self) -> dict[str, str]:
+        """report.table_6_3, and for each of its conditions run again under a sensor
+        (trials.sensed), the row '<method>/<objects>/<sensing>' of that condition."""
+        sensed = self.trials.sensed
+        rows = dict(self.cfg.table_6_3)
+        for row, cond in self.cfg.table_6_3.items():
+            if cond in sensed.of:
+                rows.setdefault(f"{row}/{sensed.sensing}", f"{cond}_{sensed.sensing}")
+        return rows
+
+    @functools.cached_property
     def ch6_records(self) -> dict[str, list[dict]]:
         return {
             cond: read_records(Path(f"reports/trials/{cond}/records.jsonl"))
-            for cond in self.cfg.table_6_3.values()
+            for cond in self.table_6_3_rows.values()
         }
 
     @functools.cached_property
@@ -223,11 +234,11 @@ def table_6_3_extraction(r: Report) -> None:
     rules = rule_note(records, r.chosen, r.cfg.table_6_2_methods)
     noise = r.noise["conditions"]
     extraction_table(
-        records, r.cfg.table_6_3, r.figures, TABLES, scale, [trial_note, *rules], noise
+        records, r.table_6_3_rows, r.figures, TABLES, scale, [trial_note, *rules], noise
     )
-    extraction_families_table(records, r.cfg.table_6_3, TABLES, scale, [trial_note])
+    extraction_families_table(records, r.table_6_3_rows, TABLES, scale, [trial_note])
     decomposition_table(records | r.robust_records, TABLES, scale, r.trials.ch6.pull_map_meaning)
-    noise_table(r.noise, r.cfg.table_6_3, TABLES, scale)
+    noise_table(r.noise, r.table_6_3_rows, TABLES, scale)
     paired_table(records, TABLES, scale)
     estimation_table(records, TABLES, scale)
 

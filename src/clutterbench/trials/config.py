@@ -381,6 +381,32 @@ class ArmConditionConfig:
 
 
 @dataclasses.dataclass(frozen=True)
+class SensedRows:
+    """Chapter 6 conditions run again as a robot sees: for each condition named in `of`, the
+    condition <name>_<sensing>, the same but for its sensor and masks (docs/sensing.md)."""
+
+    sensing: Literal["ideal", "structured_light", "d415"] = "d415"
+    """The depth sensor of the sensed conditions (sim/sensor.py)."""
+    perception: Literal["instance", "depth"] = "depth"
+    """Their object masks (ConditionConfig.perception)."""
+    of: tuple[str, ...] = ()
+    """The trials.conditions run again so (none: no sensed condition)."""
+
+    @staticmethod
+    def expand(conditions: Mapping[str, Any], sensed: Mapping[str, Any]) -> dict[str, Any]:
+        """Raw conditions with the sensed ones added after them (unknown names are left for
+        __post_init__'s one-line error)."""
+        sensing = sensed.get("sensing", SensedRows.sensing)
+        perception = sensed.get("perception", SensedRows.perception)
+        out = dict(conditions)
+        for name in sensed.get("of") or ():
+            if isinstance(conditions.get(name), Mapping):
+                extra = {"sensing": sensing, "perception": perception}
+                out.setdefault(f"{name}_{sensing}", {**conditions[name], **extra})
+        return out
+
+
+@dataclasses.dataclass(frozen=True)
 class TrialsConfig:
     workers: int = cores_field(2)
     """Worker processes per condition, each with its own renderer and one torch thread;
@@ -393,6 +419,8 @@ class TrialsConfig:
     """Thresholds of the collapse-free criterion, every chapter's (criteria.py)."""
     conditions: Mapping[str, ConditionConfig] = dataclasses.field(default_factory=dict)
     """Condition name -> planner on a stream; stage trials runs them all in one pool."""
+    sensed: SensedRows = SensedRows()
+    """Conditions run again under a depth sensor with masks from depth (added to conditions)."""
     ch4: Ch4TrialParams = Ch4TrialParams()
     """Chapter 4 judging."""
     ch4_conditions: Mapping[str, Ch4ConditionConfig] = dataclasses.field(default_factory=dict)
@@ -420,8 +448,10 @@ class TrialsConfig:
         """The raw section with every condition that names no `episodes` given its chapter's
         (trials.ch6/ch4/ch5.episodes, else their defaults), as params.yaml states it once."""
         out = dict(data)
+        if isinstance(data.get("sensed"), Mapping) and isinstance(data.get("conditions"), Mapping):
+            out["conditions"] = SensedRows.expand(data["conditions"], data["sensed"])
         for group, chapter in EPISODE_DEFAULTS.items():
-            conditions = data.get(group)
+            conditions = out.get(group)
             if not isinstance(conditions, Mapping):
                 continue
             section = data.get(chapter)
@@ -435,6 +465,9 @@ class TrialsConfig:
         return out
 
     def __post_init__(self) -> None:
+        unknown = [name for name in self.sensed.of if name not in self.conditions]
+        if unknown:
+            raise ValueError(f"sensed.of: no condition {unknown[0]!r} in trials.conditions")
         for group in ("conditions", "ch4_conditions", "ch5_conditions"):
             for name, cond in getattr(self, group).items():
                 if cond.stream not in self.streams:

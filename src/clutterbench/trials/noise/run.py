@@ -61,8 +61,15 @@ def replay_job(job: ReplayJob) -> list[tuple[bool, bool]]:
 
 
 def conditions_of(cfg: NoiseConfig, trials: TrialsConfig) -> list[str]:
-    """The replayed ch. 6 conditions (noise.conditions, else all), checked against trials."""
-    names = list(cfg.conditions) or list(trials.conditions)
+    """The replayed ch. 6 conditions (noise.conditions, else every one whose planner saw exact
+    depth and the simulator's masks: a sensed row's noise is its sensor), checked against
+    trials."""
+    seen_ideal = [
+        name
+        for name, c in trials.conditions.items()
+        if (c.sensing, c.perception) == ("ideal", "instance")
+    ]
+    names = list(cfg.conditions) or seen_ideal
     for name in names:
         if name not in trials.conditions:
             raise ClutterbenchError(f"noise.conditions: '{name}' is no trials.conditions entry")
