@@ -78,10 +78,11 @@ run-times: setup
 #   make score PREDICTOR=path/to/my_predictor.py
 # Published-set scores are on trust (its labels are public); a trusted score draws new scenes
 # from an unpublished seed and labels them on the spot: make score PREDICTOR=... FRESH=200
+# On the sensed track (the same scenes, the depth through a sensor model): ... TRACK=d415
 .PHONY: score
 score: setup
 	@test -n "$(PREDICTOR)" || { echo "make score: name the predictor: make score PREDICTOR=path/to/file.py" >&2; exit 2; }
-	clutterbench evaluate-predictor "$(PREDICTOR)" $(if $(FRESH),--fresh $(FRESH))
+	clutterbench evaluate-predictor "$(PREDICTOR)" $(if $(FRESH),--fresh $(FRESH)) $(if $(TRACK),--track $(TRACK))
 
 # The README's generated blocks (results at a glance, the leaderboard, run times) rewritten from
 # the committed files they quote (clutterbench.readme; a unit test fails while one is stale)

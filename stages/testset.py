@@ -1,7 +1,8 @@
 """Stage testset: the pull-consequence test set as a standalone artifact (data/testset: the
-ch6_test dataset and the ch. 6 table streams' benchmark starts), and
-the leaderboard's baseline rows scored on it (the work: clutterbench.data.testset,
-clutterbench.support.scorecard and baselines)."""
+ch6_test dataset and the ch. 6 table streams' benchmark starts; its sensed track, the same
+scenes through support.sensing's first sensor, beside it as data/testset_sensed/<preset>), and
+the leaderboard's baseline rows scored on each track (the work: clutterbench.data.testset and
+testset_sensed, clutterbench.support.scorecard and baselines)."""
 
 from pathlib import Path
 
@@ -10,7 +11,9 @@ from clutterbench.criteria import label_thresholds
 from clutterbench.data.config import GenerateConfig
 from clutterbench.data.testset import dataset_arrays, export_testset, labelled_arrays
 from clutterbench.data.testset_load import load
+from clutterbench.data.testset_sensed import IDEAL, export_sensed, sensed_root, track_dir
 from clutterbench.errors import ClutterbenchError
+from clutterbench.io import write_json
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
 from clutterbench.support.baselines import baselines
@@ -36,17 +39,24 @@ def testset(params: dict, base: BaseConfig) -> None:
     streams = ch6_streams(trials)
     starts = benchmark_starts(trials, sim, base.seed, streams)
     parts = [dataset_arrays(Path("data/generate"), dataset), labelled_arrays(starts)]
-    export_testset(parts, sim.camera, thresholds, cfg.min_pixels, OUT, sim.physics)
-    ts = load(OUT)
-    model = Path(f"models/{cfg.model}/best.pt")
+    ideal = export_testset(parts, sim.camera, thresholds, cfg.min_pixels, OUT, sim.physics)
+    sensed = {name: export_sensed(OUT, name, sim.camera)["sha256"] for name in cfg.sensing[:1]}
+    write_json(sensed_root(OUT) / "tracks.json", sensed)  # the out exists with no track too
     physics = (trials.ch6, cfg.test.catalogue, cfg.min_pixels)
+    for track in (IDEAL, *sensed):
+        score_baselines(load(track_dir(OUT, track)), track, cfg.model, sim, physics)
+    leaderboard(BOARD, BOARD, ideal["sha256"], sensed)
+
+
+def score_baselines(ts: dict, track: str, model: str, sim: SimConfig, physics: tuple) -> None:
+    """Every baseline's row on one track of the test set: baselines/<name>.json on the ideal
+    track, baselines/<name>@<preset>.json on a sensed one."""
     for name, (make, about) in baselines(
-        ts, model, Path("models/box_head/best.pt"), sim, physics
+        ts, Path(f"models/{model}/best.pt"), Path("models/box_head/best.pt"), sim, physics
     ).items():
         card = score(ts, make(), name, about)
-        write_row(card, BOARD / "baselines")
-        print(f"{name}: pull_collapse AUROC {card['pull_collapse']['auroc']}")
-    leaderboard(BOARD, BOARD, ts["manifest"]["sha256"])
+        write_row(card, BOARD / "baselines", name if track == IDEAL else f"{name}@{track}")
+        print(f"{name} ({track}): pull_collapse AUROC {card['pull_collapse']['auroc']}")
 
 
 def ch6_streams(trials: TrialsConfig) -> dict[str, int]:

@@ -35,6 +35,7 @@ from clutterbench.sim.config import SimConfig
 from clutterbench.trials.ch3.config import Ch3Config
 from clutterbench.trials.ch6.planners import planner_info
 from clutterbench.trials.config import TrialsConfig
+from clutterbench.trials.core.protocol import EPISODE_ENDS
 from clutterbench.trials.core.records import read_records
 
 pytestmark = pytest.mark.slow
@@ -166,7 +167,7 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
         records = read_records(a / "reports/trials" / name / "records.jsonl")
         assert len(records) == cond.episodes
         for rec in records:  # the episode protocol's named outcome on every step
-            assert rec["end"] in ("target_out", "collapse", "target_fell", "gave_up", "max_steps")
+            assert rec["end"] in EPISODE_ENDS
             for step in rec["steps"]:
                 assert {"executed", "aborted_before_motion", "aborted_after_motion"} <= set(step)
                 assert {"extracted", "others_still", "success", "success_held"} <= set(step)
@@ -187,7 +188,8 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
         assert {"judged", "counted", "strict_success", "box_motion"} <= set(rec)
         assert rec["valid"] or not rec["success"]  # an invalid action is never a success
     assert (a / "reports/trials_ch4/fig_4_8.png").stat().st_size > 1000
-    n63 = len(load_section(ReportConfig, "report", params).table_6_3)
+    rows63 = load_section(ReportConfig, "report", params).table_6_3.values()
+    n63 = len(rows63) + len(set(rows63) & set(trials.sensed.of))  # and the sensed rows
     for table, rows in (("table_4_1", 24 + 6), ("table_4_1_target", 3), ("table_6_3", n63)):
         frame = pd.read_csv(a / "reports/tables" / f"{table}.csv")
         assert len(frame) == rows and frame["success_rate"].between(0, 1).all(), table
@@ -219,6 +221,19 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     assert t62.iloc[:, 0].str.contains("CP pull head").sum() == 1  # against the pull truth
     chosen = json.loads((a / "reports/support/thresholds.json").read_text())["chosen"]
     assert {"pull_coverage_gap", "pull_collapse_coverage_gap"} <= set(chosen)
+    # as a robot sees: sensed rows in Tables 6.2 and 6.3, the decomposition's sensing part,
+    # the test set's sensed track
+    for name in trials.sensed.of:
+        recs = read_records(a / "reports/trials" / f"{name}_{trials.sensed.sensing}/records.jsonl")
+        assert {(r["sensing"], r["perception"]) for r in recs} == {("d415", "depth")}, name
+    assert "sensing" in dec.columns and dec["sensing"].notna().any()
+    assert t62.iloc[:, 0].str.contains("on d415 depth").sum() > 1
+    sensed_set = json.loads((a / "data/testset_sensed/d415/manifest.json").read_text())
+    assert (
+        sensed_set["sensing"] == "d415"
+        and sensed_set["sha256"]
+        != json.loads((a / "data/testset/manifest.json").read_text())["sha256"]
+    )
     t42 = pd.read_csv(a / "reports/tables/table_4_2.csv")
     assert len(t42) == 4
     # chapter 3: every variant's games, one row per slide, one MCAP per variant, Fig. 3.15

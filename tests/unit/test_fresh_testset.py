@@ -117,6 +117,26 @@ def test_evaluate_predictor_fresh_labels_new_scenes_and_says_so_in_its_row(tmp_p
     assert again["sha256"] == ts["manifest"]["sha256"]
 
 
+def test_evaluate_predictor_fresh_on_a_sensed_track_senses_the_fresh_set(tmp_path, monkeypatch):
+    """--fresh 2 --track d415: the fresh set labelled as ever, then sensed beside it
+    (<seed>_sensed/d415); the row is scored on the sensed one and ranked in the d415 section."""
+    _tiny_project(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    board, sets = tmp_path / "board", tmp_path / "sets"
+    args = ["evaluate-predictor", str(EXAMPLES / "example_predictor.py"), "--testset", "ref"]
+    args += ["--out", str(board), "--fresh", "2", "--seed", "7", "--fresh-dir", str(sets)]
+    result = runner.invoke(app, [*args, "--track", "d415"])
+    assert result.exit_code == 0, result.output
+    ideal, sensed = load(sets / "7"), load(sets / "7_sensed" / "d415")
+    assert sensed["manifest"]["sensing"] == "d415"
+    assert np.array_equal(ideal["instance"], sensed["instance"])
+    assert not np.array_equal(ideal["depth_m"], sensed["depth_m"])
+    card = read_json(board / "fresh/predictor-example_predictor@d415.json")
+    assert card["sensing"] == "d415" and card["scored_on"]["sha256"] == sensed["manifest"]["sha256"]
+    _, _, section = (board / "leaderboard.md").read_text().partition("## Sensed track: d415")
+    assert "| example_predictor | fresh 2 scenes, seed 7 (--seed) |" in section
+
+
 def test_evaluate_agent_fresh_runs_episodes_of_a_fresh_stream(tmp_path, monkeypatch):
     """--fresh 1 --seed 5: episode 0 of fresh/ch6_3_10 (not the published episode 0), drawn
     with the fresh stream seed; its row names the seed and pairs with no planner."""

@@ -326,3 +326,19 @@ def test_rule_note_names_the_trials_rule_and_its_val_thresholds():
     assert "coverage_gap (Table 6.2 row 'CP + coverage rule + gap'; p>0.30" in note
     assert "surface gap<50 mm" in note
     assert rule_note({"or": used["or"]}, chosen, {}) == []
+
+
+def test_support_table_adds_each_method_s_sensed_rows_after_the_exact_ones(tmp_path, figures):
+    sensed = scenes_frame()
+    sensed["method"] = sensed["method"] + "@d415"
+    sensed.loc[sensed["method"] == "iou@d415", "tp"] = 0
+    sensed.loc[sensed["method"] == "iou@d415", "precision"] = 0.0
+    frame = pd.concat([scenes_frame(), sensed], ignore_index=True)
+    methods = {"iou": "CP + IoU rule (thesis)", "coverage": "CP + coverage rule (eq. 6.2)"}
+    stats = support_table(frame, methods, {}, figures, tmp_path, "tiny")
+    assert list(stats["method"]) == ["iou", "coverage", "iou@d415", "coverage@d415"]
+    assert stats.iloc[0]["precision"] == pytest.approx(0.75)  # the exact rows as before
+    assert stats.iloc[2]["precision"] == pytest.approx(0.0)
+    assert "| CP + IoU rule (thesis), on d415 depth" in (tmp_path / "table_6_2.md").read_text()
+    alone = support_table(scenes_frame(), methods, {}, figures, tmp_path, "tiny")
+    assert list(alone["method"]) == ["iou", "coverage"]

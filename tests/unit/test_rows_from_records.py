@@ -16,6 +16,7 @@ import pytest
 from clutterbench.config import load_base, load_params, load_section
 from clutterbench.data.testset_load import load, visible
 from clutterbench.data.testset_pins import pin_problems
+from clutterbench.data.testset_sensed import sensed_tracks
 from clutterbench.envs.board import CRITERIA, repaired
 from clutterbench.io import read_json
 from clutterbench.report.config import ReportConfig
@@ -52,7 +53,8 @@ def test_the_leaderboard_is_its_rows_rewritten_by_the_writer(tmp_path):
         dst = tmp_path / path.parent.name / path.name
         dst.parent.mkdir(exist_ok=True)
         shutil.copyfile(path, dst)
-    leaderboard(tmp_path, tmp_path, read_json(PUBLISHED / "manifest.json")["sha256"])
+    sha = read_json(PUBLISHED / "manifest.json")["sha256"]
+    leaderboard(tmp_path, tmp_path, sha, sensed_tracks(PUBLISHED))
     for name in ("leaderboard.md", "leaderboard.csv"):
         assert (tmp_path / name).read_text() == (BOARD / name).read_text(), (
             f"reports/leaderboard/{name} is stale: python -m clutterbench.envs.board"
@@ -60,8 +62,9 @@ def test_the_leaderboard_is_its_rows_rewritten_by_the_writer(tmp_path):
 
 
 def test_every_published_predictor_row_quotes_the_published_set():
-    """Each predictor row not scored on fresh scenes names the published set's hash and its
-    scene and pair counts, recounted from the set itself."""
+    """Each predictor row not scored on fresh scenes names the published set's hash (a sensed
+    track's row: that track's, published beside it) and its scene and pair counts, recounted
+    from the set itself (a sensed track has the ideal one's scenes and masks)."""
     ts = load(PUBLISHED)
     scenes = pairs = 0
     for s in range(len(ts["n_objects"])):
@@ -70,9 +73,10 @@ def test_every_published_predictor_row_quotes_the_published_set():
             scenes, pairs = scenes + 1, pairs + k * (k - 1)
     rows = [(p, c) for p, c in _cards() if not is_fresh(c)]
     assert rows
+    tracks = {None: ts["manifest"]["sha256"], **sensed_tracks(PUBLISHED)}
     for path, card in rows:
         got = (card["testset_sha256"], card["scenes"], card["pairs"])
-        assert got == (ts["manifest"]["sha256"], scenes, pairs), path.name
+        assert got == (tracks.get(card.get("sensing")), scenes, pairs), path.name
 
 
 def test_every_agent_row_pairs_with_what_the_trials_records_say_each_planner_won():

@@ -355,3 +355,20 @@ def test_training_augmentation_is_the_noise_unless_a_sensor_is_named():
     assert not np.array_equal(one, sensed.apply(depth, np.random.default_rng(6)))
     assert one.dtype == np.float32 and np.isfinite(one).all()
     assert (one == 0).any() and not np.array_equal(one, depth)  # shadows, steps: sensed
+
+
+def test_a_support_scene_under_a_sensor_keeps_its_masks_and_truth():
+    from clutterbench.sim.config import CameraConfig
+    from clutterbench.support.evaluate import Scene, sensed_scene
+
+    depth = np.full((64, 64), 0.7, np.float32)
+    depth[20:40, 10:30], depth[20:40, 34:54] = 0.55, 0.6
+    masks = np.zeros((2, 64, 64), dtype=bool)
+    masks[0, 20:40, 10:30] = masks[1, 20:40, 34:54] = True
+    eye = np.eye(2, dtype=bool)
+    scene = Scene(0, "random", depth, [0, 1], masks, ~eye, eye, 2, gaps_m=np.zeros((2, 2)))
+    cam = CameraConfig(image_size=64)
+    one, two = sensed_scene(scene, "d415", cam), sensed_scene(scene, "d415", cam)
+    assert not np.array_equal(one.depth_m, depth) and np.array_equal(one.depth_m, two.depth_m)
+    assert one.masks is scene.masks and one.moved is scene.moved and one.ids == scene.ids
+    assert one.gaps_m.shape == (2, 2) and not np.array_equal(one.gaps_m, scene.gaps_m)

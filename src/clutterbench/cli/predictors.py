@@ -7,7 +7,12 @@ checkout's run, which the baselines in reports/leaderboard/baselines were scored
 published copy in git, data/published/testset (the run that published it scored the committed
 baselines on the same bytes). Their labels are public, so a score on them is on trust; with
 --fresh N the predictor is scored on N scenes drawn from an unpublished seed and labelled now
-(data/testset_fresh.py), the set written to data/fresh/<seed>/ and the row saying so."""
+(data/testset_fresh.py), the set written to data/fresh/<seed>/ and the row saying so.
+
+Which track: --track (default ideal, the renderer's exact depth); a sensed track, e.g.
+`--track d415`, is the same set with its depth images through that sensor model, written
+beside it (data/testset_sensed/d415, data/testset_sensed.py); with --fresh the fresh set is sensed
+likewise."""
 
 from __future__ import annotations
 
@@ -89,6 +94,14 @@ FreshScenes = Annotated[
         "now by simulation: a score that cannot have read its labels.",
     ),
 ]
+Track = Annotated[
+    str,
+    typer.Option(
+        "--track",
+        help="ideal (the renderer's exact depth) or a sensed track's sensor preset (e.g. "
+        "d415): the same scenes and labels, the depth images through that sensor model.",
+    ),
+]
 FreshDir = Annotated[
     Path | None,
     typer.Option("--fresh-dir", help=f"With --fresh: where its sets go (default {FRESH})."),
@@ -121,11 +134,13 @@ def evaluate_predictor(
     fresh: FreshScenes = None,
     seed: FreshSeed = None,
     fresh_dir: FreshDir = None,
+    track: Track = "ideal",
 ) -> None:
-    """Score a predictor on every (scene, pulled box) of the test set (or of N fresh scenes),
-    write its scorecard (OUT/submitted/NAME.json; fresh: OUT/fresh/predictor-NAME.json) and the
-    leaderboard with it (OUT/leaderboard.md)."""
+    """Score a predictor on every (scene, pulled box) of the test set's track (or of N fresh
+    scenes), write its scorecard (OUT/submitted/NAME.json; fresh: OUT/fresh/predictor-NAME.json;
+    a sensed track's: NAME@TRACK.json) and the leaderboard with it (OUT/leaderboard.md)."""
     with user_errors():
+        from clutterbench.data.testset_sensed import IDEAL, sensed_tracks
         from clutterbench.support.scorecard import (
             check_name,
             leaderboard,
@@ -136,14 +151,21 @@ def evaluate_predictor(
 
         if seed is not None and fresh is None:
             raise ClutterbenchError("--seed: only with --fresh N")
+        check_track(track)
         ts_dir = testset_dir(testset)
         reference = load_testset(ts_dir)
+        if reference["manifest"].get("sensing"):
+            raise ClutterbenchError(
+                f"{ts_dir}: a sensed track; --testset names the ideal set, --track "
+                f"{reference['manifest']['sensing']} the track beside it"
+            )
+        ts = reference if track == IDEAL or fresh is not None else track_set(ts_dir, track)
         predict, about = load_predict(predictor)  # before any labelling: a broken module fails now
         label = check_name(name or Path(predictor.partition(":")[0]).stem.split(".")[-1])
         board = default_path(out, "reports/leaderboard")
-        ts, scored_on = reference, None
+        scored_on = None
         if fresh is not None:
-            ts, scored_on = fresh_set(ts_dir, fresh, seed, default_path(fresh_dir, FRESH))
+            ts, scored_on = fresh_set(ts_dir, fresh, seed, default_path(fresh_dir, FRESH), track)
         try:
             card = score(ts, predict, label, about)
         except ClutterbenchError:
@@ -152,12 +174,13 @@ def evaluate_predictor(
             raise ClutterbenchError(
                 f"predictor {label} raised {type(exc).__name__}: {exc}"
             ) from None
+        stem = label if track == IDEAL else f"{label}@{track}"
         if scored_on is not None:
             card["scored_on"] = scored_on
-            path = write_row(card, board / "fresh", f"predictor-{label}")
+            path = write_row(card, board / "fresh", f"predictor-{stem}")
         else:
-            path = write_row(card, board / "submitted")
-        leaderboard(board, board, reference["manifest"]["sha256"])
+            path = write_row(card, board / "submitted", stem)
+        leaderboard(board, board, reference["manifest"]["sha256"], sensed_tracks(ts_dir))
         pc = card["pull_collapse"]
         typer.echo(
             f"{label} ({scored_on_text(card)}): pull_collapse AUROC {pc['auroc']} "
@@ -179,12 +202,42 @@ def load_testset(ts_dir: Path) -> dict:
         raise ClutterbenchError(f"{ts_dir}: {exc}") from None
 
 
-def fresh_set(reference: Path, n: int, seed: int | None, root: Path) -> tuple[dict, dict]:
-    """N fresh scenes labelled now (support/testset_fresh.py) in root/<seed>/ -> (the set, the
-    card's `scored_on`); the seed is printed before the labelling starts."""
+def check_track(track: str) -> str:
+    """--track: ideal or a sensor preset (sim/sensor.py PRESETS), else one line."""
+    from clutterbench.sim.sensor import PRESETS
+
+    if track not in PRESETS:
+        raise ClutterbenchError(f"--track {track}: one of {', '.join(PRESETS)}")
+    return track
+
+
+def track_set(ts_dir: Path, track: str) -> dict:
+    """The test set's `track` loaded: ts_dir itself (ideal) or the sensed track beside it."""
+    from clutterbench.data.testset_sensed import IDEAL, track_dir
+
+    path = track_dir(ts_dir, check_track(track))
+    if not (path / "manifest.json").is_file():
+        raise ClutterbenchError(
+            f"--track {track}: no such track beside {ts_dir} ({path}; stage testset writes "
+            "the sensed track of support.sensing's first sensor)"
+        )
+    ts = load_testset(path)
+    if (ts["manifest"].get("sensing") or IDEAL) != track:
+        raise ClutterbenchError(f"{path}: its manifest says it is not the {track} track")
+    return ts
+
+
+def fresh_set(
+    reference: Path, n: int, seed: int | None, root: Path, track: str = "ideal"
+) -> tuple[dict, dict]:
+    """N fresh scenes labelled now (support/testset_fresh.py) in root/<seed>/ (a sensed
+    track: sensed too, into root/<seed>_<track>/) -> (the set, the card's `scored_on`); the
+    seed is printed before the labelling starts."""
     from clutterbench.config import load_base, load_section
     from clutterbench.data.testset_fresh import draw_seed
+    from clutterbench.data.testset_sensed import IDEAL, export_sensed, track_dir
     from clutterbench.platform_info import cpu_model
+    from clutterbench.sim.config import SimConfig
     from clutterbench.support.testset_fresh import fresh_testset
     from clutterbench.trials.config import TrialsConfig
 
@@ -196,6 +249,9 @@ def fresh_set(reference: Path, n: int, seed: int | None, root: Path) -> tuple[di
     typer.echo(f"fresh: {n} scenes, seed {seed} ({seed_from}) -> {out}")
     trials = load_section(TrialsConfig, "trials", params)
     manifest = fresh_testset(params, trials, reference, n, seed, out, load_base(params).cores)
+    if track != IDEAL:
+        manifest = export_sensed(out, track, load_section(SimConfig, "sim", params).camera)
+        out = track_dir(out, track)
     scored_on = {
         "set": "fresh",
         "scenes": n,
@@ -214,29 +270,54 @@ def publish_testset(
     testset: Annotated[Path | None, typer.Option("--testset", help=f"Default: {TESTSET}.")] = None,
     to: Annotated[Path | None, typer.Option("--to", help=f"Default: {PUBLISHED}.")] = None,
 ) -> None:
-    """Copy a run's test set (stage testset, default scale) to the published copy that git
-    keeps, after checking it loads (hash and schema); the copy replaces the old one whole."""
+    """Copy a run's test set (stage testset, default scale) and its sensed tracks beside it
+    (data/testset_sensed/<preset>) to the published copy that git keeps (data/published/testset,
+    testset_sensed/<preset>), after checking each loads (hash and schema); the copy replaces the old
+    one whole, a published sensed track the run has not dropped."""
     with user_errors():
-        from clutterbench.data.testset_load import load
-        from clutterbench.data.testset_pins import pin_files
+        from clutterbench.data.testset_sensed import IDEAL, sensed_tracks, track_dir
 
         src = default_path(testset, TESTSET)
         dst = default_path(to, PUBLISHED)
-        missing = [f for f in TESTSET_FILES if not (src / f).is_file()]
-        if missing:
-            raise ClutterbenchError(f"{src}: no test set ({', '.join(missing)} missing)")
-        try:
-            sha = load(src)["manifest"]["sha256"]
-        except (ValueError, OSError) as exc:
-            raise ClutterbenchError(f"{src}: {exc}") from None
-        dst.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=".publish-", dir=dst.parent))
-        for name in TESTSET_FILES:
-            shutil.copy2(src / name, tmp / name)
-        pin_files(tmp)  # the published manifest pins every file of the set, its loader included
-        old = dst.with_name(dst.name + ".old")
-        if dst.exists():
-            dst.rename(old)
-        tmp.rename(dst)
-        shutil.rmtree(old, ignore_errors=True)
-        typer.echo(f"{dst}: the published test set is now sha256 {sha[:12]} (from {src})")
+        tracks = [IDEAL, *sensed_tracks(src)] if (src / "manifest.json").is_file() else [IDEAL]
+        shas = {t: checked_sha(track_dir(src, t)) for t in tracks}  # all load, or none is copied
+        for track in [*sensed_tracks(dst)] if (dst / "manifest.json").is_file() else []:
+            if track not in shas:
+                shutil.rmtree(track_dir(dst, track))  # of an older set: not this one's track
+        for track, sha in shas.items():
+            replace_whole(track_dir(src, track), track_dir(dst, track))
+            what = "test set" if track == IDEAL else f"test set's {track} track"
+            typer.echo(
+                f"{track_dir(dst, track)}: the published {what} is now sha256 {sha[:12]} "
+                f"(from {track_dir(src, track)})"
+            )
+
+
+def checked_sha(src: Path) -> str:
+    """The sha256 of a test set that has its files and loads (hash and schema), else one
+    line."""
+    from clutterbench.data.testset_load import load
+
+    missing = [f for f in TESTSET_FILES if not (src / f).is_file()]
+    if missing:
+        raise ClutterbenchError(f"{src}: no test set ({', '.join(missing)} missing)")
+    try:
+        return load(src)["manifest"]["sha256"]
+    except (ValueError, OSError) as exc:
+        raise ClutterbenchError(f"{src}: {exc}") from None
+
+
+def replace_whole(src: Path, dst: Path) -> None:
+    """dst becomes a copy of the test set in src, its manifest pinning every file of it."""
+    from clutterbench.data.testset_pins import pin_files
+
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".publish-", dir=dst.parent))
+    for name in TESTSET_FILES:
+        shutil.copy2(src / name, tmp / name)
+    pin_files(tmp)  # the published manifest pins every file of the set, its loader included
+    old = dst.with_name(dst.name + ".old")
+    if dst.exists():
+        dst.rename(old)
+    tmp.rename(dst)
+    shutil.rmtree(old, ignore_errors=True)

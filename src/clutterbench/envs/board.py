@@ -138,12 +138,15 @@ def write_agent_row(card: Mapping[str, Any], board: Path = BOARD) -> Path:
 
 def rewrite_leaderboard(board: Path = BOARD) -> None:
     """The leaderboard rewritten from every row under `board`, with the predictor rows of the
-    project's test set (the first of TESTSET_DIRS beside reports/ that holds one)."""
+    project's test set (the first of TESTSET_DIRS beside reports/ that holds one) and of its
+    sensed tracks beside it."""
+    from clutterbench.data.testset_sensed import sensed_tracks
     from clutterbench.support.scorecard import leaderboard
 
     manifests = [board.parent.parent / d / "manifest.json" for d in TESTSET_DIRS]
     found = [m for m in manifests if m.is_file()]
-    leaderboard(board, board, read_json(found[0]).get("sha256") if found else None)
+    sha = read_json(found[0]).get("sha256") if found else None
+    leaderboard(board, board, sha, sensed_tracks(found[0].parent) if found else {})
 
 
 def repair_rows(board: Path = BOARD) -> list[str]:

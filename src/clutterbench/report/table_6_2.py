@@ -114,6 +114,19 @@ def _check(scenes: pd.DataFrame, methods: Mapping[str, str]) -> None:
         )
 
 
+def with_sensed(methods: Mapping[str, str], scenes: pd.DataFrame) -> dict[str, str]:
+    """`methods`, then each one's rows under a sensor (support.sensing: method@<sensor> in
+    scenes.csv) labelled so, sensor by sensor."""
+    found = set(scenes["method"])
+    sensors = sorted({m.partition("@")[2] for m in found if "@" in m})
+    out = dict(methods)
+    for sensor in sensors:
+        for method, label in methods.items():
+            if f"{method}@{sensor}" in found:
+                out[f"{method}@{sensor}"] = f"{label}, on {sensor} depth"
+    return out
+
+
 def support_table(
     scenes: pd.DataFrame,
     methods: Mapping[str, str],
@@ -132,6 +145,7 @@ def support_table(
     scene -> its true (supporter, supported) edges (data/support/truth.json), for the note on
     mutual support."""
     _check(scenes, methods)
+    methods = with_sensed(methods, scenes)
     thesis = thesis_row(figures, TABLE, "mean")
     rows, stats = [], []
     family_rows = []

@@ -6,6 +6,7 @@ Imports no SAPIEN and no torch, so that the report stage can read them.
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 from clutterbench.config import bounded, cores_field
 from clutterbench.data.trial_params import SceneStreamConfig
@@ -70,3 +71,7 @@ class SupportEvalConfig:
     """A test scene is redrawn at most this often."""
     box_head: BoxHeadConfig = dataclasses.field(default_factory=BoxHeadConfig)
     """The per-box head over the support model's maps (stage box_head)."""
+    sensing: tuple[Literal["structured_light", "d415"], ...] = ()
+    """Depth sensors (sim/sensor.py) under which every method is scored again on the same
+    test scenes, their depth images sensed (the masks stay the simulator's): Table 6.2's
+    method@<sensor> rows; thresholds stay those chosen on exact val depth."""

@@ -209,6 +209,26 @@ def all_scenes(
             )
 
 
+def sensed_scene(scene: Scene, sensing: str, camera: CameraConfig) -> Scene:
+    """`scene` as the sensor `sensing` (sim/sensor.py) would have returned its depth image,
+    seeded by the picture as every observation is (sim/render.py observe), its surface gaps
+    measured on that depth; masks and truth unchanged."""
+    from clutterbench.observation import CameraModel
+    from clutterbench.perception.gaps import surface_gaps
+    from clutterbench.sim.sensor import focal_px, observation_rng, preset, sense
+
+    h, w = scene.depth_m.shape
+    f = focal_px(h, camera.fovy_deg)
+    K = np.array([[f, 0.0, w / 2], [0.0, f, h / 2], [0.0, 0.0, 1.0]])
+    model = CameraModel(K=K, T_world_from_cam=np.eye(4))
+    depth_m = sense(scene.depth_m, model, preset(sensing), observation_rng(0, scene.depth_m))
+    gaps = scene.gaps_m
+    if gaps is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            gaps = surface_gaps(camera_points(depth_m, camera), scene.masks)
+    return dataclasses.replace(scene, depth_m=depth_m, gaps_m=gaps)
+
+
 def evidence(scene: Scene, heatmaps: np.ndarray) -> SceneEvidence:
     return SceneEvidence(heatmaps, scene.masks, scene.ids, scene.true_edges, scene.gaps_m)
 

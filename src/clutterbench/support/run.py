@@ -50,6 +50,7 @@ from clutterbench.support.evaluate import (
     head_prefix,
     method_head,
     predicted_heatmaps,
+    sensed_scene,
     split_scenes,
     sweep_all,
     val_metrics_at,
@@ -133,13 +134,7 @@ def run_support(
     scenes_in = all_scenes(
         paths.scenes, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera, **read
     )
-    rows, panels, truth = score_test_scenes(
-        scenes_in,
-        cfg,
-        models,
-        chosen,
-        p_edge,
-        rng,
+    tail = (
         physics_depth,
         seed,
         (box_maps, box_chosen),
@@ -149,6 +144,8 @@ def run_support(
             fitted_contacts_of(cfg, sim, ch6, cfg.test.catalogue),
         ),
     )
+    rows, panels, truth = score_test_scenes(scenes_in, cfg, models, chosen, p_edge, rng, *tail)
+    rows += sensed_rows(cfg, sim, paths, read, (models, chosen, p_edge), tail)
     # edges: removing X moves Y, X and Y touch; <head>_edges: the trials' pull of X marks Y
     # under that head's label kind, X and Y touch
     truths = {f"{head_prefix(h)}edges": edges for h, edges in truth.items()}
@@ -160,6 +157,29 @@ def run_support(
         panels, paths.out / "figure.png", "Inferred (white, dashed) and true (pink) support"
     )
     return scenes.groupby("method", sort=False)[["precision", "recall"]].mean()
+
+
+def sensed_rows(
+    cfg: SupportEvalConfig,
+    sim: SimConfig,
+    paths: SupportPaths,
+    read: dict[str, Any],
+    scoring: tuple[Predictors, dict, float],
+    tail: tuple[Any, ...],
+) -> list[dict]:
+    """Every method's rows on the test scenes again under each sensor of cfg.sensing (their
+    depth sensed, support/evaluate.py sensed_scene), named method@<sensor>; the thresholds
+    and fusion chosen on exact val depth."""
+    rows: list[dict] = []
+    for k, sensing in enumerate(cfg.sensing):
+        scenes = all_scenes(
+            paths.scenes, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera, **read
+        )
+        sensed = (sensed_scene(sc, sensing, sim.camera) for sc in scenes)
+        rng = np.random.default_rng([tail[1], 62, k + 1])
+        more, _, _ = score_test_scenes(sensed, cfg, *scoring, rng, *tail)
+        rows += [r | {"method": f"{r['method']}@{sensing}"} for r in more]
+    return rows
 
 
 def val_sweep(

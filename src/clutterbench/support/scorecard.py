@@ -9,7 +9,7 @@ predictor; the leaderboard is every row as one table."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from clutterbench.data.testset_load import LABEL_KINDS, labels, visible
+from clutterbench.data.testset_sensed import IDEAL
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import read_json, write_json, write_text
 from clutterbench.progress import progress_bar
@@ -179,6 +180,8 @@ def scorecard(rows: pd.DataFrame, name: str, about: str, manifest: dict) -> dict
         "pairs": len(rows),
         "threshold": THRESHOLD,
     }
+    if manifest.get("sensing"):
+        card["sensing"] = manifest["sensing"]  # a sensed track's row (data/testset_sensed.py)
     groups = {
         **{f"family={f}": rows["family"] == f for f in sorted(rows["family"].unique())},
         "visible=2-5": rows["visible"] <= 5,
@@ -208,28 +211,80 @@ def write_row(card: dict[str, Any], rows_dir: Path, stem: str | None = None) -> 
     return path
 
 
-def leaderboard(rows_dir: Path, out: Path, testset_sha256: str | None) -> pd.DataFrame:
+def leaderboard(
+    rows_dir: Path,
+    out: Path,
+    testset_sha256: str | None,
+    sensed: Mapping[str, str] | None = None,
+) -> pd.DataFrame:
     """out/leaderboard.{md,csv}: every predictor row under rows_dir's folders (baselines/, the
     stage's; submitted/, evaluate-predictor's; fresh/, evaluate-predictor --fresh's) scored on
     this test set (its hash; None: no test set, no published rows) or on fresh scenes, ranked
-    by AUROC of what the pull collapses, each saying which set it was scored on; then the
-    planners' rows (agents/ and fresh/, evaluate-agent's)."""
+    by AUROC of what the pull collapses, each saying which set it was scored on; then, per
+    sensed track (`sensed`: preset -> its sha256; and any fresh sensed row's), a section and
+    out/leaderboard_<preset>.csv of the rows scored on it; then the planners' rows (agents/
+    and fresh/, evaluate-agent's). Returns the ideal track's table."""
     cards = [read_json(p) for p in sorted(rows_dir.glob("*/*.json"))]
     agents = [c for c in cards if c.get("kind") == "agent"]
-    cards = [c for c in cards if c.get("kind") != "agent"]
-    published = [c for c in cards if testset_sha256 and c.get("testset_sha256") == testset_sha256]
-    cards = published + [c for c in cards if is_fresh(c)]
-    if not cards and not agents:
+    tracks = track_cards([c for c in cards if c.get("kind") != "agent"], sensed or {})
+    ideal = tracks.pop(IDEAL)
+    published = [c for c in ideal if testset_sha256 and c.get("testset_sha256") == testset_sha256]
+    cards = published + [c for c in ideal if is_fresh(c)]
+    tracks = {t: c for t, c in tracks.items() if c}
+    if not cards and not agents and not tracks:
         raise ClutterbenchError(f"{rows_dir}: no scorecard of this test set")
     lines = ["# Pull-consequence leaderboard", "", *TRUST_NOTE, ""]
-    table = pd.DataFrame([_board_row(c) for c in cards])
+    table = _ranked(cards)
     if cards:
-        table = table.sort_values(["pull_collapse AUROC", "predictor"], ascending=[False, True])
-        lines += [*_predictor_intro(published, testset_sha256), "", *_markdown(table)]
+        intro = _predictor_intro(published, testset_sha256)
+        if tracks:
+            intro[0] = "Ideal track (the renderer's exact depth). " + intro[0]
+        lines += [*intro, "", *_markdown(table)]
+    for track, rows in sorted(tracks.items()):
+        lines += sensed_section(track, rows, (sensed or {}).get(track))
+        write_text(out / f"leaderboard_{track}.csv", _ranked(rows).to_csv(index=False))
     lines += planner_section(agents)
     write_text(out / "leaderboard.md", "\n".join(lines) + "\n")
     write_text(out / "leaderboard.csv", table.to_csv(index=False))
     return table
+
+
+def track_cards(cards: list[dict[str, Any]], sensed: Mapping[str, str]) -> dict[str, list]:
+    """The predictor rows by track: IDEAL -> every row that names no sensor (filtered by the
+    caller); each sensed preset -> its rows scored on that track (its sha256) or on fresh
+    scenes sensed by it."""
+    out: dict[str, list] = {IDEAL: [], **{t: [] for t in sensed}}
+    for c in cards:
+        track = c.get("sensing") or IDEAL
+        if track == IDEAL:
+            out[IDEAL].append(c)
+        elif is_fresh(c) or c.get("testset_sha256") == sensed.get(track):
+            out.setdefault(track, []).append(c)
+    return out
+
+
+def _ranked(cards: list[dict[str, Any]]) -> pd.DataFrame:
+    table = pd.DataFrame([_board_row(c) for c in cards])
+    if cards:
+        table = table.sort_values(["pull_collapse AUROC", "predictor"], ascending=[False, True])
+    return table
+
+
+def sensed_section(track: str, rows: list[dict[str, Any]], sha: str | None) -> list[str]:
+    """A sensed track's part of the leaderboard: what it is, then its rows ranked."""
+    first = next((c for c in rows if not is_fresh(c)), None)
+    size = f"{first['scenes']} scenes, {first['pairs']} (pulled, other) pairs; " if first else ""
+    at = f"sha256 {sha[:12]}: " if sha else ""
+    return [
+        "",
+        f"## Sensed track: {track}",
+        "",
+        f"The same scenes, masks and labels, each depth image through the {track} depth-sensor "
+        f"model (docs/sensing.md; {at}{size}ranked and scored as above). "
+        f"`clutterbench evaluate-predictor --track {track}` adds a row on it.",
+        "",
+        *_markdown(_ranked(rows)),
+    ]
 
 
 TRUST_NOTE = [
