@@ -96,3 +96,17 @@ def test_instance_perception_reads_the_simulator_s_masks_as_before():
     assert rec["perception"] == "instance" and "perception_failures" not in rec
     assert all("seen_pull" not in s for s in rec["steps"])
     assert ch6_episodes.Eyes is Eyes
+
+
+def test_a_hold_whose_grasp_takes_the_pulled_box_leaves_the_second_arm_idle(monkeypatch):
+    """Two segments of one box, one pulled and one held: the second arm finds the box taken."""
+    from clutterbench.planning.ch6.extraction import Decision
+
+    job = _jobs("random", episodes=1)[0]
+    spec = ch6_episodes.job_spec(job)
+    episode = ch6_episodes.Extraction(spec, job)
+    monkeypatch.setattr(Eyes, "grasped", lambda self, seen_id: None if seen_id is None else 0)
+    step = episode.step(Decision(pull=0, hold=7, state={}), planner=object())
+    assert step["box"] == 0 and step["hold"] is None
+    assert step["grasp"] == "hold on the pulled box"
+    assert step["seen_hold"] == 7

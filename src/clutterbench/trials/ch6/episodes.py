@@ -159,7 +159,12 @@ class Extraction:
         grasped = self.eyes.grasped(decision.pull), self.eyes.grasped(decision.hold)
         if grasped[0] is None or (decision.hold is not None and grasped[1] is None):
             return self._missed_grasp(decision)
+        void_hold = grasped[1] is not None and grasped[1] == grasped[0]
+        if void_hold:  # two segments of one box: the second arm finds it taken and stays idle
+            grasped = (grasped[0], None)
         step, self.state, elapsed = self.execute_decision(decision, planner, grasped)
+        if void_hold:
+            step["grasp"] = "hold on the pulled box"
         self.steps.append(step)
         self.t = t + elapsed
         if step["aborted_before_motion"] or step["aborted_after_motion"]:
