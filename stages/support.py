@@ -24,15 +24,7 @@ def support(params: dict, base: BaseConfig) -> None:
     parallel = load_section(ParallelConfig, "parallel", params)  # the test scenes' backend
     if cfg.val_dataset not in gen.datasets:
         raise ClutterbenchError(f"support.val_dataset: unknown dataset '{cfg.val_dataset}'")
-    paths = SupportPaths(
-        model=Path(f"models/{cfg.model}/best.pt"),
-        box_head=Path("models/box_head/best.pt"),
-        box_metrics=Path("reports/box_head/metrics.json"),
-        gen_dir=Path("data/generate"),
-        split_file=Path(f"data/split/{cfg.val_dataset}.json"),
-        out=OUT,
-        scenes=SCENES,
-    )
+    paths = SupportPaths.of(cfg, OUT, SCENES)
     ch6 = load_section(TrialsConfig, "trials", params).ch6  # the trials' pull, fits, fusion
     mean = run_support(params, base.seed, cfg, sim, parallel, paths, ch6)
     for method, r in mean.iterrows():

@@ -10,11 +10,12 @@ with defaults, reset and stepped (`envs`), the same simulation jobs on both para
 backends, processes and Ray, with 1 and 2 workers (`ray`: `bench/scaling.py`, its
 workloads built in `bench/workloads.py`; it also costs the paper scale from them), and how
 much of this CPU's matmul rate training the networks reaches (`train_rate`), where a
-slice of a training epoch spends its time (`train_profile`), what dvc's own YAML work costs
-per stage (`dvc`) and what a trusted score costs: 200 fresh scenes drawn, labelled and scored,
-and 200 fresh episodes of an agent (`fresh`). Results go
-to reports/bench/: one JSON per part and a markdown table beside most; each records the CPU
-model it ran on.
+slice of a training epoch spends its time (`train_profile`), where each simulation stage's
+wall time goes, by kind of work, with a sample of it profiled and the whole stage
+extrapolated (`sim_profile`), what dvc's own YAML work costs per stage (`dvc`) and what a
+trusted score costs: 200 fresh scenes drawn, labelled and scored, and 200 fresh episodes of
+an agent (`fresh`). Results go to reports/bench/: one JSON per part and a markdown table
+beside most; each records the CPU model it ran on.
 """
 
 from __future__ import annotations

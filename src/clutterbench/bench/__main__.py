@@ -19,6 +19,7 @@ from clutterbench.bench.physics_depth import bench_physics_depth
 from clutterbench.bench.replenish import bench_ch5
 from clutterbench.bench.scaling import bench_ray
 from clutterbench.bench.sim import bench_replay, bench_sim
+from clutterbench.bench.sim_profile import bench_sim_profile
 from clutterbench.bench.train_profile import bench_train_profile
 from clutterbench.bench.train_rate import bench_train_rate
 from clutterbench.bench.trials import bench_trials
@@ -47,6 +48,7 @@ PARTS: list[tuple[str, Callable[[], object]]] = [
     ("ray", bench_ray),  # ray.json, ray.md (both parallel backends, 1 and 2 workers; needs ray)
     ("train_rate", bench_train_rate),  # train_rate.json, .md (training FLOP/s vs matmul; no data)
     ("train_profile", bench_train_profile),  # train_profile.json, .md (a cp_focal epoch's slice)
+    ("sim_profile", bench_sim_profile),  # sim_profile.json, .md (each sim stage's time, by kind)
     ("dvc", bench_dvc),  # dvc.json, dvc.md (dvc's own YAML work per stage; no data needed)
     ("fresh", bench_fresh),  # fresh.json, .md (200 fresh scenes labelled and scored; no data)
 ]

@@ -107,9 +107,11 @@ def machine_busy_seconds() -> float | None:
     return (sum(ticks) - ticks[3] - ticks[4]) / os.sysconf("SC_CLK_TCK")
 
 
-def own_seconds() -> float:
+def own_seconds(children: bool = False) -> float:
+    """CPU seconds this process has run; with `children`, those of its waited-for child
+    processes too."""
     t = os.times()
-    return t.user + t.system
+    return t.user + t.system + (t.children_user + t.children_system if children else 0.0)
 
 
 def others_share(busy_s: float, own_s: float, wall_s: float, cpus: int) -> float:
@@ -121,12 +123,16 @@ def others_share(busy_s: float, own_s: float, wall_s: float, cpus: int) -> float
 class Contention:
     """Measures, over a `with` block, the share of the CPUs other processes used (`others`:
     0 on an otherwise idle machine, 0.5 where they kept one of two cores busy; None where
-    /proc/stat is missing)."""
+    /proc/stat is missing). `children`: this process's child processes, waited for within
+    the block, count as its own."""
 
     others: float | None = None
 
+    def __init__(self, children: bool = False) -> None:
+        self.children = children
+
     def __enter__(self) -> Contention:
-        self._busy, self._own = machine_busy_seconds(), own_seconds()
+        self._busy, self._own = machine_busy_seconds(), own_seconds(self.children)
         self._t0 = time.perf_counter()
         return self
 
@@ -136,7 +142,10 @@ class Contention:
             return
         wall = time.perf_counter() - self._t0
         self.others = others_share(
-            busy - self._busy, own_seconds() - self._own, wall, os.cpu_count() or 1
+            busy - self._busy,
+            own_seconds(self.children) - self._own,
+            wall,
+            os.cpu_count() or 1,
         )
 
 
@@ -176,6 +185,32 @@ class Gate:
                 break
         assert best is not None
         return best[0], best[1], attempt
+
+
+def least_disturbed(
+    measure: Callable[[], dict[str, Any]],
+    idle_wait_s: float = 60.0,
+    limit_s: float = SOFT_LIMIT_S,
+    children: bool = False,
+) -> dict[str, Any]:
+    """`measure()` on shared cores: wait for idle ones, and repeat a run other processes
+    disturbed (Gate: ATTEMPTS at most, none started after `limit_s`); the least disturbed
+    run's dict, with the others' CPU share (`others`) and its attempt (`attempts`).
+    `children`: the child processes `measure` waits for count as this one (Contention)."""
+    gate = Gate(idle_wait_s=idle_wait_s, deadline=time.perf_counter() + limit_s)
+    best: dict[str, Any] | None = None
+    for attempt in range(1, gate.attempts + 1):
+        gate.wait_idle()
+        with Contention(children) as c:
+            got = measure()
+        got |= {"others": c.others, "attempts": attempt}
+        print({k: v for k, v in got.items() if isinstance(v, int | float | str)}, flush=True)
+        if best is None or (c.others or 0.0) < (best["others"] or 0.0):
+            best = got
+        if c.others is None or c.others <= gate.clean or time.perf_counter() > gate.deadline:
+            break
+    assert best is not None
+    return best
 
 
 def matmul_rate(

@@ -30,7 +30,7 @@ import torch
 from torch.profiler import ProfilerActivity, profile, record_function
 
 from clutterbench.bench import header, write_result
-from clutterbench.bench.cpu_rates import SOFT_LIMIT_S, THREADS, Contention, Gate, torch_threads
+from clutterbench.bench.cpu_rates import THREADS, least_disturbed, torch_threads
 from clutterbench.bench.train_rate_md import pct
 from clutterbench.bench.train_steps import (
     PROFILED,
@@ -150,7 +150,7 @@ def bench_train_profile(out_dir: Path = Path("reports/bench")) -> dict[str, Any]
                 **_profiled(model, batches, opt, loss, cfg, val_loader, n_val, head_loss),
             }
 
-        best = _least_disturbed(measure)
+        best = least_disturbed(measure)
         groups, ops, wall_s = best["groups"], best["ops"], best["wall_s"]
     result: dict[str, Any] = {
         "model": PROFILED,
@@ -227,25 +227,6 @@ def _profiled(
         wall_s = time.perf_counter() - t0
     groups, ops = group_times(prof.events())
     return {"train_s": train_s, "wall_s": wall_s, "groups": groups, "ops": ops}
-
-
-def _least_disturbed(measure) -> dict[str, Any]:
-    """`measure()` on shared cores: wait for idle ones, and repeat a slice other processes
-    disturbed; the least disturbed run, with the others' CPU share and its attempt."""
-    gate = Gate(idle_wait_s=60.0, deadline=time.perf_counter() + SOFT_LIMIT_S)
-    best: dict[str, Any] | None = None
-    for attempt in range(1, gate.attempts + 1):
-        gate.wait_idle()
-        with Contention() as c:
-            got = measure()
-        got |= {"others": c.others, "attempts": attempt}
-        print({k: v for k, v in got.items() if k != "ops"}, flush=True)
-        if best is None or (c.others or 0.0) < (best["others"] or 0.0):
-            best = got
-        if c.others is None or c.others <= gate.clean or time.perf_counter() > gate.deadline:
-            break
-    assert best is not None
-    return best
 
 
 def markdown(result: dict[str, Any]) -> list[str]:

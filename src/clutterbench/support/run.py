@@ -71,6 +71,19 @@ class SupportPaths:
     out: Path  # val_sweep.csv, scenes.csv, thresholds.json, figure.png
     scenes: Path  # the test scenes and their truth.json
 
+    @classmethod
+    def of(cls, cfg: SupportEvalConfig, out: Path, scenes: Path) -> SupportPaths:
+        """The pipeline's inputs of `cfg` (models/, data/generate, data/split), these outputs."""
+        return cls(
+            model=Path(f"models/{cfg.model}/best.pt"),
+            box_head=Path("models/box_head/best.pt"),
+            box_metrics=Path("reports/box_head/metrics.json"),
+            gen_dir=Path("data/generate"),
+            split_file=Path(f"data/split/{cfg.val_dataset}.json"),
+            out=out,
+            scenes=scenes,
+        )
+
 
 @dataclass(frozen=True)
 class Predictors:
