@@ -36,3 +36,18 @@ def test_rows_count_each_scene_once_and_every_decision():
 def test_no_physics_from_depth_condition_writes_nothing(tmp_path):
     assert estimation_table({"c": [{"planner": "oracle"}]}, tmp_path, "tiny") is None
     assert not list(tmp_path.iterdir())
+
+
+def test_a_sensed_condition_s_estimates_get_their_own_row(tmp_path):
+    boxes = [[0, 1.0, 0.0, 0.5, 0.2]]
+    sensed = _rec("physics_from_depth", 0, [[0, 9.0, 4.0, 3.0, 2.0]], 2, 1, 3)
+    records = {
+        "a": [_rec("physics_from_depth", 0, boxes, 0, 0, 2)],
+        "a_d415": [sensed | {"sensing": "d415", "perception": "depth"}],
+    }
+    ideal, seen = estimation_rows(records)
+    assert "seen" not in ideal and ideal["decisions"] == 2 and ideal["missing"] == 0
+    assert seen["stream"] == "s" and seen["seen"] == "d415, depth masks"
+    assert seen["missing"] == 2 and seen["centre_median_mm"] == pytest.approx(9.0)
+    estimation_table(records, tmp_path, "tiny")
+    assert "d415, depth masks" in (tmp_path / "box_estimation.md").read_text()

@@ -20,6 +20,7 @@ TABLE = "box_estimation"
 
 COLUMNS = [
     Column("stream", "stream", "{}"),
+    Column("seen", "depth image, masks (if not exact and the simulator's)", "{}"),
     Column("scenes", "scenes", "{:d}"),
     Column("boxes", "boxes", "{:d}"),
     Column("missing_pct", "missing (hidden or < min_pixels) %", "{:.1f}"),
@@ -39,6 +40,14 @@ COLUMNS = [
 ]
 
 
+def _stream_seen(record: Mapping[str, Any]) -> str:
+    """A row's key: the stream, then what a sensed condition's planner saw (its own row)."""
+    stream = str(record["stream"])
+    if "sensing" not in record and record.get("perception", "instance") == "instance":
+        return stream
+    return f"{stream} {record.get('sensing', 'ideal')}, {record.get('perception')} masks"
+
+
 def estimation_rows(
     records_by_condition: Mapping[str, Sequence[Mapping[str, Any]]],
 ) -> list[dict[str, Any]]:
@@ -53,7 +62,7 @@ def estimation_rows(
         for r in recs:
             if r.get("estimate_start") is None:  # only physics from depth records its estimates
                 continue
-            stream = str(r["stream"])
+            stream = _stream_seen(r)
             rest.setdefault(stream, []).extend(
                 [float(r["estimate_not_at_rest"]), float(len(r["estimate_settle_mm"]))]
             )
@@ -81,7 +90,8 @@ def estimation_rows(
 
         rows.append(
             {
-                "stream": stream,
+                "stream": stream.partition(" ")[0],
+                "seen": stream.partition(" ")[2] or None,
                 "scenes": len(recs),
                 "boxes": n_boxes,
                 "estimated": len(boxes),
@@ -107,7 +117,7 @@ def estimation_rows(
                 "perception_failed": int(repair[stream][2]),
             }
         )
-    return rows
+    return [{k: v for k, v in r.items() if k != "seen" or v} for r in rows]
 
 
 def estimation_table(
@@ -118,7 +128,8 @@ def estimation_table(
     rows = estimation_rows(records_by_condition)
     if not rows:
         return None
-    frame = pd.DataFrame([{c.header: r.get(c.key) for c in COLUMNS} for r in rows])
+    columns = [c for c in COLUMNS if c.key != "seen" or any("seen" in r for r in rows)]
+    frame = pd.DataFrame([{c.header: r.get(c.key) for c in columns} for r in rows])
     notes = [
         f"{scale} scale. Boxes fitted to the first observation of each episode (the canonical "
         "start, every box in the scene) by perception/box_fit.py: the dominant face's plane "
@@ -140,6 +151,6 @@ def estimation_table(
         "recorded in the step); the planner then pulls the target.",
     ]
     write_table(
-        frame, COLUMNS, out_dir, TABLE, "Box estimation from one depth image: errors", notes
+        frame, columns, out_dir, TABLE, "Box estimation from one depth image: errors", notes
     )
     return write_raw_csv(rows, out_dir / f"{TABLE}.csv", counts=("scenes", "boxes"))
