@@ -55,16 +55,12 @@ def sensed_tracks(ideal_dir: Path) -> dict[str, str]:
 def sensed_depth(depth_m: np.ndarray, camera: CameraConfig, name: str) -> np.ndarray:
     """(S, H, W) float32: each image through preset `name`'s sensor model, seeded by itself
     (observation_rng(0, image)), the camera's focal length focal_px(image_size, fovy_deg)."""
-    from clutterbench.observation import CameraModel
-    from clutterbench.sim.sensor import focal_px, observation_rng, preset, sense
+    from clutterbench.sim.sensor import focal_px, observation_rng, pinhole, preset, sense
 
     cfg = preset(name)
     if cfg is None:
         raise ClutterbenchError(f"sensed track {name!r}: a sensor preset, not the ideal depth")
-    h, w = depth_m.shape[1:]
-    f = focal_px(camera.image_size, camera.fovy_deg)
-    K = np.array([[f, 0.0, w / 2], [0.0, f, h / 2], [0.0, 0.0, 1.0]])
-    model = CameraModel(K=K, T_world_from_cam=np.eye(4))
+    model = pinhole(focal_px(camera.image_size, camera.fovy_deg), depth_m.shape[1:])
     images = [np.ascontiguousarray(d, dtype=np.float32) for d in depth_m]
     return np.stack([sense(d, model, cfg, observation_rng(SEED, d)) for d in images])
 

@@ -189,10 +189,17 @@ class SensedAugmentation:
     spread: float = 0.2
 
     def apply(self, depth_m: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        h, w = depth_m.shape[-2:]
-        K = np.array([[self.fx_px, 0.0, w / 2], [0.0, self.fx_px, h / 2], [0.0, 0.0, 1.0]])
-        camera = CameraModel(K=K, T_world_from_cam=np.eye(4))
+        camera = pinhole(self.fx_px, depth_m.shape[-2:])
         return sense(depth_m, camera, randomized(self.sensor, rng, self.spread), rng)
+
+
+def pinhole(fx_px: float, shape: tuple[int, ...]) -> CameraModel:
+    """The camera `sense` needs for an image of `shape` (H, W) rendered without a world at
+    hand (a stored depth image): focal length fx_px, principal point at the centre, as the
+    renderer makes it; the pose (unused by `sense`) the identity."""
+    h, w = shape
+    K = np.array([[fx_px, 0.0, w / 2], [0.0, fx_px, h / 2], [0.0, 0.0, 1.0]])
+    return CameraModel(K=K, T_world_from_cam=np.eye(4))
 
 
 def focal_px(image_size: int, fovy_deg: float) -> float:

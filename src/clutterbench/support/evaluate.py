@@ -213,14 +213,10 @@ def sensed_scene(scene: Scene, sensing: str, camera: CameraConfig) -> Scene:
     """`scene` as the sensor `sensing` (sim/sensor.py) would have returned its depth image,
     seeded by the picture as every observation is (sim/render.py observe), its surface gaps
     measured on that depth; masks and truth unchanged."""
-    from clutterbench.observation import CameraModel
     from clutterbench.perception.gaps import surface_gaps
-    from clutterbench.sim.sensor import focal_px, observation_rng, preset, sense
+    from clutterbench.sim.sensor import focal_px, observation_rng, pinhole, preset, sense
 
-    h, w = scene.depth_m.shape
-    f = focal_px(h, camera.fovy_deg)
-    K = np.array([[f, 0.0, w / 2], [0.0, f, h / 2], [0.0, 0.0, 1.0]])
-    model = CameraModel(K=K, T_world_from_cam=np.eye(4))
+    model = pinhole(focal_px(scene.depth_m.shape[0], camera.fovy_deg), scene.depth_m.shape)
     depth_m = sense(scene.depth_m, model, preset(sensing), observation_rng(0, scene.depth_m))
     gaps = scene.gaps_m
     if gaps is not None:
