@@ -96,6 +96,18 @@ def _extents(masks: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(a.astype(np.float32) for a in (top, bottom, left, right))
 
 
+def _masked_peaks(p: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    """(X, C, Y) float32: each map's largest value inside each mask, at least 0 (0 where a
+    mask is empty). p: (X, C, P) maps; masks: (Y, P) bool. Each mask gathers only its own
+    pixels: the same maxima as masking every map with every mask, at 1 / Y of the work."""
+    x, c, _ = p.shape
+    peak = np.zeros((x, c, len(masks)), np.float32)
+    for y, mask in enumerate(masks):
+        if mask.any():
+            peak[:, :, y] = p[:, :, mask].max(-1)
+    return peak.clip(0.0)
+
+
 def pair_features(
     probs: np.ndarray, masks: np.ndarray, depth_m: np.ndarray, gaps_m: np.ndarray
 ) -> np.ndarray:
@@ -112,8 +124,7 @@ def pair_features(
     p = probs.reshape(k, c, -1).astype(np.float32)
     mean = np.einsum("xcp,yp->xcy", p, flat) / area
     share = np.einsum("xcp,yp->xcy", (p > 0.5).astype(np.float32), flat) / area
-    big = np.where(masks.reshape(1, 1, k, -1), p[:, :, None, :], -1.0)
-    peak = big.max(-1).clip(0.0)
+    peak = _masked_peaks(p, masks.reshape(k, -1))
     head = np.stack([mean, peak, share], axis=-1)  # (x, c, y, 3)
     head = head.transpose(0, 2, 1, 3).reshape(k, k, c * len(HEAD_FEATURES))
     yy, xx = np.mgrid[0:h, 0:w]

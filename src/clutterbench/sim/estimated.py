@@ -129,14 +129,17 @@ def resolve_overlaps(
 
 
 def _resolve(
-    sizes_m: np.ndarray, poses: np.ndarray, shelf: Shelf
+    sizes_m: np.ndarray, poses: np.ndarray, shelf: Shelf, memo: dict[bytes, float] | None = None
 ) -> tuple[np.ndarray, list[int], int, int]:
-    """resolve_overlaps, and how many boxes it dropped for having no place in the shelf."""
+    """resolve_overlaps, and how many boxes it dropped for having no place in the shelf.
+    `memo`: deepest_overlap's pair depths (a push moves one or two boxes: the other pairs'
+    depths are not measured again)."""
     poses = inside_shelf(sizes_m, poses, shelf)
     kept = list(range(len(poses)))
     pushes = 0
+    memo = {} if memo is None else memo
     while True:
-        worst = deepest_overlap(sizes_m[kept], poses[kept])
+        worst = deepest_overlap(sizes_m[kept], poses[kept], memo)
         if worst is None:
             # dropping a box makes no new overlap, so the outside ones go last
             inside = shelf.contains(poses[kept, :3]) if kept else []  # validate_spec's test
@@ -171,7 +174,9 @@ class Repair:
     invalid: int
 
 
-def repair(sizes_m: np.ndarray, poses: np.ndarray, shelf: Shelf) -> Repair:
+def repair(
+    sizes_m: np.ndarray, poses: np.ndarray, shelf: Shelf, memo: dict[bytes, float] | None = None
+) -> Repair:
     """Any fit (N boxes of any sizes and poses) -> poses and kept boxes a spec may hold: the
     boxes that are no box (`is_box`) dropped, then `_resolve` (validate_spec normalizes the
     near-unit quaternions)."""
@@ -180,7 +185,7 @@ def repair(sizes_m: np.ndarray, poses: np.ndarray, shelf: Shelf) -> Repair:
     boxes = [k for k in range(len(poses)) if is_box(sizes_m[k], poses[k])]
     if not boxes:
         return Repair(poses, [], 0, 0, len(poses))
-    fixed, kept, pushes, outside = _resolve(sizes_m[boxes], poses[boxes], shelf)
+    fixed, kept, pushes, outside = _resolve(sizes_m[boxes], poses[boxes], shelf, memo)
     poses[boxes] = fixed
     return Repair(poses, [boxes[k] for k in kept], pushes, outside, len(poses) - len(boxes))
 
@@ -198,9 +203,9 @@ def estimated_scene(
     from clutterbench.sim.physics import BoxWorld
 
     sizes_m = np.asarray(sizes_m, dtype=np.float64).reshape(-1, 3)
-    fix = repair(sizes_m, poses, shelf)
+    memo: dict[bytes, float] = {}  # the repair's pair depths, which the spec's check reads
+    fix = repair(sizes_m, poses, shelf, memo)
     fixed, kept, pushes = fix.poses, fix.kept, fix.pushes
-    assert deepest_overlap(sizes_m[kept], fixed[kept]) is None
     spec = validate_spec(
         SceneSpec(
             sizes_m=sizes_m[kept],
@@ -210,6 +215,7 @@ def estimated_scene(
             meta={"ids": [int(ids[k]) for k in kept], "given": len(ids)},
         ),
         "estimated scene",
+        memo,
     )
     if spec.n == 0:
         return EstimatedScene(spec, tuple(kept), True, 0.0, pushes, 0, fix.outside, fix.invalid)

@@ -90,11 +90,15 @@ def obb_penetration_m(
     centre_b: np.ndarray,
     quat_b: np.ndarray,
     size_b: np.ndarray,
+    shallow_m: float = 0.0,
 ) -> float:
     """How deep two oriented boxes interpenetrate (metres; 0 when apart or just touching).
 
     Separating-axis test over the 15 candidate axes (3 + 3 face normals, 9 edge cross
     products): the smallest overlap along them is the distance that separates the boxes.
+    `shallow_m`: a caller that asks only whether the boxes interpenetrate deeper than this
+    gets, once an axis shows an overlap of at most it, that overlap (a depth no deeper than
+    `shallow_m`: the answer, without the other axes); the depth itself when deeper.
     """
     Ra, Rb = quat_to_matrix(quat_a), quat_to_matrix(quat_b)
     ha, hb = 0.5 * np.asarray(size_a, float), 0.5 * np.asarray(size_b, float)
@@ -114,6 +118,8 @@ def obb_penetration_m(
         overlap = ra + rb - abs(float(d @ axis))
         if overlap <= 0:
             return 0.0
+        if overlap <= shallow_m:
+            return float(overlap)
         depth = min(depth, overlap)
     return float(depth)
 

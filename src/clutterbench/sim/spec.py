@@ -225,9 +225,11 @@ def check_spec_dict(d: Any, where: str = "spec") -> tuple[Shelf, CameraConfig]:
     return shelf, camera
 
 
-def validate_spec(spec: SceneSpec, where: str = "spec") -> SceneSpec:
+def validate_spec(
+    spec: SceneSpec, where: str = "spec", memo: dict[bytes, float] | None = None
+) -> SceneSpec:
     """The spec with near-unit quaternions normalized; a ClutterbenchError naming the box for
-    anything a world cannot hold."""
+    anything a world cannot hold. `memo`: pair depths already measured (deepest_overlap)."""
     poses = spec.poses.copy()
     for k in range(spec.n):
         box = f"{where}: box {k}"
@@ -249,7 +251,7 @@ def validate_spec(spec: SceneSpec, where: str = "spec") -> SceneSpec:
             raise ClutterbenchError(
                 f"{box}: centre {np.round(poses[k, :3], 4).tolist()} m is outside the shelf"
             )
-    overlap = deepest_overlap(spec.sizes_m, poses)
+    overlap = deepest_overlap(spec.sizes_m, poses, memo)
     if overlap is not None:
         a, b, depth = overlap
         raise ClutterbenchError(
@@ -258,9 +260,13 @@ def validate_spec(spec: SceneSpec, where: str = "spec") -> SceneSpec:
     return dataclasses.replace(spec, poses=poses)
 
 
-def deepest_overlap(sizes_m: np.ndarray, poses: np.ndarray) -> tuple[int, int, float] | None:
+def deepest_overlap(
+    sizes_m: np.ndarray, poses: np.ndarray, memo: dict[bytes, float] | None = None
+) -> tuple[int, int, float] | None:
     """(a, b, depth) of the most deeply interpenetrating pair of boxes if it is deeper than
-    MAX_PENETRATION_M, else None."""
+    MAX_PENETRATION_M, else None. `memo`: the depths of pairs already measured, by the two
+    boxes' sizes and poses (a caller that moves a few boxes at a time passes the same dict
+    again: an unmoved pair's depth is not measured twice, and is the same number)."""
     half = np.array([box_aabb_half_extents(s, p[3:]) for s, p in zip(sizes_m, poses)])
     worst = None
     for a in range(len(sizes_m)):
@@ -268,9 +274,20 @@ def deepest_overlap(sizes_m: np.ndarray, poses: np.ndarray) -> tuple[int, int, f
             gap = np.abs(poses[a, :3] - poses[b, :3]) - half[a] - half[b]
             if np.any(gap > -MAX_PENETRATION_M):  # AABBs barely meet: cannot overlap deeper
                 continue
-            depth = obb_penetration_m(
-                poses[a, :3], poses[a, 3:], sizes_m[a], poses[b, :3], poses[b, 3:], sizes_m[b]
-            )
+            key = b"".join(x.tobytes() for x in (sizes_m[a], poses[a], sizes_m[b], poses[b]))
+            depth = memo.get(key) if memo is not None else None
+            if depth is None:
+                depth = obb_penetration_m(  # a pair no deeper than the limit: not asked how deep
+                    poses[a, :3],
+                    poses[a, 3:],
+                    sizes_m[a],
+                    poses[b, :3],
+                    poses[b, 3:],
+                    sizes_m[b],
+                    shallow_m=MAX_PENETRATION_M,
+                )
+                if memo is not None:
+                    memo[key] = depth
             if depth > MAX_PENETRATION_M and (worst is None or depth > worst[2]):
                 worst = (a, b, depth)
     return worst
