@@ -14,10 +14,10 @@ from clutterbench.perception.depth_segmentation import ShelfROI
 from clutterbench.perception.region_growing import (
     RegionGrowingParams,
     fit_planes,
-    inverse_depth_noise,
     segment_regions,
     window_side,
 )
+from clutterbench.perception.sensor_marks import lag_noise
 
 ROI = ShelfROI(-0.28, 0.28, -0.165, 0.165, 0.0, 0.33)
 """The default shelf's interior (sim/shelf.py: 330 wide, 280 deep, 330 high)."""
@@ -212,17 +212,23 @@ def test_degenerate_images_raise_nothing():
 def test_the_noise_is_measured_and_sets_the_window():
     obs = render(APART)
     inv = np.where(obs.depth_m > 0, 1.0 / np.maximum(obs.depth_m, 1e-9), 0.0)
-    assert inverse_depth_noise(inv, obs.depth_m > 0) < 1e-5  # planes: no second difference
+    assert lag_noise(inv, obs.depth_m > 0, 1) < 1e-5  # planes: no second difference
     sigma = 0.002  # depth noise at z ~ 0.6 m: 1 / z noise of sigma / z^2
     noisy_obs = noisy(obs, sigma, 0.0, 0.0)
     valid = noisy_obs.depth_m > 0
     inv = np.where(valid, 1.0 / np.where(valid, noisy_obs.depth_m, 1.0), 0.0)
     expected = sigma / np.median(obs.depth_m[valid]) ** 2
-    assert inverse_depth_noise(inv, valid) == pytest.approx(expected, rel=0.3)
+    assert lag_noise(inv, valid, 1) == pytest.approx(expected, rel=0.3)
     # More noise, a wider window; the window bounded; its normals' error as asked.
-    sides = [window_side(n, PARAMS)[0] for n in (0.1, 0.5, 1.0, 100.0)]
+    sides = [
+        window_side(n, PARAMS.max_window_px, PARAMS.normal_noise_deg)[0]
+        for n in (0.1, 0.5, 1.0, 100.0)
+    ]
     assert sides == sorted(sides) and sides[0] == 3 and sides[-1] == PARAMS.max_window_px
-    assert window_side(0.5, PARAMS)[1] <= PARAMS.normal_noise_deg
+    assert (
+        window_side(0.5, PARAMS.max_window_px, PARAMS.normal_noise_deg)[1]
+        <= PARAMS.normal_noise_deg
+    )
     assert fit_planes(noisy_obs, PARAMS).window > fit_planes(obs, PARAMS).window
 
 
@@ -258,3 +264,69 @@ def test_a_small_depth_step_parts_touching_boxes(noise):
     """Depth cannot part them once noise hides the step (a stereo-like sensor's 3 mm)."""
     obs = render(STEP)
     assert_one_per_box(segments(obs if noise is None else noisy(obs, *noise)), obs, 0.7)
+
+
+# A real sensor's marks (perception/sensor_marks.py): holes, flying pixels, correlated noise.
+
+
+def sensed(obs: Observation, name: str, seed: int) -> Observation:
+    """`obs` as sim/sensor.py's preset `name` returns it: shadows, holes and flying pixels at
+    depth steps, fattening, disparity noise (correlated over the block-matching window)."""
+    from clutterbench.sim import sensor
+
+    rng = np.random.default_rng(seed)
+    depth = sensor.sense(obs.depth_m, obs.camera, sensor.preset(name), rng)
+    return dataclasses.replace(obs, depth_m=depth)
+
+
+OLD = dataclasses.replace(PARAMS, hole_weight=1.0, corr_ratio=1e9)
+"""Region growing without the sensor marks: filled holes count as returns, noise is white."""
+
+
+@pytest.mark.parametrize("size", [64, 128, 256])
+def test_exact_depth_is_segmented_as_without_the_sensor_marks(size):
+    """Exact depth has no hole inside the shelf and no noise: neither step changes a pixel."""
+    for boxes in (APART, IN_FRONT, RESTING, STEP, LOW):
+        obs = render(boxes, size)
+        assert np.array_equal(segments(obs), segment_regions(obs, ROI, OLD, MIN_PIXELS))
+
+
+def test_a_segment_of_filled_holes_is_no_object():
+    """A small box (a segment of 32 px) whose returns are half missing: the plane fit fills
+    them, but its 16 measured pixels (plus a quarter of the 16 filled) are under MIN_PIXELS;
+    counted as returns, the filled holes would make it a segment."""
+    obs = render([Box((0.14, 0.0, 0.015), (0.02, 0.015, 0.03))])
+    box = obs.instance == 1
+    assert box.sum() == 36 and (segments(obs) == 1).sum() == 32
+    holes = box & (np.add.outer(np.arange(128), np.arange(128)) % 2 == 0)  # a checkerboard
+    holed = dataclasses.replace(obs, depth_m=np.where(holes, 0.0, obs.depth_m).astype(np.float32))
+    assert segments(obs).max() == 1  # whole, the box is a segment
+    assert segment_regions(holed, ROI, OLD, MIN_PIXELS).max() == 1
+    assert segments(holed).max() == 0
+
+
+def test_holes_and_flying_pixels_at_depth_steps_make_fewer_strays():
+    """The d415 preset at 128 px: half the pixels beside each step return nothing, a fifth a
+    depth between the two sides; the plane fit fills the holes, whose slivers were segments."""
+    strays = {"now": 0, "old": 0}
+    for seed in range(6):
+        obs = sensed(render(APART), "d415", seed)
+        for key, params in (("now", PARAMS), ("old", OLD)):
+            labels = segment_regions(obs, ROI, params, MIN_PIXELS)
+            assert min(matched(labels, obs)) > 0.7
+            strays[key] += labels.max() - len(APART)
+    assert strays["now"] <= 8 < 2 * strays["now"] <= strays["old"]
+
+
+@pytest.mark.parametrize("boxes", [APART, STEP], ids=["apart", "step"])
+def test_noise_correlated_over_pixels_is_measured_at_its_span(boxes):
+    """The d415 preset at 256 px: block matching correlates the disparity noise over ~2 px, which
+    adjacent pixels' differences miss (they move together); measured at its span, the noise
+    asks for a wider window and the boxes come out whole, one segment each."""
+    obs = render(boxes, 256)
+    noisy = sensed(obs, "d415", 1)
+    assert fit_planes(noisy, PARAMS).window > fit_planes(noisy, OLD).window
+    labels = segments(noisy)
+    assert labels.max() == len(boxes)
+    assert min(matched(labels, obs)) > 0.8
+    assert segment_regions(noisy, ROI, OLD, MIN_PIXELS).max() > 10 * len(boxes)

@@ -7,6 +7,13 @@ fitted cloud, split where fitted points jump apart, merge into faces most alike 
 merge into objects where their junction is convex (a box's front turning into its top) and they
 do not cross, while a concave one (a box resting or leaning on another) stays a cut.
 
+A real sensor's marks (perception/sensor_marks.py, sim/sensor.py's presets): noise correlated
+over a block matcher's window hides from neighbours' differences, so it is measured at its span,
+and widens the window as fewer independent points would; a pixel with no return (a shadow, a
+depth step, dropout) is filled by the fit but counts only hole_weight towards a segment's size,
+so slivers of filled holes along depth steps are no objects. Exact depth has neither mark: it is
+segmented as it was before them.
+
 Depth cannot separate faces in one plane (the fronts of a flush stack, or of boxes side by side
 touching: the seam is narrower than a pixel), nor, as noise widens the tolerances, boxes meeting
 with a smaller step or fold (a box leaning a few degrees on another, a stack offset by a
@@ -26,9 +33,7 @@ import numpy as np
 from clutterbench.config import bounded
 from clutterbench.observation import Observation
 from clutterbench.perception.depth_segmentation import ShelfROI
-
-_MAD_TO_SIGMA = 1.4826
-"""Median absolute deviation to standard deviation, for Gaussian noise."""
+from clutterbench.perception.sensor_marks import depth_noise, support_weight, window_side
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,6 +46,13 @@ class RegionGrowingParams:
     """Least depth noise assumed (pixel footprints: depth / focal length), for flying pixels."""
     normal_noise_deg: float = bounded(5.0, gt=0.0, le=45.0)
     """The plane-fit window is the smallest whose normals err this much at the image's noise ..."""
+    corr_max_lag: int = bounded(3, ge=1)
+    """... measured white, or correlated over up to this many pixels (sensor_marks.depth_noise;
+    scenes 60-119: 4 lets edges and folds lift white noise's ratio below to 1.27) ..."""
+    corr_ratio: float = bounded(1.25, gt=1.0)
+    """... when the noise between pixels that far apart exceeds their neighbours' by this ratio.
+    Scenes 60-119 of dev_ch6_3_10, every image: at most 1.16 for white noise (every model, 64-256
+    px), at least 1.33 for d415 at 256 px (correlated over ~2 px): 1.25 parts them ..."""
     max_window_px: int = bounded(11, ge=3)
     """... but no wider than this many pixels."""
     shift_cost: float = bounded(0.3, ge=0.0)
@@ -81,6 +93,11 @@ class RegionGrowingParams:
     """... unless they cross: the step between them within this angle of the planes' meeting."""
     fragment_windows: float = bounded(2.0, ge=0.0)
     """Segments under this many supervoxel cells join the neighbour they share most links with."""
+    hole_weight: float = bounded(0.25, ge=0.0, le=1.0)
+    """A pixel with no return (filled by the fit) counts this much of a measured one towards
+    min_pixels. Scenes 60-119 of dev_ch6_3_10, 128 px, structured_light / d415: 1 (as before),
+    0.5, 0.25, 0 all find 354 / 340 of 375 boxes, with 78 / 410, 51 / 224, 44 / 158, 39 / 126
+    stray segments; 0 finds 1 / 2 fewer of 115 at 64 px: 0.25, the least that loses none."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,32 +113,6 @@ class PlaneFit:
     fit_sigma_m: np.ndarray
     window: int
     normal_deg: float
-
-
-def inverse_depth_noise(w: np.ndarray, valid: np.ndarray) -> float:
-    """Standard deviation of the noise of `w` = 1 / depth (1/m) where `valid`: the median absolute
-    second difference of three returns in a row or column (zero on any plane: faces give the
-    noise, edges are the median's outliers) over sqrt(6); 0.0 where there are none."""
-    d2 = np.concatenate(
-        [
-            np.abs(a[:-2] - 2 * a[1:-1] + a[2:])[ok[:-2] & ok[1:-1] & ok[2:]]
-            for a, ok in ((w, valid), (w.T, valid.T))
-        ]
-    )
-    return float(_MAD_TO_SIGMA * np.median(d2) / np.sqrt(6.0)) if d2.size else 0.0
-
-
-def window_side(noise_px: float, params: RegionGrowingParams) -> tuple[int, float]:
-    """The plane-fit window's side (odd, pixels) and its normals' expected error (degrees) at
-    depth noise `noise_px` (footprints): a least-squares slope over m x m points one footprint
-    apart errs by sqrt(12) sigma / (m sqrt(m^2 - 1))."""
-
-    def error_deg(m: int) -> float:
-        return float(np.rad2deg(np.sqrt(12.0) * noise_px / (m * np.sqrt(m * m - 1.0))))
-
-    sides = range(3, max(3, params.max_window_px) + 1, 2)
-    m = next((m for m in sides if error_deg(m) <= params.normal_noise_deg), sides[-1])
-    return m, error_deg(m)
 
 
 _PLACEMENTS = ((0, 0), (-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
@@ -173,9 +164,10 @@ def fit_planes(obs: Observation, params: RegionGrowingParams) -> PlaneFit:
     v, u = np.mgrid[0 : inv.shape[0], 0 : inv.shape[1]].astype(np.float64) + 0.5
     u, v = u - K[0, 2], v - K[1, 2]  # from the principal point
     w0 = float(np.median(inv[valid])) if valid.any() else 1.0
-    sigma_w = inverse_depth_noise(inv, valid)
+    floor_w = params.min_noise_px * w0 / fx
+    sigma_w, corr = depth_noise(inv, valid, floor_w, params.corr_max_lag, params.corr_ratio)
     noise_px = max(sigma_w * fx / w0, params.min_noise_px)
-    m, normal_deg = window_side(noise_px, params)
+    m, normal_deg = window_side(noise_px, params.max_window_px, params.normal_noise_deg, corr)
     # Noise of 1 / depth per pixel: the image's, or the floor (min_noise_px footprints).
     sigma_pix = np.maximum(sigma_w, params.min_noise_px * np.where(valid, inv, w0) / fx)
     tol, shift_cost = params.outlier_k * sigma_pix, params.shift_cost * sigma_pix**2
@@ -447,13 +439,14 @@ def _join(labels: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     return root[labels].astype(np.int32)
 
 
-def _finish(labels: np.ndarray, min_pixels: int) -> np.ndarray:
-    """Segments with `min_pixels` pixels and a 2 x 2 block of their own (no sliver), numbered
-    1..K in raster order of their first pixel; the rest background."""
+def _finish(labels: np.ndarray, min_pixels: int, weight: np.ndarray) -> np.ndarray:
+    """Segments of `min_pixels` pixels, each counted by its `weight` (support_weight), with a 2 x 2
+    block of their own (no sliver), numbered 1..K in raster order of their first pixel; the rest
+    background."""
     n, tl = int(labels.max()) + 1, labels[:-1, :-1]
     block = (tl == labels[1:, :-1]) & (tl == labels[:-1, 1:]) & (tl == labels[1:, 1:])
     keep = np.bincount(tl[block], minlength=n) > 0
-    keep &= np.bincount(labels.ravel(), minlength=n) >= min_pixels
+    keep &= np.bincount(labels.ravel(), weight.ravel(), minlength=n) >= min_pixels
     keep[0] = False
     flat = np.where(keep[labels], labels, 0).ravel()
     ids, first = np.unique(flat, return_index=True)
@@ -467,7 +460,8 @@ def segment_regions(
     obs: Observation, roi: ShelfROI, params: RegionGrowingParams, min_pixels: int
 ) -> np.ndarray:
     """(H, W) int32 labels from depth alone, robust to sensor noise: 0 background, 1..K objects in
-    raster order of their first pixel; segments under `min_pixels`, or one pixel thin, dropped."""
+    raster order of their first pixel; segments under `min_pixels` (a pixel with no return
+    counting hole_weight), or one pixel thin, dropped."""
     fit = fit_planes(obs, params)
     T = obs.camera.T_world_from_cam  # objects: fitted points clear of the boards by the margin
     margin = params.board_margin_m + params.board_noise_k * np.nan_to_num(fit.fit_sigma_m)
@@ -491,10 +485,11 @@ def segment_regions(
     faces = _faces(patches, fit, jumps, flat_tol, params)
     pairs = _adjacent(faces, jumps, params.merge_share)
     if pairs.size == 0:
-        return _finish(faces, min_pixels)
+        return _finish(faces, min_pixels, support_weight(obs.depth_m, params.hole_weight))
     centroid, normal = patch_planes(faces, fit, params.curvature_k)
     near = _near_centroids(faces, np.nan_to_num(fit.points), pairs, s)
     tol_m = params.convex_tol_px * near[..., 2].mean(axis=0) / fx + sigma
     convex = convex_junction(normal[pairs.T], centroid[pairs.T], near, tol_m, params.singular_deg)
     objects = _join(faces, pairs[convex])
-    return _finish(_fragments(objects, jumps, int(params.fragment_windows * s * s)), min_pixels)
+    objects = _fragments(objects, jumps, int(params.fragment_windows * s * s))
+    return _finish(objects, min_pixels, support_weight(obs.depth_m, params.hole_weight))
