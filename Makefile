@@ -19,7 +19,7 @@ TORCH_PIP_ARGS := $(if $(TORCH_INDEX_URL),--index-url $(TORCH_INDEX_URL))
 TORCH_CHOICE := $(if $(filter-out torch==2.13.0,$(TORCH_SPEC))$(TORCH_INDEX_URL),echo '$(TORCH_SPEC) $(TORCH_INDEX_URL)';)
 STAMP := $(VENV)/.installed-$(shell ($(TORCH_CHOICE) cat requirements.lock pyproject.toml) 2>/dev/null | sha1sum | cut -c1-12)
 
-.PHONY: setup system venv repro test lint bench learning-curve designs benchmark-scenes clean-venv shell
+.PHONY: setup system venv repro repro-full test lint bench learning-curve designs benchmark-scenes clean-venv shell
 
 setup: system venv .dvc/config
 
@@ -41,6 +41,12 @@ $(STAMP): requirements.lock pyproject.toml
 
 repro: setup
 	dvc repro
+
+# The same with the opt-in conditions too (trials.opt_in: rows no headline figure reads, left
+# out of `make repro`; their cost: docs/run-times.md). A dvc experiment, as any -S switch:
+# params.yaml is left with trials.opt_in.run: true.
+repro-full: setup
+	dvc exp run -S trials.opt_in.run=true
 
 # An interactive bash inside the environment (exit to leave); the same as
 # `source .venv/bin/activate` in the shell you are in.

@@ -1,6 +1,7 @@
-"""Stage trials: the chapter 6 extraction trials of every condition (thesis Table 6.3) in one
-pool of workers -> per condition reports/trials/<condition>/records.jsonl (one record per
-episode) and summary.json, and data/trials/<condition>/episodes.mcap.
+"""Stage trials: the chapter 6 extraction trials of every condition (thesis Table 6.3; the
+opt-in ones only when trials.opt_in.run, make repro-full) in one pool of workers -> per
+condition reports/trials/<condition>/records.jsonl (one record per episode) and summary.json,
+and data/trials/<condition>/episodes.mcap.
 
 One stage, not one per condition: an episode takes about a second, so starting the workers
 (torch, a renderer, the networks) once for all conditions saves most of the overhead, and
@@ -28,17 +29,16 @@ FIGURE_SCENES = 4
 
 def trials(params: dict, base: BaseConfig) -> None:
     cfg = load_section(TrialsConfig, "trials", params)
-    only = sys.argv[1:]  # optional: run only these conditions (debugging; dvc runs them all)
-    unknown = [n for n in only if n not in cfg.conditions]
-    if unknown:
-        raise ClutterbenchError(
-            f"trials.conditions.{unknown[0]}: no such condition "
-            f"(known: {', '.join(cfg.conditions)})"
-        )
-    conditions = {n: c for n, c in cfg.conditions.items() if not only or n in only}
+    only = sys.argv[1:]  # optional: run only these (debugging; dvc: all but the opt-in ones)
+    conditions = cfg.stage_conditions(only)
     if not conditions:
         raise ClutterbenchError("trials.conditions: no conditions to run")
-    load_planners(cfg.planner_modules, [c.planner for c in conditions.values()])
+    load_planners(cfg.planner_modules, [c.planner for c in cfg.conditions.values()])
+    planner_of = {n: c.planner for n, c in cfg.conditions.items()}
+    if problem := cfg.opt_in.role_problem(planner_of, lambda p: planner_info(p).role):
+        raise ClutterbenchError(f"trials.{problem}")
+    if cfg.opt_in.skipped and not only:
+        print(f"not run (opt-in, make repro-full runs them): {', '.join(cfg.opt_in.skipped)}")
     sim = load_section(SimConfig, "sim", params)
     precision = inference_from_params(params)
     jobs, about = [], {}

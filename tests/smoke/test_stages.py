@@ -34,6 +34,7 @@ from clutterbench.report.config import ReportConfig
 from clutterbench.sim.config import SimConfig
 from clutterbench.trials.ch3.config import Ch3Config
 from clutterbench.trials.ch6.planners import planner_info
+from clutterbench.trials.condition_sets import NOT_RUN
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.core.protocol import EPISODE_ENDS
 from clutterbench.trials.core.records import read_records
@@ -163,7 +164,12 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
             read_episode(a / "data/trials_ch4" / name / "episodes.mcap")["topics"]["/trial/outcome"]
             == trials.ch4_conditions[name].episodes
         )
-    for name, cond in trials.conditions.items():
+    # the opt-in rows (trials.opt_in) are left out at tiny scale as at default: not run, not
+    # replayed, and Table 6.3 says so
+    skipped = trials.opt_in.skipped
+    assert skipped and not any((a / "reports/trials" / name).exists() for name in skipped)
+    assert not set(skipped) & set(noise)
+    for name, cond in trials.run_conditions.items():
         records = read_records(a / "reports/trials" / name / "records.jsonl")
         assert len(records) == cond.episodes
         for rec in records:  # the episode protocol's named outcome on every step
@@ -189,20 +195,25 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
         assert rec["valid"] or not rec["success"]  # an invalid action is never a success
     assert (a / "reports/trials_ch4/fig_4_8.png").stat().st_size > 1000
     rows63 = load_section(ReportConfig, "report", params).table_6_3.values()
-    n63 = len(rows63) + len(set(rows63) & set(trials.sensed.of))  # and the sensed rows
+    n63 = sum(c not in skipped for c in rows63) + len(set(rows63) & set(trials.sensed.of))
+    t63 = (a / "reports/tables/table_6_3.md").read_text().splitlines()
+    assert sum(NOT_RUN in line for line in t63 if line.startswith("|")) == len(skipped)
     for table, rows in (("table_4_1", 24 + 6), ("table_4_1_target", 3), ("table_6_3", n63)):
         frame = pd.read_csv(a / "reports/tables" / f"{table}.csv")
         assert len(frame) == rows and frame["success_rate"].between(0, 1).all(), table
     # Table 6.3 decomposed: every stream with a CP row, its truth-map row and its oracle,
     # under both criteria; planning (+ what the map predicts, where a pull-truth row ran) +
-    # perception = the gap
+    # perception = the gap. The opt-in rows left out are the 3-5 and 10-box streams' truth
+    # rows: there multi_step and multi_step_pull have no split (with them: 12 and 8 chains)
+    chains, pull_chains = 8, 6
     dec = pd.read_csv(a / "reports/tables/table_6_3_decomposition.csv")
-    assert len(dec) == 2 * 12 and set(dec["key"]) == {"success", "strict_success"}
+    assert len(dec) == 2 * chains and set(dec["key"]) == {"success", "strict_success"}
     parts = dec["planning"] + dec["meaning"].fillna(0.0) + dec["perception"]
     assert ((parts - dec["gap"]).abs() < 1e-9).all()
     pull_chain = dec["planner"].map(lambda p: planner_info(p).of_the_pull)
-    # the pull head's and the box head's chains: oracle -> pull truth -> CP (4 + 4 rows)
-    assert pull_chain.sum() == 2 * 8
+    # the pull head's and the box head's chains: oracle -> pull truth -> CP (multi_step_pull
+    # on each stream with its pull-truth row, bimanual_pull, the four box planners)
+    assert pull_chain.sum() == 2 * pull_chains
     assert dec[~pull_chain]["meaning"].notna().all()  # every CP row has its pull-truth row
     assert dec[pull_chain]["meaning"].isna().all()
     head = {"moved": "pull", "collapse": "pull_collapse"}[trials.ch6.pull_map_meaning]

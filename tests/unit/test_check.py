@@ -71,6 +71,24 @@ MISTAKES: dict[str, tuple[Callable[[dict[str, Any]], None], str]] = {
         lambda p: p["trials"]["conditions"]["oracle"].update(stream="ch6_3_01"),
         "error: trials.conditions.oracle.stream: unknown stream 'ch6_3_01' (not in trials.streams",
     ),
+    "unknown opt-in condition": (
+        lambda p: p["trials"]["opt_in"].update(conditions=["multi_step_truth_35"]),
+        "error: trials.opt_in.conditions: unknown condition 'multi_step_truth_35' (not in "
+        "trials.conditions; did you mean 'multi_step_truth_3_5'?)",
+    ),
+    "an oracle opt-in": (
+        lambda p: p["trials"]["opt_in"].update(conditions=["oracle_10"]),
+        "error: trials.opt_in.conditions: 'oracle_10' is a search oracle's row",
+    ),
+    "a thesis row opt-in": (
+        lambda p: p["trials"]["opt_in"].update(conditions=["single_step_10"]),
+        "error: trials.opt_in.conditions: 'single_step_10' runs Table 6.3's thesis row "
+        "single_step/10 (the README's results at a glance quote it)",
+    ),
+    "an opt-in row replayed": (
+        lambda p: p["noise"].update(conditions=["multi_step_truth_10"]),
+        "error: noise.conditions: 'multi_step_truth_10' is opt-in and not run",
+    ),
     "unknown model of a run": (
         lambda p: p["evaluate"]["runs"]["fcn8s_ch5"].update(model="fcn8"),
         "error: evaluate.runs.fcn8s_ch5.model: unknown model 'fcn8' (not in train.models",

@@ -22,6 +22,7 @@ from clutterbench.io import read_json
 from clutterbench.report.config import ReportConfig
 from clutterbench.report.tables import load_thesis_figures
 from clutterbench.support.scorecard import is_fresh, leaderboard
+from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.core.records import read_records
 from clutterbench.trials.core.stats import aggregate, aggregate_games
 
@@ -163,14 +164,19 @@ def _tables_from_records(out: Path) -> dict[str, pd.DataFrame]:
     figures = load_thesis_figures(ROOT / cfg.thesis_figures)
     ch4 = by_condition(read_records(ROOT / "reports/trials_ch4/records.jsonl"))
     ch5 = by_condition(read_records(ROOT / "reports/trials_ch5/records.jsonl"))
-    ch6 = {c: read_records(TRIALS / c / "records.jsonl") for c in cfg.table_6_3.values()}
+    not_run = load_section(TrialsConfig, "trials", params).opt_in.skipped
+    ch6 = {
+        c: read_records(TRIALS / c / "records.jsonl")
+        for c in cfg.table_6_3.values()
+        if c not in not_run
+    }
     games = read_records(ROOT / "reports/trials_ch3/records.jsonl")
     val = read_json(ROOT / "reports/train_slide/metrics.json")["val"]
     fig_3_15_table(aggregate_games(games), games, figures, val, out, out / "f.png", scale)
     table_4_1(ch4, cfg.table_4_1, figures, out, scale)
     table_4_1_target(ch4, cfg.table_4_1_target, figures, out, scale)
     table_5_2(ch5, cfg.table_5_2, figures, out, scale)
-    extraction_table(ch6, cfg.table_6_3, figures, out, scale)
+    extraction_table(ch6, cfg.table_6_3, figures, out, scale, not_run=not_run)
     names = ("fig_3_15", "table_4_1", "table_4_1_target", "table_5_2", "table_6_3")
     return {name: pd.read_csv(out / f"{name}.csv") for name in names} | {"figures": figures}
 

@@ -277,7 +277,7 @@ def stage_jobs(scale: str) -> dict[str, int]:
     return {
         "generate": sum(ds.n_scenes for ds in gen.datasets.values()),
         "support": load_section(SupportEvalConfig, "support", params).test_scenes,
-        "trials": sum(c.episodes for c in trials.conditions.values()),
+        "trials": sum(c.episodes for c in trials.run_conditions.values()),
         "trials_ch4": sum(c.episodes for c in trials.ch4_conditions.values()),
         "trials_ch5": sum(c.episodes for c in trials.ch5_conditions.values()),
         "trials_arm": sum(c.episodes for c in trials.arm_conditions.values()),

@@ -89,10 +89,11 @@ def trials(ctx: Context) -> Sample:
             name, one, trials=cfg, sim=ctx.sim, seed=ctx.base.seed, thresholds=thresholds
         )[0]
 
-    groups = by_key(dict(cfg.conditions), lambda c: c.planner, jobs_of, run_ch6_episode)
+    run = cfg.run_conditions  # as the stage runs them: the opt-in ones only when switched on
+    groups = by_key(run, lambda c: c.planner, jobs_of, run_ch6_episode)
     notes = [
-        f"the first {plural(n, 'episode')} of each of the {len(cfg.conditions)} conditions, "
-        "grouped by planner; networks randomly initialised (default config)",
+        f"the first {plural(n, 'episode')} of each of the {len(run)} conditions the stage "
+        "runs, grouped by planner; networks randomly initialised (default config)",
         "not sampled: the stage's box-estimation figure (4 scenes, once)",
     ]
     return Sample(groups, notes)

@@ -36,6 +36,7 @@ from clutterbench.cli.common import (
 )
 from clutterbench.config import SCALES, BaseConfig, as_dict, load_base, load_params, parse
 from clutterbench.errors import ClutterbenchError
+from clutterbench.trials.condition_sets import opt_in_lines, thesis_row_lines
 
 Resolved = Mapping[str, Any]
 """params.yaml's sections at one scale profile (scale mappings resolved), as read."""
@@ -256,7 +257,8 @@ def check_trials(p: Resolved) -> list[str]:
                 out += _model_ref(p, f"{key}.model", cond.get("model"))
     for field in ("ch6.model", "ch6.ch4_model", "ch5.model"):
         out += _model_ref(p, f"trials.{field}", _at(p, f"trials.{field}"))
-    return out + check_arm_conditions(p)
+    role = {name: _role(name) for name in planners}
+    return out + check_arm_conditions(p) + opt_in_lines(_mapping(p, "trials"), role.get)
 
 
 def check_arm_conditions(p: Resolved) -> list[str]:
@@ -283,18 +285,25 @@ def check_arm_conditions(p: Resolved) -> list[str]:
     return out
 
 
-def _is_oracle(planner: str) -> bool:
+def _role(planner: str) -> str:
     from clutterbench.trials.ch6.planners import planner_info
 
-    return planner_info(planner).role == "oracle"
+    return planner_info(planner).role
+
+
+def _is_oracle(planner: str) -> bool:
+    return _role(planner) == "oracle"
 
 
 def check_noise(p: Resolved) -> list[str]:
     conditions = _entries(p, "trials.conditions")
     planners, _ = ch6_planners(p)
+    skipped = [] if _at(p, "trials.opt_in.run") else _list(_at(p, "trials.opt_in.conditions"))
     out = []
     for name in _list(_at(p, "noise.conditions")):
         found = _ref(p, "noise.conditions", name, "trials.conditions", "condition")
+        if not found and name in skipped:
+            found.append(f"noise.conditions: '{name}' is opt-in and not run (trials.opt_in.run)")
         executor = conditions.get(name, {}).get("executor", "kinematic")
         if not found and executor != "kinematic":
             found.append(
@@ -332,6 +341,15 @@ def check_report(p: Resolved, root: Path) -> list[str]:
     figures = _at(p, "report.thesis_figures")
     if isinstance(figures, str) and not (root / figures).is_file():
         out.append(f"report.thesis_figures: {figures} not found (a path in the repository)")
+    elif isinstance(figures, str):  # no opt-in condition runs a thesis row of Table 6.3
+        from clutterbench.report.tables import load_thesis_figures
+
+        try:
+            rows = _list(_at(load_thesis_figures(root / figures), "table_6_3.rows"))
+        except ClutterbenchError as exc:
+            return [*out, str(exc)]
+        opt_in = _list(_at(p, "trials.opt_in.conditions"))
+        out += thesis_row_lines(opt_in, _mapping(p, "report.table_6_3"), rows)
     return out
 
 

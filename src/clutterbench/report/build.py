@@ -114,9 +114,12 @@ class Report:
 
     @functools.cached_property
     def ch6_records(self) -> dict[str, list[dict]]:
+        """The records of every Table 6.3 row's condition the trials ran (not of an opt-in
+        one this run left out: trials.opt_in)."""
         return {
             cond: read_records(Path(f"reports/trials/{cond}/records.jsonl"))
             for cond in self.table_6_3_rows.values()
+            if cond not in self.trials.opt_in.skipped
         }
 
     @functools.cached_property
@@ -229,15 +232,15 @@ def table_6_2_support(r: Report) -> None:
 
 
 def table_6_3_extraction(r: Report) -> None:
-    records, scale = r.ch6_records, r.base.scale
+    records, scale, rows = r.ch6_records, r.base.scale, r.table_6_3_rows
     trial_note = trial_params_note(r.trials.ch6.pull, r.trials.ch6.max_steps)
     rules = rule_note(records, r.chosen, r.cfg.table_6_2_methods)
     noise = r.noise["conditions"]
-    extraction_table(
-        records, r.table_6_3_rows, r.figures, TABLES, scale, [trial_note, *rules], noise
-    )
-    extraction_families_table(records, r.table_6_3_rows, TABLES, scale, [trial_note])
-    decomposition_table(records | r.robust_records, TABLES, scale, r.trials.ch6.pull_map_meaning)
+    not_run = r.trials.opt_in.skipped  # opt-in conditions this run left out
+    extraction_table(records, rows, r.figures, TABLES, scale, [trial_note, *rules], noise, not_run)
+    extraction_families_table(records, rows, TABLES, scale, [trial_note], not_run)
+    meaning = r.trials.ch6.pull_map_meaning
+    decomposition_table(records | r.robust_records, TABLES, scale, meaning, not_run)
     noise_table(r.noise, r.table_6_3_rows, TABLES, scale)
     paired_table(records, TABLES, scale)
     estimation_table(records, TABLES, scale)

@@ -42,6 +42,7 @@ import pandas as pd
 
 from clutterbench.report.tables import Column, write_raw_csv, write_table
 from clutterbench.trials.ch6 import planners
+from clutterbench.trials.condition_sets import NOT_RUN
 from clutterbench.trials.config import PULL_MAP_HEADS
 from clutterbench.trials.core.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
 
@@ -238,10 +239,12 @@ def decomposition_table(
     out_dir: Path,
     scale: str,
     pull_map_meaning: str = "moved",
+    not_run: Sequence[str] = (),
 ) -> pd.DataFrame | None:
     """reports/tables/table_6_3_decomposition.{md,csv,png}; None (nothing written) when no
     stream has a CP row, its truth row and its oracle. `pull_map_meaning`: what the pull maps
-    mark (trials.ch6.pull_map_meaning), for the notes."""
+    mark (trials.ch6.pull_map_meaning), for the notes; `not_run`: the opt-in conditions the
+    run left out (trials.opt_in), named in a note (a CP row without its truth row has no row)."""
     rows = decompose(records_by_condition)
     if not rows:
         return None
@@ -268,6 +271,12 @@ def decomposition_table(
         columns={c.key: c.header for c in columns}
     )
     notes = _notes(rows, scale, pull_map_meaning)
+    if not_run:
+        notes.append(
+            f"{NOT_RUN}: {', '.join(not_run)} (opt-in conditions, trials.opt_in; make "
+            "repro-full runs them). Where one is a stream's truth or pull-truth row, that "
+            "stream's split of its CP rows is missing here or has one part less."
+        )
     write_table(
         frame,
         columns,

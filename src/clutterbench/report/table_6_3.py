@@ -9,7 +9,7 @@ rows split by scene family make table_6_3_families (ours only).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -28,6 +28,7 @@ from clutterbench.report.tables import (
     write_table,
 )
 from clutterbench.trials.ch6 import planners
+from clutterbench.trials.condition_sets import NOT_RUN
 from clutterbench.trials.core.stats import aggregate
 
 if TYPE_CHECKING:
@@ -306,53 +307,44 @@ def extraction_table(
     scale: str,
     notes_extra: Sequence[str] = (),
     noise: Mapping[str, Any] | None = None,
+    not_run: Collection[str] = (),
 ) -> pd.DataFrame:
     """Table 6.3 as reports/tables/table_6_3.md (ours beside the thesis) and .csv (the raw
     aggregate, with the thesis counts beside it). Returns the raw frame.
 
     rows: '<method>/<objects>' -> trials condition. noise: the noise stage's summary per
-    condition (its task-noise column; None: no such column)."""
+    condition (its task-noise column; None: no such column). not_run: the opt-in conditions
+    the run left out (trials.opt_in): their rows say NOT_RUN, and the CSV has none."""
     shown, raw, used = [], [], {}
-    by_row = {c: _condition_records(records_by_condition, r, c) for r, c in rows.items()}
+    by_row = {
+        c: _condition_records(records_by_condition, r, c)
+        for r, c in rows.items()
+        if c not in not_run
+    }
     # the depth and masks column, once any row saw other than exact depth and the sim's masks
     any_seen = any(seen_of(recs) != IDEAL_SEEN for recs in by_row.values())
     gaps = oracle_gaps(by_row)
     strict_gaps = oracle_gaps(by_row, "strict_success")
     for row, condition in rows.items():
         method, objects = _parse_row(row)
-        records = _condition_records(records_by_condition, row, condition)
-        _check_planner(records, row, method)
-        agg = aggregate(records, "condition").to_dict("records")
-        if len(agg) != 1 or agg[0]["condition"] != condition:
-            found = ", ".join(str(a["condition"]) for a in agg)
-            raise ClutterbenchError(
-                f"report.{TABLE}.{row}: records of condition '{condition}' say condition {found}"
+        thesis = thesis_figures_for(figures, method, objects)
+        label = f"{row_label(method)} [{condition}]"
+        if condition in not_run:
+            shown.append(
+                (label, {"objects": objects, "success": NOT_RUN, "strict_success": NOT_RUN}, thesis)
             )
-        a = agg[0]
-        gap = gaps.get(condition)
-        ours = {
-            "objects": _objects_text(records, row),
-            "seen": seen_text(seen_of(records)) if any_seen else None,
-            "step_success": step_rate_text(a),
-            "success": rate_text(a, "success"),
+            continue
+        records = by_row[condition]
+        _check_planner(records, row, method)
+        a = _aggregate_row(records, row, condition)
+        ours = _cells(records, a, row, any_seen) | {
             "task_noise": noise_text(noise[condition]["success"])
             if noise and condition in noise
             else None,
-            "step_strict_success": step_rate_text(a, "strict_success"),
-            "strict_success": rate_text(a, "strict_success"),
-            "below_oracle": _gap_text(gap, condition),
+            "below_oracle": _gap_text(gaps.get(condition), condition),
             "below_oracle_strict": _gap_text(strict_gaps.get(condition), condition),
-            "success_held": rate_text(a, "success_held"),
-            "aborts": aborts_text(a),
-            "mean_steps": a.get("mean_steps"),
-            "mean_n_disturbed": a.get("mean_n_disturbed"),
-            "mean_disturbance_mm": 1000.0 * a["mean_disturbance_m"]
-            if "mean_disturbance_m" in a
-            else None,
-            "episodes": a["episodes"],
         }
-        thesis = thesis_figures_for(figures, method, objects)
-        shown.append((f"{row_label(method)} [{condition}]", ours, thesis))
+        shown.append((label, ours, thesis))
         extra = _raw_extra(gaps.get(condition), strict_gaps.get(condition), noise, condition)
         if any_seen:
             extra |= dict(zip(("sensing", "perception"), seen_of(records)))
@@ -366,13 +358,60 @@ def extraction_table(
     ]
     frame = comparison_frame(shown, columns, "method [our condition]")
     caption = figures[TABLE].get("caption", TABLE)
-    notes = [*_notes(figures, used, scale), *notes_extra]
+    notes = [*_notes(figures, used, scale), *not_run_note(rows, not_run), *notes_extra]
     title = (
         "Table 6.3 (simulated): extraction performance of different approaches and "
         f"conditions (the thesis' table: {caption})"
     )
     write_table(frame, columns, out_dir, TABLE, title, notes)
     return write_raw_csv(raw, out_dir / f"{TABLE}.csv")
+
+
+def _aggregate_row(records: list[dict[str, Any]], row: str, condition: str) -> dict[str, Any]:
+    """The aggregate of one row's records, which must all be of its condition."""
+    agg = aggregate(records, "condition").to_dict("records")
+    if len(agg) != 1 or agg[0]["condition"] != condition:
+        found = ", ".join(str(a["condition"]) for a in agg)
+        raise ClutterbenchError(
+            f"report.{TABLE}.{row}: records of condition '{condition}' say condition {found}"
+        )
+    return agg[0]
+
+
+def _cells(
+    records: Sequence[Mapping[str, Any]], a: Mapping[str, Any], row: str, any_seen: bool
+) -> dict[str, Any]:
+    """A row's cells of COLUMNS from its own records and aggregate `a` (not the task noise
+    and the oracle gaps, which need other rows)."""
+    return {
+        "objects": _objects_text(records, row),
+        "seen": seen_text(seen_of(records)) if any_seen else None,
+        "step_success": step_rate_text(a),
+        "success": rate_text(a, "success"),
+        "step_strict_success": step_rate_text(a, "strict_success"),
+        "strict_success": rate_text(a, "strict_success"),
+        "success_held": rate_text(a, "success_held"),
+        "aborts": aborts_text(a),
+        "mean_steps": a.get("mean_steps"),
+        "mean_n_disturbed": a.get("mean_n_disturbed"),
+        "mean_disturbance_mm": 1000.0 * a["mean_disturbance_m"]
+        if "mean_disturbance_m" in a
+        else None,
+        "episodes": a["episodes"],
+    }
+
+
+def not_run_note(rows: Mapping[str, str], not_run: Collection[str]) -> list[str]:
+    """The note naming the rows of `rows` (row -> condition) whose condition the run left out
+    (opt-in, trials.opt_in), if any."""
+    left_out = [f"{row} [{c}]" for row, c in rows.items() if c in not_run]
+    if not left_out:
+        return []
+    return [
+        f"{NOT_RUN}: {', '.join(left_out)}. Opt-in conditions (trials.opt_in) that a run leaves "
+        "out unless switched on: make repro-full (dvc exp run -S trials.opt_in.run=true) runs "
+        "them; docs/run-times.md states their cost."
+    ]
 
 
 def _raw_extra(
@@ -406,14 +445,18 @@ def extraction_families_table(
     out_dir: Path,
     scale: str,
     notes_extra: Sequence[str] = (),
+    not_run: Collection[str] = (),
 ) -> pd.DataFrame:
     """Table 6.3 by scene family as reports/tables/table_6_3_families.md (one row per table
     row and family, families sorted; ours only: the thesis has no per-family split) and
     .csv (the raw aggregate per family). Returns the raw frame.
 
-    rows: '<method>/<objects>' -> trials condition, as for extraction_table."""
+    rows: '<method>/<objects>' -> trials condition, as for extraction_table; not_run: the
+    opt-in conditions the run left out, whose rows a note names instead."""
     shown, raw, used = [], [], {}
     for row, condition in rows.items():
+        if condition in not_run:
+            continue
         method, _ = _parse_row(row)
         records = _condition_records(records_by_condition, row, condition)
         _check_planner(records, row, method)
@@ -439,6 +482,7 @@ def extraction_families_table(
         "family of the scene; the thesis reports no per-family split.",
         SUCCESS_NOTE,
         f"trial scenes: {grouped(used, lambda rs: 'stream ' + values_text(rs, 'stream'))}.",
+        *not_run_note(rows, not_run),
         *notes_extra,
     ]
     title = "Table 6.3 by scene family: extraction success per step and per episode"

@@ -8,14 +8,16 @@ the support stage, which stands below the trials, reads them too.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
 from clutterbench.config import bounded, cores_field
 from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.data.trial_params import PULL_MAP_HEADS, SceneStreamConfig  # noqa: F401 (re-exported)
+from clutterbench.errors import ClutterbenchError
 from clutterbench.maniskill.config import ArmConfig
 from clutterbench.trials.ch6_groups import PullExecution, PullLevers, SearchLimits
+from clutterbench.trials.condition_sets import OptInRows, SensedRows
 
 DEV_PREFIX = "dev_"
 """Every dev stream's name starts with it (experiments/params.yaml), and no table stream's does."""
@@ -381,32 +383,6 @@ class ArmConditionConfig:
 
 
 @dataclasses.dataclass(frozen=True)
-class SensedRows:
-    """Chapter 6 conditions run again as a robot sees: for each condition named in `of`, the
-    condition <name>_<sensing>, the same but for its sensor and masks (docs/sensing.md)."""
-
-    sensing: Literal["ideal", "structured_light", "d415"] = "d415"
-    """The depth sensor of the sensed conditions (sim/sensor.py)."""
-    perception: Literal["instance", "depth"] = "depth"
-    """Their object masks (ConditionConfig.perception)."""
-    of: tuple[str, ...] = ()
-    """The trials.conditions run again so (none: no sensed condition)."""
-
-    @staticmethod
-    def expand(conditions: Mapping[str, Any], sensed: Mapping[str, Any]) -> dict[str, Any]:
-        """Raw conditions with the sensed ones added after them (unknown names are left for
-        __post_init__'s one-line error)."""
-        sensing = sensed.get("sensing", SensedRows.sensing)
-        perception = sensed.get("perception", SensedRows.perception)
-        out = dict(conditions)
-        for name in sensed.get("of") or ():
-            if isinstance(conditions.get(name), Mapping):
-                extra = {"sensing": sensing, "perception": perception}
-                out.setdefault(f"{name}_{sensing}", {**conditions[name], **extra})
-        return out
-
-
-@dataclasses.dataclass(frozen=True)
 class TrialsConfig:
     workers: int = cores_field(2)
     """Worker processes per condition, each with its own renderer and one torch thread;
@@ -421,6 +397,8 @@ class TrialsConfig:
     """Condition name -> planner on a stream; stage trials runs them all in one pool."""
     sensed: SensedRows = SensedRows()
     """Conditions run again under a depth sensor with masks from depth (added to conditions)."""
+    opt_in: OptInRows = OptInRows()
+    """Conditions the trials leave out unless switched on (`make repro-full`)."""
     ch4: Ch4TrialParams = Ch4TrialParams()
     """Chapter 4 judging."""
     ch4_conditions: Mapping[str, Ch4ConditionConfig] = dataclasses.field(default_factory=dict)
@@ -464,10 +442,29 @@ class TrialsConfig:
             }
         return out
 
+    @property
+    def run_conditions(self) -> dict[str, ConditionConfig]:
+        """The conditions the trials stage runs: all but the opt-in ones this run leaves out."""
+        return {n: c for n, c in self.conditions.items() if n not in self.opt_in.skipped}
+
+    def stage_conditions(self, only: Sequence[str] = ()) -> dict[str, ConditionConfig]:
+        """What stage trials runs: the conditions named in `only` (a debugging run; opt-in
+        ones too), else run_conditions (the opt-in ones only when trials.opt_in.run)."""
+        unknown = [n for n in only if n not in self.conditions]
+        if unknown:
+            raise ClutterbenchError(
+                f"trials.conditions.{unknown[0]}: no such condition "
+                f"(known: {', '.join(self.conditions)})"
+            )
+        return {n: c for n, c in self.conditions.items() if n in only} or self.run_conditions
+
     def __post_init__(self) -> None:
         unknown = [name for name in self.sensed.of if name not in self.conditions]
         if unknown:
             raise ValueError(f"sensed.of: no condition {unknown[0]!r} in trials.conditions")
+        arm_of = {name: arm.of for name, arm in self.arm_conditions.items()}
+        if problem := self.opt_in.problem(self.conditions, self.sensed.of, arm_of):
+            raise ValueError(problem)
         for group in ("conditions", "ch4_conditions", "ch5_conditions"):
             for name, cond in getattr(self, group).items():
                 if cond.stream not in self.streams:

@@ -61,18 +61,22 @@ def replay_job(job: ReplayJob) -> list[tuple[bool, bool]]:
 
 
 def conditions_of(cfg: NoiseConfig, trials: TrialsConfig) -> list[str]:
-    """The replayed ch. 6 conditions (noise.conditions, else every one whose planner saw exact
-    depth and the simulator's masks: a sensed row's noise is its sensor), checked against
-    trials."""
+    """The replayed ch. 6 conditions (noise.conditions, else every one the trials ran whose
+    planner saw exact depth and the simulator's masks: a sensed row's noise is its sensor),
+    checked against trials."""
     seen_ideal = [
         name
-        for name, c in trials.conditions.items()
+        for name, c in trials.run_conditions.items()
         if (c.sensing, c.perception) == ("ideal", "instance")
     ]
     names = list(cfg.conditions) or seen_ideal
     for name in names:
         if name not in trials.conditions:
             raise ClutterbenchError(f"noise.conditions: '{name}' is no trials.conditions entry")
+        if name in trials.opt_in.skipped:
+            raise ClutterbenchError(
+                f"noise.conditions: '{name}' is opt-in and not run (trials.opt_in.run: false)"
+            )
         if trials.conditions[name].executor != "kinematic":
             raise ClutterbenchError(
                 f"noise.conditions: '{name}' runs on the {trials.conditions[name].executor} "
