@@ -5,11 +5,11 @@ from pathlib import Path
 
 import pandas as pd
 
+from clutterbench.collapse.detection_metrics import pr_rows
 from clutterbench.collapse.detector import (
     DetectorParams,
     DetectorPaths,
     evaluate_detector,
-    pr_rows,
     train_detector,
     truth_of,
 )
@@ -19,6 +19,7 @@ from clutterbench.data.arrangement import load_arrangement_split
 from clutterbench.data.config import GenerateConfig
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import atomic_path, write_json
+from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
 
 
@@ -38,7 +39,8 @@ def detector(params: dict, base: BaseConfig) -> None:
         report_dir=Path("reports/detector"),
         timing_file=Path("reports/timing/detector.json"),
     )
-    detector, summary = train_detector(cfg, base.seed, paths)
+    fovy_deg = load_section(SimConfig, "sim", params).camera.fovy_deg  # detector.sensing's focal
+    detector, summary = train_detector(cfg, base.seed, paths, fovy_deg)
     test = load_arrangement_split(paths.gen_dir, paths.split_file, "test")
     metrics, prs, at_threshold = evaluate_detector(detector, test, cfg)
     out = paths.report_dir

@@ -1,19 +1,26 @@
 """The arrangement detector (thesis 5.2.1): output shapes, decoding of hand-made heads, training
-targets, checkpoint round trip and one-line refusals of checkpoints it cannot use."""
+targets, its training depth (parametric noise or a sensor, detector.sensing), checkpoint round
+trip and one-line refusals of checkpoints it cannot use."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pytest
 import torch
 
+from clutterbench.collapse.config import TrainSensingConfig
 from clutterbench.collapse.detector import (
     ArrangementDetector,
     DetectorParams,
     detector_loss,
     heatmap_targets,
     shift_image,
+    train_detector,
+    training_batch,
 )
+from clutterbench.data.arrangement import ArrangementSet
 from clutterbench.errors import ClutterbenchError
 from clutterbench.models.checkpoint import save_checkpoint
 from clutterbench.models.collapse_map import CollapseMapConfig, CollapseMapNet
@@ -27,6 +34,8 @@ from clutterbench.models.detector import (
 )
 from clutterbench.models.vgg import VGGConfig
 from clutterbench.perception.boxes import ARRANGEMENT_CLASSES, Detection
+from clutterbench.sim.noise import add_depth_noise
+from clutterbench.sim.sensor import SensedAugmentation, focal_px, preset
 
 SIZE = 64
 CFG = DetectorConfig(input_size=SIZE, widths=(4, 4, 8, 8, 8), neck_channels=8)
@@ -161,3 +170,64 @@ def test_foreign_and_broken_checkpoints_are_one_line(tmp_path):
     torch.save(mixed, tmp_path / "mixed.pt")
     with pytest.raises(ClutterbenchError, match="do not fit its config"):
         ArrangementDetector.from_checkpoint(tmp_path / "mixed.pt")
+
+
+def arrangement(n: int = 3) -> ArrangementSet:
+    """`n` scenes of two boxes on a table (depth steps for a sensor's shadows and edges)."""
+    depth = np.full((n, SIZE, SIZE), 0.7, np.float32)
+    depth[:, 20:40, 10:28], depth[:, 24:44, 36:54] = 0.55, 0.6
+    boxes = np.array([[19.0, 30.0, 18.0, 20.0], [45.0, 34.0, 18.0, 20.0]], np.float32)
+    classes = [np.array([0, 1]) for _ in range(n)]
+    return ArrangementSet(np.arange(n), np.array(["random"] * n), depth, classes, [boxes] * n)
+
+
+def test_ideal_sensing_is_the_parametric_noise_with_the_same_draws():
+    data, idx, p = arrangement(), np.arange(3), DetectorParams(net=CFG)
+    augment = p.augmentation(42.0)
+    assert augment is p.noise_model
+    assert dataclasses.replace(p, noise=False).augmentation(42.0) is None
+    x, targets = training_batch(data, idx, p, np.random.default_rng(7), augment)
+    rng, depths, boxes = np.random.default_rng(7), [], []  # the batch as before sensing
+    for i in idx:
+        dx, dy = rng.integers(-p.shift_px, p.shift_px + 1, size=2)
+        depth, box, _ = shift_image(data.depth_m[i], data.boxes_px[i], int(dx), int(dy))
+        depths.append(add_depth_noise(depth, p.noise_model, rng))
+        boxes.append(box)
+    assert torch.equal(x, torch.from_numpy(np.stack(depths))[:, None])
+    t = heatmap_targets(data.classes, boxes, 4, SIZE // STRIDE, p.gaussian_alpha)
+    assert all(np.array_equal(targets[k].numpy(), t[k]) for k in t)
+
+
+def test_a_sensing_preset_passes_the_training_depth_through_the_sensor():
+    data, idx = arrangement(), np.arange(3)
+    ideal = DetectorParams(net=CFG, shift_px=0)
+    p = dataclasses.replace(ideal, sensing=TrainSensingConfig(preset="d415"))
+    augment = p.augmentation(42.0)
+    assert isinstance(augment, SensedAugmentation) and augment.sensor == preset("d415")
+    assert augment.fx_px == pytest.approx(focal_px(SIZE, 42.0))
+    x, _ = training_batch(data, idx, p, np.random.default_rng(7), augment)
+    again, _ = training_batch(data, idx, p, np.random.default_rng(7), p.augmentation(42.0))
+    noised, _ = training_batch(data, idx, ideal, np.random.default_rng(7), ideal.noise_model)
+    assert torch.equal(x, again) and not torch.equal(x, noised)
+    x, noised, exact = x[:, 0].numpy(), noised[:, 0].numpy(), data.depth_m
+    assert x.dtype == np.float32 and np.isfinite(x).all()
+    holes, dropped = ((x == 0) & (exact > 0)).sum(), ((noised == 0) & (exact > 0)).sum()
+    assert holes > 3 * max(dropped, 1)  # shadows and missing steps, not 0.5% dropout
+
+
+def test_the_detector_records_the_sensing_it_trained_with(tmp_path, monkeypatch):
+    from clutterbench.collapse import detector as module
+
+    data = arrangement(4)
+    monkeypatch.setattr(module, "_train_val_splits", lambda p, paths: (data, data, SIZE))
+    paths = module.DetectorPaths(tmp_path, tmp_path, tmp_path, tmp_path, tmp_path / "t.json")
+    kwargs = dict(net=CFG, epochs=1, batch_size=2, precision="fp32", channels_last=False)
+    for sensing in ("ideal", "d415"):
+        p = DetectorParams(**kwargs, sensing=TrainSensingConfig(preset=sensing))
+        _, summary = train_detector(p, 0, paths)
+        params = load_detector(tmp_path / "best.pt")[1]["params"]
+        if sensing == "ideal":  # as before the switch: no field anywhere
+            assert "sensing" not in summary and "sensing" not in params
+        else:
+            assert summary["sensing"] == {"preset": "d415", "spread": 0.2}
+            assert params["sensing"] == summary["sensing"]

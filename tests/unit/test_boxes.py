@@ -116,8 +116,7 @@ def test_class_pr_matches_each_truth_once():
 
 
 def test_pr_rows_keep_the_true_positives_and_the_last_detection():
-    from clutterbench.collapse.detection_metrics import ClassPR
-    from clutterbench.collapse.detector import pr_rows
+    from clutterbench.collapse.detection_metrics import ClassPR, pr_rows
 
     pr = ClassPR(3, np.array([0.9, 0.8, 0.7, 0.6]), np.array([True, False, True, False]))
     none = ClassPR(0, np.zeros(0), np.zeros(0, bool))

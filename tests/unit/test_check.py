@@ -63,6 +63,10 @@ MISTAKES: dict[str, tuple[Callable[[dict[str, Any]], None], str]] = {
         lambda p: p["detector"].update(lr=-1),
         "error: detector.lr: -1.0 is out of range (must be > 0.0)",
     ),
+    "unknown sensor of the detector": (
+        lambda p: p["detector"]["sensing"].update(preset="d435"),
+        "error: detector.sensing.preset: 'd435' is not one of ideal, structured_light, d415",
+    ),
     "unknown planner": (
         lambda p: p["trials"]["conditions"]["oracle"].update(planner="oracel"),
         "error: trials.conditions.oracle.planner: unknown planner 'oracel' (did you mean",

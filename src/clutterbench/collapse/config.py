@@ -115,7 +115,8 @@ def check_labels(m: TrainModelConfig, key: str) -> None:
 
 @dataclasses.dataclass(frozen=True)
 class TrainSensingConfig:
-    """The depth sensor the networks train on (sim/sensor.py, docs/sensing.md)."""
+    """The depth sensor the networks train on: train.sensing, detector.sensing (sim/sensor.py,
+    docs/sensing.md)."""
 
     preset: Literal["ideal", "structured_light", "d415"] = "ideal"
     """A preset of sim/sensor.py PRESETS: its model replaces the parametric noise (train.noise)
@@ -123,6 +124,27 @@ class TrainSensingConfig:
     spread: float = bounded(0.2, ge=0.0, le=0.95)
     """Each image's sensor noise is the preset's, each randomised field scaled by a factor
     drawn in [1 - spread, 1 + spread] (sim.sensor.randomized)."""
+
+
+def depth_augmentation(
+    noise_on: bool,
+    noise_model: DepthNoiseConfig,
+    sensing: TrainSensingConfig,
+    input_size: int,
+    fovy_deg: float,
+) -> DepthAugmentation | None:
+    """What a network's training depth passes through (train.<model>, detector): None
+    (noise off), the parametric `noise_model` (preset ideal), or the sensing preset's model,
+    its noise scaled per image by the spread; the focal length is sim.camera's fovy_deg at
+    the network's `input_size`."""
+    if not noise_on:
+        return None
+    if sensing.preset == "ideal":
+        return noise_model
+    from clutterbench.sim.sensor import SensedAugmentation, focal_px, preset
+
+    sensor = preset(sensing.preset)
+    return SensedAugmentation(sensor, focal_px(input_size, fovy_deg), sensing.spread)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -150,15 +172,8 @@ class TrainConfig:
         """What model `name`'s training images pass through: None (noise: false), the
         parametric noise, or the sensor preset's model (sim.camera's fovy_deg at the
         network's input size gives our focal length)."""
-        if not self.models[name].noise:
-            return None
-        if self.sensing.preset == "ideal":
-            return self.noise
-        from clutterbench.sim.sensor import SensedAugmentation, focal_px, preset
-
-        size = self.models[name].net.input_size
-        sensor = preset(self.sensing.preset)
-        return SensedAugmentation(sensor, focal_px(size, fovy_deg), self.sensing.spread)
+        m = self.models[name]
+        return depth_augmentation(m.noise, self.noise, self.sensing, m.net.input_size, fovy_deg)
 
     @staticmethod
     def prepare_params(data: Mapping[str, Any]) -> Mapping[str, Any]:

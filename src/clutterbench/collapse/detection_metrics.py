@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
-from clutterbench.perception.boxes import box_iou
+from clutterbench.perception.boxes import ARRANGEMENT_CLASSES, box_iou
 
 Dets = tuple[np.ndarray, np.ndarray, np.ndarray]
 """One image's detections: boxes (K, 4), scores (K,), class indices (K,)."""
@@ -94,3 +95,20 @@ def mean_ap(
     prs = [class_pr(dets, truth, c, iou) for c in range(n_classes)]
     aps = [p.ap() for p in prs if p.n_truth > 0]
     return (float(np.mean(aps)) if aps else float("nan")), prs
+
+
+def pr_rows(prs: list[ClassPR]) -> list[dict[str, Any]]:
+    """PR curve, long format: per class, one row at each true positive (where recall rises;
+    the points AP is computed from) and one at the last detection."""
+    rows = []
+    for name, pr in zip(ARRANGEMENT_CLASSES, prs):
+        for k in np.nonzero(pr.tp | (np.arange(len(pr.tp)) == len(pr.tp) - 1))[0]:
+            rows.append(
+                {
+                    "class": name,
+                    "score": float(pr.scores[k]),
+                    "recall": float(pr.recall[k]),
+                    "precision": float(pr.precision[k]),
+                }
+            )
+    return rows

@@ -22,6 +22,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from clutterbench.collapse.config import TrainSensingConfig, depth_augmentation
 from clutterbench.collapse.detection_metrics import ClassPR, Dets, Truth, mean_ap
 from clutterbench.config import as_dict, bounded
 from clutterbench.data.arrangement import ArrangementSet, load_arrangement_split
@@ -40,7 +41,7 @@ from clutterbench.models.detector import (
 from clutterbench.perception.boxes import ARRANGEMENT_CLASSES, Detection, nms
 from clutterbench.precision import check_precision, resolve_precision
 from clutterbench.progress import progress_bar
-from clutterbench.sim.noise import DepthNoiseConfig, add_depth_noise
+from clutterbench.sim.noise import DepthAugmentation, DepthNoiseConfig
 
 SCORE_THRESHOLD = 0.30
 """Thesis 5.2.1: confidence threshold of a detection."""
@@ -85,6 +86,8 @@ class DetectorParams:
     """Add simulated sensor noise (sim.noise) to training depth."""
     noise_model: DepthNoiseConfig = DepthNoiseConfig()
     """That noise."""
+    sensing: TrainSensingConfig = TrainSensingConfig()
+    """A sensor model instead of that noise, as train.sensing (ideal: the noise above)."""
     score_threshold: float = bounded(SCORE_THRESHOLD, ge=0.0, le=1.0)
     """Confidence threshold of a detection at use (thesis 5.2.1: 0.30)."""
     nms_iou: float = bounded(NMS_IOU, gt=0.0, le=1.0)
@@ -101,6 +104,13 @@ class DetectorParams:
 
     def __post_init__(self) -> None:
         check_precision(self.precision, "detector.precision")
+
+    def augmentation(self, fovy_deg: float) -> DepthAugmentation | None:
+        """What training depth passes through: None (noise: false), noise_model, or the
+        sensing preset's model (focal length: sim.camera's fovy_deg at net.input_size)."""
+        return depth_augmentation(
+            self.noise, self.noise_model, self.sensing, self.net.input_size, fovy_deg
+        )
 
 
 class ArrangementDetector:
@@ -229,10 +239,15 @@ def shift_image(
 
 
 def training_batch(
-    data: ArrangementSet, idx: np.ndarray, p: DetectorParams, rng: np.random.Generator
+    data: ArrangementSet,
+    idx: np.ndarray,
+    p: DetectorParams,
+    rng: np.random.Generator,
+    augment: DepthAugmentation | None,
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """Depth (B, 1, H, W) and targets of scenes `idx`, augmented: shifted by up to
-    p.shift_px and noised (p.noise_model); no flip (it would swap C^r and C^l)."""
+    p.shift_px, then through `augment` (p.augmentation: the noise or a sensor model); no
+    flip (it would swap C^r and C^l)."""
     depths, classes, boxes = [], [], []
     for i in idx:
         depth, cls, box = data.depth_m[i], data.classes[i], data.boxes_px[i]
@@ -240,8 +255,8 @@ def training_batch(
             dx, dy = rng.integers(-p.shift_px, p.shift_px + 1, size=2)
             depth, box, kept = shift_image(depth, box, int(dx), int(dy))
             cls = cls[kept]
-        if p.noise:
-            depth = add_depth_noise(depth, p.noise_model, rng)
+        if augment is not None:
+            depth = augment.apply(depth, rng)
         depths.append(depth)
         classes.append(cls)
         boxes.append(box)
@@ -302,14 +317,15 @@ def detector_seed(base_seed: int, dataset: str) -> int:
 
 
 def train_detector(
-    p: DetectorParams, base_seed: int, paths: DetectorPaths
+    p: DetectorParams, base_seed: int, paths: DetectorPaths, fovy_deg: float = 42.0
 ) -> tuple[ArrangementDetector, dict[str, Any]]:
     """Train on the train split, keep the best val-mAP epoch; returns (its detector, the
-    training summary)."""
+    training summary). `fovy_deg`: sim.camera's, for a sensor model (detector.sensing)."""
     train, val, size = _train_val_splits(p, paths)
     seed = detector_seed(base_seed, p.dataset)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
+    augment = p.augmentation(fovy_deg)
     precision = resolve_precision(p.precision)
     bf16 = precision == "bf16"
     model = ArrangementNet(p.net)
@@ -328,12 +344,14 @@ def train_detector(
         "max_detections": p.max_detections,
         "params": as_dict(dataclasses.replace(p, net={})),
     }
+    if p.sensing.preset == "ideal":  # default checkpoints stay byte for byte as before
+        del meta["params"]["sensing"]
     best: dict[str, Any] = {"epoch": 0}
     best_score = -1.0
     stale, started, epoch_s = 0, time.perf_counter(), []
     for epoch in range(1, p.epochs + 1):
         t0 = time.perf_counter()
-        total = _train_epoch(model, opt, schedule, train, p, rng, bf16, epoch)
+        total = _train_epoch(model, opt, schedule, train, p, rng, augment, bf16, epoch)
         row, val_map = _val_row(model, val, p, epoch, total / len(train))
         log.append(row)
         epoch_s.append(round(time.perf_counter() - t0, 1))
@@ -358,6 +376,8 @@ def train_detector(
         "parameters": sum(t.numel() for t in model.parameters()),
         "precision": precision,
     }
+    if p.noise and p.sensing.preset != "ideal":  # the sensor its images passed through
+        summary["sensing"] = {"preset": p.sensing.preset, "spread": p.sensing.spread}
     write_json(paths.timing_file, {"stage": "detector", "train_s": train_s, "epoch_s": epoch_s})
     return ArrangementDetector.from_checkpoint(paths.model_dir / "best.pt"), summary
 
@@ -404,6 +424,7 @@ def _train_epoch(
     train: ArrangementSet,
     p: DetectorParams,
     rng: np.random.Generator,
+    augment: DepthAugmentation | None,
     bf16: bool,
     epoch: int,
 ) -> float:
@@ -415,7 +436,7 @@ def _train_epoch(
     with progress_bar(f"detector epoch {epoch}", total=len(train)) as advance:
         for lo in range(0, len(order), p.batch_size):
             idx = np.sort(order[lo : lo + p.batch_size])
-            x, targets = training_batch(train, idx, p, rng)
+            x, targets = training_batch(train, idx, p, rng, augment)
             if p.channels_last:
                 x = x.contiguous(memory_format=torch.channels_last)
             with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
@@ -473,20 +494,3 @@ def evaluate_detector(
         for b, s, c in dets
     ]
     return metrics, prs, at_threshold
-
-
-def pr_rows(prs: list[ClassPR]) -> list[dict[str, Any]]:
-    """PR curve, long format: per class, one row at each true positive (where recall rises;
-    the points AP is computed from) and one at the last detection."""
-    rows = []
-    for name, pr in zip(ARRANGEMENT_CLASSES, prs):
-        for k in np.nonzero(pr.tp | (np.arange(len(pr.tp)) == len(pr.tp) - 1))[0]:
-            rows.append(
-                {
-                    "class": name,
-                    "score": float(pr.scores[k]),
-                    "recall": float(pr.recall[k]),
-                    "precision": float(pr.precision[k]),
-                }
-            )
-    return rows
