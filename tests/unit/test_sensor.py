@@ -372,3 +372,42 @@ def test_a_support_scene_under_a_sensor_keeps_its_masks_and_truth():
     assert not np.array_equal(one.depth_m, depth) and np.array_equal(one.depth_m, two.depth_m)
     assert one.masks is scene.masks and one.moved is scene.moved and one.ids == scene.ids
     assert one.gaps_m.shape == (2, 2) and not np.array_equal(one.gaps_m, scene.gaps_m)
+
+
+@pytest.mark.parametrize("size", SIZES)
+@pytest.mark.parametrize("name", SENSORS)
+def test_a_steep_slope_is_no_step_at_any_image_size(name, size):
+    """A plane seen at a grazing angle, 1.1 cm deeper per pixel of ours at 128 px (more than
+    step_m), and a roof fold of two such planes: continuous surfaces, no step for a sensor at
+    its own resolution. No pixel goes missing, and block matching fattens nothing."""
+    cam = camera(size)
+    u = np.arange(size) + 0.5
+    per_px = 0.011 * 128 / size  # the same surface at every size
+    slope = np.tile((0.5 + per_px * u).astype(np.float32), (size, 1))  # 0.5 .. 1.9 m
+    fold = np.tile((0.5 + per_px * np.abs(u - size / 2)).astype(np.float32), (size, 1))
+    cfg = quiet(SENSORS[name], step_missing=1.0, baseline_m=1e-4)  # a face of the fold would
+    for depth in (slope, fold):  # be in the second view's shadow: steps alone here
+        out = sense(depth, cam, cfg, np.random.default_rng(0))
+        inner = np.s_[1:-1, 1:-1]  # away from the image's border, whose pairs have one side
+        assert np.all(out[inner] > 0), "a pixel of a slope went missing as if at a step"
+        fat = sense(
+            depth,
+            cam,
+            dataclasses.replace(cfg, window_px=28.0, step_missing=0.0),
+            np.random.default_rng(0),
+        )
+        assert np.all(fat[inner] == depth[inner])
+
+
+def test_a_step_beside_a_steep_slope_is_still_a_step():
+    """A box face in front of a wall that slopes away steeply: the jump at the box's edge is a
+    step (its pixels go missing), the wall's slope beside it is not."""
+    size = 128
+    depth = np.tile((0.6 + 0.015 * np.arange(size)).astype(np.float32), (size, 1))
+    depth[40:80, 40:80] = 0.5
+    out = sense(
+        depth, camera(size), quiet(D415, window_px=0, step_missing=1.0), np.random.default_rng(0)
+    )
+    assert np.all(out[41:79, [39, 40, 79, 80]] == 0)  # both sides of each vertical edge
+    assert np.all(out[41:79, 82:-2] > 0)  # the slope beyond the box
+    assert np.all(out[41:79, 2:30] > 0)  # and before its shadow (columns 31-39)

@@ -95,9 +95,10 @@ class RegionGrowingParams:
     """Segments under this many supervoxel cells join the neighbour they share most links with."""
     hole_weight: float = bounded(0.25, ge=0.0, le=1.0)
     """A pixel with no return (filled by the fit) counts this much of a measured one towards
-    min_pixels. Scenes 60-119 of dev_ch6_3_10, 128 px, structured_light / d415: 1 (as before),
-    0.5, 0.25, 0 all find 354 / 340 of 375 boxes, with 78 / 410, 51 / 224, 44 / 158, 39 / 126
-    stray segments; 0 finds 1 / 2 fewer of 115 at 64 px: 0.25, the least that loses none."""
+    min_pixels. Scenes 60-119 of dev_ch6_3_10, 128 px, structured_light / d415 (steps as
+    sim/sensor.py marks them, discontinuities): 1 (as before), 0.5, 0.25, 0 find 349, 349, 348,
+    348 / 340 of 375 boxes, with 43 / 100, 34 / 78, 32 / 69, 31 / 65 stray segments; 0.25
+    was chosen when every steep slope was a step (0 then found 1 / 2 fewer of 115 at 64 px)."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -71,9 +71,9 @@ class SensorConfig:
     dropout: float = bounded(0.005, ge=0.0, le=1.0)
     """Fraction of pixels that return nothing, at random."""
     step_m: float = bounded(0.01, gt=0.0)
-    """A depth difference between 4-neighbours above this is a step (m); also the tolerance
-    of the shadow test (a point farther than what the second view sees by more than this is
-    hidden from it)."""
+    """A depth difference between 4-neighbours above this, beyond the surface's own slope, is
+    a step (m: `step_pairs`); also the tolerance of the shadow test (a point farther than what
+    the second view sees by more than this is hidden from it)."""
     step_missing: float = bounded(0.5, ge=0.0, le=1.0)
     """Probability that a pixel beside a step returns nothing."""
     step_flying: float = bounded(0.2, ge=0.0, le=1.0)
@@ -287,32 +287,85 @@ def shadowed(
     return inside & (z > zbuf[flat] + tol_m)
 
 
+def step_pairs(z: np.ndarray, step_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The depth steps of `z` between 4-neighbours: (H, W - 1) bool for each pixel and its right
+    neighbour, (H - 1, W) bool for each pixel and the one below. A step is a discontinuity of
+    the surface, not a steep slope: the pair's depth difference exceeds `step_m`, and so does its
+    difference from the next pair's on either side along the same line (the surface's own
+    slope, where both pixels of that pair have a return). A surface sampled at our pixels, far
+    coarser than the sensor's own, changes depth by a centimetre per pixel where it is seen at a
+    grazing angle; the sensor, at its own resolution, sees no step there. A pair with no
+    neighbouring pair to compare with is a step by its difference alone."""
+    return _pairs_along(z, step_m), _pairs_along(z.T, step_m).T
+
+
+def _pairs_along(z: np.ndarray, step_m: float) -> np.ndarray:
+    """step_pairs along each row of `z`: (H, W - 1) bool."""
+    valid = z > 0
+    both = valid[:, :-1] & valid[:, 1:]
+    d = np.where(both, z[:, 1:] - z[:, :-1], np.nan)
+    pad = np.pad(d, ((0, 0), (1, 1)), constant_values=np.nan)
+    with np.errstate(invalid="ignore"):
+        beside = np.fmin(np.abs(d - pad[:, :-2]), np.abs(d - pad[:, 2:]))  # NaN: neither side
+        residual = np.where(np.isnan(beside), np.abs(d), beside)
+        return both & (np.abs(d) > step_m) & (residual > step_m)
+
+
 def fatten(depth_m: np.ndarray, radius_px: float, step_m: float) -> np.ndarray:
-    """Block matching's foreground fattening: every pixel within `radius_px` (rounded; a
-    disc) of a point nearer by more than `step_m` takes the nearest such depth. Pixels with
-    no return stay 0."""
+    """Block matching's foreground fattening: across each depth step (`step_pairs`), every
+    pixel of the far side within `radius_px` (rounded; a disc) of the step's near pixel takes
+    the nearest such depth, if nearer by more than `step_m`. A slope is no step, so a surface
+    seen at a grazing angle keeps its own depth. Pixels with no return stay 0."""
     r = int(math.floor(radius_px + 0.5))
     if r < 1:
         return depth_m
-    far = np.where(depth_m > 0, depth_m, _FAR)
+    near, far = _step_sides(depth_m, step_pairs(depth_m, step_m))
+    edge = np.where(near, depth_m, _FAR)
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-    nearest = cv2.erode(far, disc, borderType=cv2.BORDER_REPLICATE)
-    grow = (depth_m > 0) & (depth_m - nearest > step_m)
+    nearest = cv2.erode(edge, disc, borderType=cv2.BORDER_REPLICATE)
+    if r > 1:
+        band = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r - 1, 2 * r - 1))
+        far = cv2.dilate(far.astype(np.uint8), band).astype(bool)
+    grow = far & (depth_m > 0) & (depth_m - nearest > step_m)
     return np.where(grow, nearest, depth_m)
 
 
+def _step_sides(z: np.ndarray, pairs: tuple[np.ndarray, np.ndarray]):
+    """(H, W) bool of the near pixels and of the far pixels of the steps `pairs`."""
+    near, far = np.zeros(z.shape, bool), np.zeros(z.shape, bool)
+    right, down = pairs
+    for step, a, b, ia, ib in (
+        (right, z[:, :-1], z[:, 1:], np.s_[:, :-1], np.s_[:, 1:]),
+        (down, z[:-1], z[1:], np.s_[:-1], np.s_[1:]),
+    ):
+        first_near = step & (a < b)
+        near[ia] |= first_near
+        far[ib] |= first_near
+        near[ib] |= step & ~first_near
+        far[ia] |= step & ~first_near
+    return near, far
+
+
 def _steps(z: np.ndarray, step_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """(H, W) bool of the pixels beside a step (a 4-neighbour with a return, differing by more
-    than `step_m`) and the depth across the largest such step (the pixel's own elsewhere)."""
+    """(H, W) bool of the pixels beside a step (`step_pairs`) and the depth across the largest
+    of their steps (the pixel's own elsewhere)."""
+    right, down = step_pairs(z, step_m)
     pad = np.pad(z, 1, mode="edge")
+    row, col = np.zeros((1, z.shape[1]), bool), np.zeros((z.shape[0], 1), bool)
+    steps = (
+        (pad[:-2, 1:-1], np.vstack([row, down])),  # the pixel above
+        (pad[2:, 1:-1], np.vstack([down, row])),  # below
+        (pad[1:-1, :-2], np.hstack([col, right])),  # left
+        (pad[1:-1, 2:], np.hstack([right, col])),  # right
+    )
     biggest = np.zeros_like(z)
     across = z.copy()
-    for nb in (pad[:-2, 1:-1], pad[2:, 1:-1], pad[1:-1, :-2], pad[1:-1, 2:]):
-        diff = np.where((nb > 0) & (z > 0), np.abs(nb - z), 0.0)
+    for nb, step in steps:
+        diff = np.where(step, np.abs(nb - z), 0.0)
         bigger = diff > biggest
         biggest = np.where(bigger, diff, biggest)
         across = np.where(bigger, nb, across)
-    return biggest > step_m, across
+    return biggest > 0, across
 
 
 def _disparity_noise(
