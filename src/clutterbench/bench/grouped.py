@@ -199,7 +199,7 @@ def bench_trial_cp(params: dict[str, Any], episodes: int) -> dict[str, float]:
     from clutterbench.io import read_json
     from clutterbench.planning.ch6.support import SupportParams
     from clutterbench.sim.config import SimConfig
-    from clutterbench.sim.render import ensure_renderer
+    from clutterbench.sim.renderer import ensure_renderer
     from clutterbench.trials.ch6.episodes import run_ch6_episode
     from clutterbench.trials.config import TrialsConfig
 

@@ -39,7 +39,7 @@ def bench_ch5(out_dir: Path = Path("reports/bench")) -> dict:
     from clutterbench.errors import ClutterbenchError
     from clutterbench.parallel import worker_init
     from clutterbench.sim.config import SimConfig
-    from clutterbench.sim.render import ensure_renderer
+    from clutterbench.sim.renderer import ensure_renderer
     from clutterbench.trials.ch5 import episodes as ch5
     from clutterbench.trials.config import TrialsConfig
 

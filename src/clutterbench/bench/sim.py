@@ -8,7 +8,9 @@ overhead is a ratio.
 
 from __future__ import annotations
 
+import multiprocessing
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +24,8 @@ from clutterbench.platform_info import cpu_description
 from clutterbench.progress import progress_bar
 from clutterbench.sim.config import SimConfig
 from clutterbench.sim.labelling import act_on_spec, build_world, pull_outcomes, removal_matrix
-from clutterbench.sim.render import ensure_renderer, render_depth_instance
+from clutterbench.sim.render import render_depth_instance
+from clutterbench.sim.renderer import add_depth_camera, ensure_renderer
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.config import TrialsConfig
 
@@ -37,7 +40,7 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
     sim = load_section(SimConfig, "sim", params)
     ds = load_section(GenerateConfig, "generate", params).datasets[BENCH_DATASET]
     ensure_renderer()
-    # Warm-up: the first picture of a process compiles shaders (~3 s), paid once per worker.
+    # Warm-up: the first picture of a process sets the renderer up, paid once per worker.
     warm = label_scene("warmup", ds, sim, 99, 0, MAX_ATTEMPTS)
     scenes, t0 = [], time.perf_counter()
     with progress_bar("bench: labelled scenes", total=n_scenes) as advance:
@@ -54,6 +57,7 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
     ch6 = load_section(TrialsConfig, "trials", params).ch6
     removals_s, pulls_s = _label_costs(scenes, sim, ch6, n_scenes)
     render_s, raw_picture_s = _render_costs(warm, sim, n_scenes)
+    first_s = {shader: first_picture_s(shader, sim) for shader in ("depth", "default")}
 
     result = {
         "dataset": BENCH_DATASET,
@@ -66,6 +70,8 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
         "ms_per_labelled_scene": 1e3 * pipeline_s / n_scenes,
         "render_ms_per_picture": 1e3 * render_s,
         "raw_render_ms_per_picture": 1e3 * raw_picture_s,
+        "first_picture_s": first_s["depth"],
+        "first_picture_default_shader_s": first_s["default"],
         "sapien_step_render_ms_per_scene": 1e3 * sapien_s / n_scenes,
         "overhead_ratio": pipeline_s / sapien_s,
         "ms_per_scene_deletion_labels": 1e3 * removals_s,
@@ -79,6 +85,9 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
         "",
         "Targets: >= 20 labelled scenes / s / core; overhead_ratio <= 2 "
         "(pipeline time / time inside SAPIEN step + render calls in the same run).",
+        "first_picture_s: a fresh process's first picture, renderer made, with the depth "
+        "cameras' shader (sim/renderer.py); first_picture_default_shader_s: the same with "
+        "SAPIEN's default shader, whose image-based lighting the depth shader leaves out.",
         "Pull-outcome labels (generate.datasets.<name>.pull_outcomes): the trials' "
         "whole pull of every box of the same scenes, per scene, against the deletion labels "
         "(removal of every box) each labelled scene already includes; "
@@ -86,6 +95,42 @@ def bench_sim(n_scenes: int = N_SCENES, out_dir: Path = Path("reports/bench")) -
     ]
     write_result(out_dir, "sim", result, lines)
     return result
+
+
+def first_picture_s(shader: str, sim: SimConfig) -> float:
+    """Seconds a fresh process (spawned) takes to build an empty shelf's world, make the
+    renderer and render its first picture at the sim's image size, with the depth cameras'
+    shader ("depth") or SAPIEN's default one ("default")."""
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(1, mp_context=ctx) as pool:
+        return pool.submit(_first_picture, shader, sim).result()
+
+
+def _first_picture(shader: str, sim: SimConfig) -> float:
+    from clutterbench.sim.physics import BoxWorld
+    from clutterbench.sim.shelf import Shelf
+
+    t0 = time.perf_counter()
+    ensure_renderer()
+    world = BoxWorld(Shelf(), sim.physics, render=True)
+    cam = sim.camera
+    if shader == "depth":
+        camera = add_depth_camera(
+            world.scene, "first", cam.image_size, np.deg2rad(cam.fovy_deg), cam.near_m, cam.far_m
+        )
+    else:
+        camera = world.scene.add_camera(
+            "first",
+            cam.image_size,
+            cam.image_size,
+            np.deg2rad(cam.fovy_deg),
+            cam.near_m,
+            cam.far_m,
+        )
+    world.scene.update_render()
+    camera.take_picture()
+    camera.get_picture("Position")
+    return time.perf_counter() - t0
 
 
 def _label_costs(scenes: list, sim: SimConfig, ch6, n_scenes: int) -> tuple[float, float]:
@@ -112,9 +157,9 @@ def _render_costs(warm, sim: SimConfig, n_scenes: int) -> tuple[float, float]:
     for _ in range(n_scenes):
         render_depth_instance(world, sim.camera)
     render_s = (time.perf_counter() - t0) / n_scenes
-    cam = world.scene.add_camera(
+    cam = add_depth_camera(
+        world.scene,
         "raw",
-        sim.camera.image_size,
         sim.camera.image_size,
         np.deg2rad(sim.camera.fovy_deg),
         sim.camera.near_m,

@@ -7,7 +7,7 @@ under cProfile, one torch thread, as one worker of the stage's pool would. Its w
 split into two phases:
 
 - start-up: the process's imports, configs, the stage's jobs built, the networks loaded and
-  the renderer's first picture (its shaders compiled): once per worker process, counted
+  the renderer's first picture: once per worker process, counted
   whole as start-up;
 - the sample's groups (a dataset, a planner, a variant), each a handful of units (scenes,
   episodes, games) run one after another, each job and result pickled and unpickled on the

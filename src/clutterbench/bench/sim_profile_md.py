@@ -39,7 +39,7 @@ INTRO = (
 )
 HOW = (
     "How the time is attributed: the start-up phase (imports, configs, the jobs built, "
-    "the renderer's first picture, which compiles its shaders) counts whole as start-up. "
+    "the renderer's first picture) counts whole as start-up. "
     "In each group every function's self time goes to the category of its outermost "
     "categorised caller, else its own, else 'Python around the step' (a function's time "
     "split over its callers by the time each caller edge took; categories by file and "

@@ -157,7 +157,7 @@ def _save_untrained(ctx: Context, name: str, path: Path) -> None:
 
 def first_picture(ctx: Context) -> None:
     """A worker's set-up (parallel.worker_init: the renderer, one torch thread) and its first
-    picture, which compiles the renderer's shaders: once per worker process."""
+    picture (the renderer's set-up: once per worker process)."""
     from clutterbench.parallel import worker_init
     from clutterbench.sim.physics import BoxWorld
     from clutterbench.sim.render import observe

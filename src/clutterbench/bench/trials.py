@@ -22,7 +22,8 @@ from clutterbench.planning.ch6.support import SupportParams
 from clutterbench.platform_info import cpu_description
 from clutterbench.sim.config import SimConfig
 from clutterbench.sim.physics import BoxWorld
-from clutterbench.sim.render import ensure_renderer, observe
+from clutterbench.sim.render import observe
+from clutterbench.sim.renderer import ensure_renderer
 from clutterbench.trials.ch6.episodes import run_ch6_episode
 from clutterbench.trials.config import TrialsConfig
 from clutterbench.trials.core.harness import load_predictor

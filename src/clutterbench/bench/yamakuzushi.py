@@ -48,7 +48,7 @@ def bench_ch3(out_dir: Path = Path("reports/bench")) -> dict:
     specs = []
     generate_s = _per_call(lambda i: specs.append(generate_pile(cfg.pile, seeds[i])), N_PILES)
     worlds = [PileWorld.from_spec(s, cfg.pile, render=True) for s in specs]
-    top_observation(worlds[0], cfg.camera)  # the first picture compiles shaders
+    top_observation(worlds[0], cfg.camera)  # the process's first picture: the renderer's set-up
     tops = []
     render_s = _per_call(lambda i: tops.append(top_observation(worlds[i], cfg.camera)), N_PILES)
     slide_s = _per_call(

@@ -22,7 +22,7 @@ from clutterbench.io import load_npz, save_npz, write_json
 from clutterbench.parallel import ParallelConfig, iter_in_workers
 from clutterbench.sim.config import REJECT_REASONS, SimConfig
 from clutterbench.sim.labelling import LabelledScene, generate_labelled_scene
-from clutterbench.sim.render import ensure_renderer
+from clutterbench.sim.renderer import ensure_renderer
 
 FORMAT_VERSION = 3  # 2: canonical-start labels, clusters, contacts, float64 labels; 3: a lone
 # leaning box is C^r / C^l, replenish_shelved as thesis Fig. 5.9 (old shards are not reused)

@@ -396,7 +396,7 @@ class ClutterShelfEnv(BaseEnv):
 
     def _reconfigure(self, options: dict | None = None) -> None:
         # ManiSkill sets the camera shader directory process-wide for its sensors; every
-        # other camera of the process (sim/render.py's) is made with SAPIEN's default one.
+        # other camera of the process (sim/renderer.py's depth cameras) sets its own.
         shader_dir = sapien.render.get_camera_shader_dir()
         try:
             super()._reconfigure(options if options is not None else {})

@@ -36,7 +36,7 @@ from clutterbench.sim.geometry import (
     quat_to_matrix,
 )
 from clutterbench.sim.pile_config import PileCameraConfig, PileConfig, SlideConfig
-from clutterbench.sim.renderer import ensure_renderer
+from clutterbench.sim.renderer import add_depth_camera
 
 sapien.set_log_level("error")
 
@@ -472,9 +472,10 @@ def slide(world: PileWorld, piece: int, direction_rad: float, cfg: SlideConfig) 
 # -- cameras ---------------------------------------------------------------------------------
 def _add_camera(world: PileWorld, cam: PileCameraConfig, name: str):
     assert world.render, "PileWorld must be built with render=True"
-    ensure_renderer()
     size = cam.image_size
-    return world.scene.add_camera(name, size, size, np.deg2rad(cam.fovy_deg), cam.near_m, cam.far_m)
+    return add_depth_camera(
+        world.scene, name, size, np.deg2rad(cam.fovy_deg), cam.near_m, cam.far_m
+    )
 
 
 def _set_look_at(camera, eye_m: np.ndarray, target_m: np.ndarray) -> None:

@@ -1,7 +1,7 @@
 """Depth + instance rendering of a BoxWorld with one SAPIEN renderer kept alive per process.
 
-The first picture a process renders compiles shaders (~3 s on lavapipe); keeping the
-renderer alive makes every later scene cost milliseconds (docs/platform.md).
+One renderer per process and one depth camera per world (sim/renderer.py): every picture
+after a process's first costs milliseconds (docs/platform.md).
 """
 
 from __future__ import annotations
@@ -14,16 +14,15 @@ import sapien
 from clutterbench.observation import CameraModel, Observation
 from clutterbench.sim.config import CameraConfig
 from clutterbench.sim.physics import BoxWorld
-from clutterbench.sim.renderer import ensure_renderer
+from clutterbench.sim.renderer import add_depth_camera
 
 
 def _camera(world: BoxWorld, cam: CameraConfig):
     """The world's one camera, created on its first picture (a camera per picture costs a
     pipeline rebuild each time)."""
     if world.camera is None:
-        ensure_renderer()
-        world.camera = world.scene.add_camera(
-            "depth", cam.image_size, cam.image_size, np.deg2rad(cam.fovy_deg), cam.near_m, cam.far_m
+        world.camera = add_depth_camera(
+            world.scene, "depth", cam.image_size, np.deg2rad(cam.fovy_deg), cam.near_m, cam.far_m
         )
         world.camera.entity.set_pose(sapien.Pose(cam.position_m(world.shelf.height_m)))
     return world.camera

@@ -9,7 +9,8 @@ from typing import Any
 from clutterbench.progress import progress_bar
 from clutterbench.sim.labelling import label_spec
 from clutterbench.sim.pull import SceneState, world_at
-from clutterbench.sim.render import ensure_renderer, observe
+from clutterbench.sim.render import observe
+from clutterbench.sim.renderer import ensure_renderer
 
 
 def benchmark_starts(trials: Any, sim: Any, seed: int, streams: dict[str, int]) -> list[tuple]:

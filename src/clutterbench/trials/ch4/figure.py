@@ -153,7 +153,7 @@ def draw_figure(job: Any, out_path: Path) -> None:
     from clutterbench.errors import ClutterbenchError
     from clutterbench.planning.ch4.risk_planner import plan_risk
     from clutterbench.sim.physics import BoxWorld
-    from clutterbench.sim.render import ensure_renderer
+    from clutterbench.sim.renderer import ensure_renderer
     from clutterbench.trials.ch4.episodes import observe_and_segment, target_segment
     from clutterbench.trials.core.harness import load_predictor
 
