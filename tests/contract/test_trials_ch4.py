@@ -18,7 +18,8 @@ from clutterbench.planning.ch4.risk import risk_index, soft_collapse
 from clutterbench.planning.ch4.risk_planner import plan_risk
 from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
 from clutterbench.sim.physics import BoxWorld
-from clutterbench.sim.render import ensure_renderer, observe
+from clutterbench.sim.render import observe
+from clutterbench.sim.renderer import ensure_renderer
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch4.episodes import ch4_jobs, run_ch4_episode
 from clutterbench.trials.ch4.execution import plan_oracle, pull_outcome
