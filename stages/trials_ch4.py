@@ -52,6 +52,8 @@ def trials_ch4(params: dict, base: BaseConfig) -> None:
             "scale": base.scale,
             "network_precision": precision,
         }
+        if cond.sensing != "ideal":  # exact-depth conditions keep their old metadata
+            about["sensing"] = cond.sensing
         mine = [r for r in results if r.record["condition"] == name]
         write_mcap(DATA / name / "episodes.mcap", mine, about)
     figure = [

@@ -64,6 +64,8 @@ def trials_ch5(params: dict, base: BaseConfig) -> None:
             "network_precision": precision,
             "prob_threshold": str(prob),
         }
+        if cond.sensing != "ideal":  # exact-depth conditions keep their old metadata
+            about["sensing"] = cond.sensing
         mine = [r for r in results if r.record["condition"] == name]
         write_mcap(DATA / name / "episodes.mcap", mine, about)
     summary = aggregate(records)

@@ -14,6 +14,7 @@ from clutterbench.criteria import CollapseFreeConfig
 from clutterbench.data.labels import CLASS_B, CLASS_C, CLASS_E, CLASS_S, ch4_class_map
 from clutterbench.observation import Observation
 from clutterbench.perception.masks import masks_from_instance
+from clutterbench.perception.seen import grasp_point
 from clutterbench.planning.ch4.risk import risk_index, soft_collapse
 from clutterbench.planning.ch4.risk_planner import plan_risk
 from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
@@ -21,7 +22,7 @@ from clutterbench.sim.physics import BoxWorld
 from clutterbench.sim.render import observe
 from clutterbench.sim.renderer import ensure_renderer
 from clutterbench.sim.spec import SceneSpec
-from clutterbench.trials.ch4.episodes import ch4_jobs, run_ch4_episode
+from clutterbench.trials.ch4.episodes import ch4_jobs, observe_and_segment, run_ch4_episode
 from clutterbench.trials.ch4.execution import plan_oracle, pull_outcome
 from clutterbench.trials.ch4.figure import draw_figure
 from clutterbench.trials.config import (
@@ -190,7 +191,9 @@ def _jobs(tiny_ch4: Path, **cond) -> list[dict]:
     [
         {"planner": "risk", "model": "m"},
         {"planner": "risk", "model": "m", "perception": "depth"},
+        {"planner": "risk", "model": "m", "perception": "depth", "sensing": "d415"},
         {"planner": "random"},
+        {"planner": "random", "perception": "depth", "sensing": "structured_light"},
         {"planner": "oracle"},
         {"planner": "risk", "model": "m", "mode": "target"},
         {"planner": "oracle", "mode": "target"},
@@ -215,6 +218,30 @@ def test_every_planner_gives_a_judged_record(cond, tiny_ch4, physics):
         assert rec["n_candidates"] == rec["n_segments"] * (rec["n_segments"] - 1)
     if cond["planner"] == "oracle":
         assert rec["strict_success"] or rec["valid"]  # the ceiling pulls real boxes
+
+
+def test_a_sensed_condition_sees_the_sensor_and_pulls_what_its_grasps_take(tiny_ch4, physics):
+    """Under a sensor the planner's depth is the sensor's, not the render's; its masks come
+    from region growing on it; the box a mask's pull takes is the one under its grasp point
+    (none: an invalid action); the harness keeps the simulator's instance image. Records say
+    which sensor; exact-depth records keep their old fields."""
+    job = _jobs(tiny_ch4, planner="random", perception="depth", sensing="d415")[1]
+    spec = job.start.spec()
+    world = BoxWorld.from_spec(spec, job.physics, render=True)
+    obs, seg, boxes, failure = observe_and_segment(world, spec, job)
+    exact = observe(world, job.camera)
+    assert failure is None and seg.source == "depth" and len(seg.ids) >= 2
+    assert not np.array_equal(obs.depth_m, exact.depth_m)
+    assert np.array_equal(obs.instance, exact.instance)
+    for mask, box in zip(seg.masks, boxes, strict=True):
+        under = int(exact.instance[grasp_point(mask)]) - 1
+        assert box == (under if under >= 0 else None)
+    rec = run_ch4_episode(job).record
+    assert rec["sensing"] == "d415" and rec["perception_failure"] is None
+    x, s = rec["extract"], rec["support"]
+    assert rec["valid"] == (x is not None and s is not None and x != s)
+    ideal = run_ch4_episode(_jobs(tiny_ch4, planner="random", perception="depth")[1]).record
+    assert "sensing" not in ideal and "perception_failure" not in ideal
 
 
 def test_same_scenes_for_every_planner_on_one_stream(tiny_ch4):

@@ -209,6 +209,67 @@ def test_table_4_1_validates_rows_conditions_and_records(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
+def sensed(records: list[dict], sensing: str = "d415") -> list[dict]:
+    """The records as a condition run again under a sensor writes them."""
+    return [{**r, "condition": f"{r['condition']}_{sensing}", "sensing": sensing} for r in records]
+
+
+def test_table_4_1_sensed_rows_stand_apart_with_no_thesis_figure(tmp_path):
+    """A row '<method>/<objects>/<sensing>' reads its sensed twin's records: its own cells and
+    total after the exact-depth rows, labelled with the sensor, never the thesis' figure; a
+    note names the sensed rows; the exact-depth rows read as they do alone."""
+    twin = cell("s_same", "risk", "same", [True, False], model="ch4_same", perception="depth")
+    records = {**RECORDS, "s_same_d415": sensed(twin)}
+    rows = {**ROWS, "same_model_depth/same_size_5/d415": "s_same_d415"}
+    figures = {
+        **FIGURES,
+        "table_4_1": {
+            **FIGURES["table_4_1"],
+            "rows": [
+                *FIGURES["table_4_1"]["rows"],
+                {"row": "same_model_depth/same_size_5", "success": 3, "trials": 4},
+                {"row": "same_model_depth/total", "success": 3, "trials": 4, "success_rate": 0.75},
+            ],
+        },
+    }
+    raw = table_4_1(records, rows, figures, tmp_path, "tiny")
+    md = (tmp_path / "table_4_1.md").read_text()
+    label = (
+        "| trained with same-size boxes + depth-only segmentation, through the d415 sensor model"
+    )
+    line = cells(line_of(md, f"{label} ["))
+    assert line[2].startswith("1/2 = 50.0%") and line[3] == "—"  # no thesis figure beside
+    assert cells(line_of(md, f"{label}: total of 1 cell"))[3] == "—"
+    assert list(raw["row"])[-2:] == [
+        "same_model_depth/same_size_5/d415",
+        "same_model_depth/total/d415",
+    ]
+    assert "sensing (docs/sensing.md): d415 (s_same_d415)" in md
+    alone = tmp_path / "alone"
+    table_4_1(RECORDS, ROWS, figures, alone, "tiny")
+
+    def table_lines(text: str) -> list[str]:
+        return [ln for ln in text.splitlines() if ln.startswith("|") and "d415" not in ln]
+
+    assert table_lines(md) == table_lines((alone / "table_4_1.md").read_text())
+    assert "sensing" not in (alone / "table_4_1.md").read_text()
+
+
+def test_table_4_1_sensed_rows_check_their_sensor(tmp_path):
+    twin = cell("d", "risk", "same", [True], model="ch4_same", perception="depth")
+    records = {**RECORDS, "d": twin, "d_d415": sensed(twin)}
+    row = "same_model_depth/same_size_5"
+    with pytest.raises(ClutterbenchError, match="ran sensing d415, not structured_light"):
+        table_4_1(records, {f"{row}/structured_light": "d_d415"}, FIGURES, tmp_path, "t")
+    with pytest.raises(ClutterbenchError, match="ran sensing ideal, not d415"):
+        table_4_1(records, {f"{row}/d415": "d"}, FIGURES, tmp_path, "t")
+    with pytest.raises(ClutterbenchError, match="ran sensing d415, not ideal"):
+        table_4_1(records, {row: "d_d415"}, FIGURES, tmp_path, "t")
+    with pytest.raises(ClutterbenchError, match=r"same_size_5/lidar: a row must read"):
+        table_4_1(records, {f"{row}/lidar": "d_d415"}, FIGURES, tmp_path, "t")
+    assert not list(tmp_path.iterdir())
+
+
 TARGET_RECORDS = {
     "tv": cell("tv", "risk", "various", [True, True, False], model="ch4_various", mode="target"),
     "ts": cell("ts", "risk", "various", [True, False], model="ch4_same", mode="target"),

@@ -105,12 +105,7 @@ class Report:
     def table_6_3_rows(self) -> dict[str, str]:
         """report.table_6_3, and for each of its conditions run again under a sensor
         (trials.sensed), the row '<method>/<objects>/<sensing>' of that condition."""
-        sensed = self.trials.sensed
-        rows = dict(self.cfg.table_6_3)
-        for row, cond in self.cfg.table_6_3.items():
-            if cond in sensed.of:
-                rows.setdefault(f"{row}/{sensed.sensing}", f"{cond}_{sensed.sensing}")
-        return rows
+        return self.trials.sensed.table_rows(self.cfg.table_6_3)
 
     @functools.cached_property
     def ch6_records(self) -> dict[str, list[dict]]:
@@ -247,13 +242,17 @@ def table_6_3_extraction(r: Report) -> None:
 
 
 def table_4_1_pull_with_support(r: Report) -> None:
-    table_4_1(r.ch4_records, r.cfg.table_4_1, r.figures, TABLES, r.base.scale)
+    rows = r.trials.ch4_sensed.table_rows(r.cfg.table_4_1)
+    table_4_1(r.ch4_records, rows, r.figures, TABLES, r.base.scale)
     table_4_1_target(r.ch4_records, r.cfg.table_4_1_target, r.figures, TABLES, r.base.scale)
 
 
 def table_5_2_replenishment(r: Report) -> None:
+    """Table 5.2: report.table_5_2's rows, and for each of their conditions run again under a
+    sensor (trials.ch5_sensed), the row '<method>/<scene type>/<sensing>' of that condition."""
     ch5 = by_condition(read_records(Path("reports/trials_ch5/records.jsonl")))
-    table_5_2(ch5, r.cfg.table_5_2, r.figures, TABLES, r.base.scale)
+    rows = r.trials.ch5_sensed.table_rows(r.cfg.table_5_2)
+    table_5_2(ch5, rows, r.figures, TABLES, r.base.scale)
 
 
 def arm_level(r: Report) -> None:

@@ -3,8 +3,10 @@ thesis' real-robot rows; and the predetermined-target trials of thesis 4.3.3.
 
 Rows of Table 4.1 are labelled '<method>/<objects>' (the `row:` values of table_4_1 in
 reports/thesis_figures.yaml, or rows the thesis lacks such as the depth-only, random and
-oracle ones); each maps to one trials_ch4 condition. Every method also gets a
-'<method>/total' row pooling the episodes of its cells, as the thesis totals its models.
+oracle ones), or '<method>/<objects>/<sensing>' for a condition run again under a depth
+sensor (trials.ch4_sensed, docs/sensing.md; never a thesis row); each maps to one trials_ch4
+condition. Every method (and sensor) also gets a '<method>/total[/<sensing>]' row pooling the
+episodes of its cells, as the thesis totals its models.
 Rows of the predetermined-target table are methods alone. Every rate comes from
 trials.stats.aggregate.
 """
@@ -14,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 import pandas as pd
 
@@ -30,6 +32,7 @@ from clutterbench.report.tables import (
     write_raw_csv,
     write_table,
 )
+from clutterbench.trials.condition_sets import Sensing
 from clutterbench.trials.core.stats import aggregate, rate
 
 TABLE = "table_4_1"
@@ -40,6 +43,9 @@ TARGET_THESIS_ROW = "predetermined_target"
 TARGET_THESIS_METHOD = "various_model"
 """The thesis ran its predetermined-target trials with the various-size model only."""
 TOTAL = "total"
+IDEAL = "ideal"
+"""The sensing of a row that names none: the renderer's exact depth."""
+SENSED_PRESETS = get_args(Sensing)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,14 +118,25 @@ class _Row:
     """The thesis' row ({} where it has none)."""
 
 
-def _parse_row(row: str) -> tuple[str, str]:
-    method, sep, objects = row.partition("/")
-    if not sep or method not in METHODS or objects not in OBJECTS:
+def _parse_row(row: str) -> tuple[str, str, str]:
+    """'<method>/<objects>[/<sensing>]' -> (method, objects, sensing; ideal where none)."""
+    method, objects, sensing = [*row.split("/", 2), IDEAL][:3]
+    if method not in METHODS or objects not in OBJECTS or sensing not in SENSED_PRESETS:
         raise ClutterbenchError(
-            f"report.{TABLE}.{row}: a row must read '<method>/<objects>' with method one of "
-            f"{', '.join(METHODS)} and objects one of {', '.join(OBJECTS)} (totals are added)"
+            f"report.{TABLE}.{row}: a row must read '<method>/<objects>[/<sensing>]' with method "
+            f"one of {', '.join(METHODS)}, objects one of {', '.join(OBJECTS)} and sensing one of "
+            f"{', '.join(p for p in SENSED_PRESETS if p != IDEAL)} (totals are added)"
         )
-    return method, objects
+    return method, objects, sensing
+
+
+def _check_sensing(records: Sequence[Mapping[str, Any]], where: str, sensing: str) -> None:
+    """Every record saw through `sensing` (a record without the field: the exact depth)."""
+    found = sorted({str(r.get("sensing", IDEAL)) for r in records})
+    if found != [sensing]:
+        raise ClutterbenchError(
+            f"{where}: its trials ran sensing {', '.join(found)}, not {sensing}"
+        )
 
 
 def _condition_records(
@@ -259,29 +276,33 @@ def table_4_1(
         return pd.DataFrame()
     if TABLE not in figures:
         raise ClutterbenchError(f"thesis figures: no table '{TABLE}'")
-    cells: dict[str, list[_Row]] = {}
+    cells: dict[tuple[str, str], list[_Row]] = {}
     used: dict[str, list[dict[str, Any]]] = {}
     for row, condition in rows.items():
-        method, objects = _parse_row(row)
+        method, objects, sensing = _parse_row(row)
         where = f"report.{TABLE}.{row}"
         records = _condition_records(records_by_condition, where, condition)
         _check(records, where, {**METHODS[method].requires, "mode": "pair"})
         _check(records, where, OBJECTS[objects])
-        label = f"{METHODS[method].label} [{condition}]"
-        thesis = thesis_row(figures, TABLE, row)
-        cells.setdefault(method, []).append(
+        _check_sensing(records, where, sensing)
+        label = f"{METHODS[method].label}{_sensed_text(sensing)} [{condition}]"
+        thesis = thesis_row(figures, TABLE, row) if sensing == IDEAL else {}
+        cells.setdefault((method, sensing), []).append(
             _Row(row, method, objects, label, (condition,), records, thesis)
         )
         used[condition] = records
     table_rows: list[_Row] = []
-    for method, method_cells in cells.items():
+    for (method, sensing), method_cells in cells.items():
         table_rows += method_cells
-        total = f"{method}/{TOTAL}"
+        total = f"{method}/{TOTAL}" + (f"/{sensing}" if sensing != IDEAL else "")
         pooled = [r for cell in method_cells for r in cell.records]
         conditions = tuple(c for cell in method_cells for c in cell.conditions)
         n = len(method_cells)
-        label = f"{METHODS[method].label}: total of {n} cell{'s' if n > 1 else ''}"
-        thesis = thesis_row(figures, TABLE, total)
+        label = (
+            f"{METHODS[method].label}{_sensed_text(sensing)}: total of {n} "
+            f"cell{'s' if n > 1 else ''}"
+        )
+        thesis = thesis_row(figures, TABLE, total) if sensing == IDEAL else {}
         table_rows.append(_Row(total, method, TOTAL, label, conditions, pooled, thesis))
     caption = figures[TABLE].get("caption") or TABLE
     return _write(
@@ -335,6 +356,11 @@ def table_4_1_target(
     return _write(TARGET_TABLE, title, table_rows, out_dir, notes)
 
 
+def _sensed_text(sensing: str) -> str:
+    """What a row's label adds for its sensor ('' for the exact depth)."""
+    return "" if sensing == IDEAL else f", through the {sensing} sensor model"
+
+
 def _thesis_trials_text(figures: Mapping[str, Any], table: str) -> str:
     """'20 trials per cell' ('20 trials' for a one-row table) as the thesis' rows say
     (totals aside)."""
@@ -378,7 +404,21 @@ def _notes(
         f"trial scenes: {grouped(used, lambda rs: 'stream ' + values_text(rs, 'stream'))}; "
         f"families: {grouped(used, lambda rs: values_text(rs, 'family'))}.",
         f"perception (masks): {grouped(used, lambda rs: values_text(rs, 'perception'))}.",
+        *_sensing_notes(used),
         *tie_break_notes(used),
+    ]
+
+
+def _sensing_notes(used: Mapping[str, Sequence[Mapping[str, Any]]]) -> list[str]:
+    """Which rows saw through a sensor model (none: no note, as before any was run)."""
+    sensed = {c: rs for c, rs in used.items() if any("sensing" in r for r in rs)}
+    if not sensed:
+        return []
+    by = grouped(sensed, lambda rs: values_text(rs, "sensing"))
+    return [
+        f"sensing (docs/sensing.md): {by}; every other row reads the renderer's exact depth. "
+        "A sensed row's planner reads the sensed depth and its masks from depth by region "
+        "growing (each segment the box its grasp takes); execution and judging read the world."
     ]
 
 

@@ -1,10 +1,13 @@
 """Table 5.2: shelf replenishment success per scene type, our simulated trials beside the
 thesis' real-robot rows, and the failures broken down by the planner's branch.
 
-Rows are labelled '<method>/<scene type>' (report.table_5_2 in params.yaml); each maps to one
-trials_ch5 condition, and every method gets a total over its scene types. Rates are k/n with
-Wilson 95% intervals (trials.stats). The oracle simulates every candidate action, so a method
-succeeding where the oracle failed on the same scene is counted (it should not happen).
+Rows are labelled '<method>/<scene type>' (report.table_5_2 in params.yaml), or
+'<method>/<scene type>/<sensing>' for a condition run again under a depth sensor
+(trials.ch5_sensed, docs/sensing.md: a method row of its own, never a thesis row); each maps
+to one trials_ch5 condition, and every method gets a total over its scene types. Rates are
+k/n with Wilson 95% intervals (trials.stats). The oracle simulates every candidate action, so
+a method succeeding where the oracle failed on the same scene is counted (it should not
+happen).
 """
 
 from __future__ import annotations
@@ -17,7 +20,13 @@ from typing import Any
 import pandas as pd
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.report.tables import thesis_row, write_raw_csv, write_table
+from clutterbench.report.tables import (
+    grouped,
+    thesis_row,
+    values_text,
+    write_raw_csv,
+    write_table,
+)
 from clutterbench.trials.core.stats import Rate, rate
 
 TABLE = "table_5_2"
@@ -33,6 +42,10 @@ METHODS = {
     "oracle_no_contact": "oracle over the actions that move no box into another (the thesis "
     "planners' ceiling)",
 }
+IDEAL = "ideal"
+"""The sensing of a row that names none: the renderer's exact depth."""
+SENSORS = {"structured_light": "structured-light sensor", "d415": "D415-class sensor"}
+"""How a sensed row's label names its preset (sim/sensor.py PRESETS, docs/sensing.md)."""
 NOTE = (
     "protocol: every step starts from a fresh world at the present state; a blocker is carried "
     "aside and held (bimanual) or let go (rearrangement), the new box is let go at the "
@@ -45,14 +58,34 @@ NOTE = (
 )
 
 
-def _parse(row: str) -> tuple[str, str]:
-    method, _, scene = row.partition("/")
-    if not scene or method not in METHODS or scene not in SCENES:
+def _parse(row: str) -> tuple[str, str, str]:
+    """'<method>/<scene type>[/<sensing>]' -> (method, scene type, sensing; ideal where none)."""
+    method, _, rest = row.partition("/")
+    scene, _, sensing = rest.partition("/")
+    if (
+        not scene
+        or method not in METHODS
+        or scene not in SCENES
+        or (sensing and sensing not in SENSORS)
+    ):
         raise ClutterbenchError(
-            f"report.table_5_2: row '{row}' must be '<method>/<scene type>' with method in "
-            f"{', '.join(METHODS)} and scene type in {', '.join(SCENES)}"
+            f"report.table_5_2: row '{row}' must be '<method>/<scene type>[/<sensing>]' with "
+            f"method in {', '.join(METHODS)}, scene type in {', '.join(SCENES)} and sensing in "
+            f"{', '.join(SENSORS)}"
         )
-    return method, scene
+    return method, scene, sensing or IDEAL
+
+
+def _method_key(method: str, sensing: str) -> str:
+    """A method's key in the table's cells and raw CSVs: the method, '<method>/<sensing>' for
+    its rows under a sensor."""
+    return method if sensing == IDEAL else f"{method}/{sensing}"
+
+
+def _label(key: str) -> str:
+    """A method row's label: the method's, with the sensor named for a sensed one."""
+    method, _, sensing = key.partition("/")
+    return METHODS[method] + (f", {SENSORS[sensing]} ({sensing})" if sensing else "")
 
 
 def _thesis_text(figures: Mapping[str, Any], row: str) -> str | None:
@@ -89,7 +122,7 @@ def table_5_2(
         out_dir,
         TABLE,
         f"Table 5.2: shelf replenishment success ({scale} scale, simulated)",
-        _notes(cells),
+        [*_notes(cells), *_sensing_notes(by_condition, rows)],
     )
     write_raw_csv(raw, out_dir / f"{TABLE}.csv", counts=())
     _write_branches(cells, out_dir, scale)
@@ -99,16 +132,24 @@ def table_5_2(
 def _cells(
     by_condition: Mapping[str, Sequence[Mapping[str, Any]]], rows: Mapping[str, str]
 ) -> dict[str, dict[str, list[Mapping[str, Any]]]]:
-    """method -> scene type -> the records of the row's trials_ch5 condition."""
+    """method key (`_method_key`) -> scene type -> the records of the row's trials_ch5
+    condition, each checked to have seen through the row's sensing."""
     cells: dict[str, dict[str, list[Mapping[str, Any]]]] = {}
     for row, cond in rows.items():
-        method, scene = _parse(row)
+        method, scene, sensing = _parse(row)
         if cond not in by_condition:
             raise ClutterbenchError(
                 f"report.table_5_2.{row}: no trial records of condition '{cond}' "
                 "(run stage trials_ch5)"
             )
-        cells.setdefault(method, {})[scene] = list(by_condition[cond])
+        records = list(by_condition[cond])
+        found = sorted({str(r.get("sensing", IDEAL)) for r in records})
+        if records and found != [sensing]:
+            raise ClutterbenchError(
+                f"report.table_5_2.{row}: condition '{cond}' ran sensing {', '.join(found)}, "
+                f"not {sensing}"
+            )
+        cells.setdefault(_method_key(method, sensing), {})[scene] = records
     return cells
 
 
@@ -131,8 +172,11 @@ def _method_line(
     figures: Mapping[str, Any],
     raw: list[dict[str, Any]],
 ) -> dict[str, Any]:
-    """One method's row of the table; its per-scene and total counts are appended to `raw`."""
-    line: dict[str, Any] = {"method": METHODS[method]}
+    """One method's row of the table (`method`: its key, `_method_key`); its per-scene and
+    total counts are appended to `raw`. A sensed row has no thesis figures (the thesis' rows
+    are its own robot's, with its own sensor)."""
+    line: dict[str, Any] = {"method": _label(method)}
+    sensed = "/" in method
     all_recs: list[Mapping[str, Any]] = []
     beats = 0
     for scene in SCENES:
@@ -142,7 +186,7 @@ def _method_line(
         strict = rate(recs, "strict_success") if recs else Rate(0, 0)
         # the thesis column beside the collapse-free one (the thesis' trial notion)
         line[scene] = r.text()
-        line[f"{scene} (thesis)"] = _thesis_text(figures, f"{method}/{scene}")
+        line[f"{scene} (thesis)"] = None if sensed else _thesis_text(figures, f"{method}/{scene}")
         line[f"{scene} strict"] = strict.text()
         raw.append(_raw_row(method, scene, r, strict))
         known = oracle_ok.get(scene, {})
@@ -150,7 +194,7 @@ def _method_line(
     total = rate(all_recs, "success") if all_recs else Rate(0, 0)
     total_strict = rate(all_recs, "strict_success") if all_recs else Rate(0, 0)
     line["total"] = total.text()
-    line["total (thesis)"] = _thesis_text(figures, f"{method}/total")
+    line["total (thesis)"] = None if sensed else _thesis_text(figures, f"{method}/total")
     line["total strict"] = total_strict.text()
     raw.append(_raw_row(method, "total", total, total_strict))
     if oracle and method != "oracle":
@@ -210,6 +254,25 @@ def _notes(cells: Mapping[str, Mapping[str, Sequence[Mapping[str, Any]]]]) -> li
         "episodes the oracle failed: scenes where the method succeeded but the oracle's "
         "first successful action sequence was not found (its budget or the rearrangement "
         "re-plan, which the oracle simulates as one fixed sequence).",
+    ]
+
+
+def _sensing_notes(
+    by_condition: Mapping[str, Sequence[Mapping[str, Any]]], rows: Mapping[str, str]
+) -> list[str]:
+    """Which rows saw through a sensor model, by preset (none: no note, as before any was
+    run)."""
+    used = {cond: by_condition[cond] for row, cond in rows.items() if _parse(row)[2] != IDEAL}
+    if not used:
+        return []
+    by = grouped(used, lambda rs: values_text(rs, "sensing"))
+    return [
+        f"sensed rows (trials.ch5_sensed, docs/sensing.md), by sensor preset: {by}. Their "
+        "planner reads every picture through the sensor model: the detector, the collapse map "
+        "network and the planner's depth points see the sensed depth; the starts' free places, "
+        "execution and judging read the exact picture and physics, as in every other row, "
+        "which reads the renderer's exact depth. The thesis' figures stand beside the "
+        "thesis' own rows only."
     ]
 
 

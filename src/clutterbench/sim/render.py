@@ -6,6 +6,7 @@ after a process's first costs milliseconds (docs/platform.md).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -63,9 +64,18 @@ def observe(world: BoxWorld, cam: CameraConfig, sensing: str = "ideal") -> Obser
     sim/sensor.py, seeded by the picture itself so a rerun sees the same; ideal: the exact
     depth), instance ids and the camera model."""
     depth_m, instance = render_depth_instance(world, cam)
-    model = camera_model(world, cam)
-    if sensing != "ideal":
-        from clutterbench.sim.sensor import observation_rng, preset, sense
+    exact = Observation(depth_m=depth_m, instance=instance, camera=camera_model(world, cam))
+    return sensed(exact, sensing)
 
-        depth_m = sense(depth_m, model, preset(sensing), observation_rng(0, depth_m))
-    return Observation(depth_m=depth_m, instance=instance, camera=model)
+
+def sensed(obs: Observation, sensing: str) -> Observation:
+    """The exact observation `obs` as the `sensing` preset's sensor returns it: its depth
+    through the sensor model (sim/sensor.py), seeded by the exact picture itself so the same
+    picture always gets the same noise; its instance image and camera as they are. Ideal:
+    `obs` itself, unchanged."""
+    if sensing == "ideal":
+        return obs
+    from clutterbench.sim.sensor import observation_rng, preset, sense
+
+    depth_m = sense(obs.depth_m, obs.camera, preset(sensing), observation_rng(0, obs.depth_m))
+    return dataclasses.replace(obs, depth_m=depth_m)

@@ -1,5 +1,6 @@
-"""The chapter 6 conditions a run has beyond and short of trials.conditions: the sensed rows,
-added (trials.sensed), and the opt-in rows, left out unless switched on (trials.opt_in).
+"""The conditions a run has beyond and short of those params.yaml lists: the sensed rows,
+added (trials.sensed for chapter 6, trials.ch4_sensed and trials.ch5_sensed for Tables 4.1 and
+5.2), and the opt-in rows of chapter 6, left out unless switched on (trials.opt_in).
 
 Imports no SAPIEN and no torch (trials/config.py imports it).
 """
@@ -10,21 +11,34 @@ import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Literal
 
+Sensing = Literal["ideal", "structured_light", "d415"]
+"""A depth sensor preset (sim/sensor.py; ideal: the renderer's exact depth)."""
+
 NOT_RUN = "not run (opt-in: make repro-full)"
 """What a table says in place of an opt-in row's figures when the run left it out."""
 
 
+SENSED_GROUPS = {
+    "conditions": "sensed",
+    "ch4_conditions": "ch4_sensed",
+    "ch5_conditions": "ch5_sensed",
+}
+"""A trials condition group -> the key of the sensed rows added to it."""
+
+
 @dataclasses.dataclass(frozen=True)
 class SensedRows:
-    """Chapter 6 conditions run again as a robot sees: for each condition named in `of`, the
-    condition <name>_<sensing>, the same but for its sensor and masks (docs/sensing.md)."""
+    """Conditions of one group run again as a robot sees: for each condition named in `of`,
+    the condition <name>_<sensing>, the same but for its sensor and, where given, its object
+    masks (docs/sensing.md)."""
 
-    sensing: Literal["ideal", "structured_light", "d415"] = "d415"
+    sensing: Sensing = "d415"
     """The depth sensor of the sensed conditions (sim/sensor.py)."""
-    perception: Literal["instance", "depth"] = "depth"
-    """Their object masks (ConditionConfig.perception)."""
+    perception: Literal["instance", "depth"] | None = None
+    """Their object masks (the group's `perception`: ch. 6 and ch. 4 conditions take
+    instance or depth); null: each keeps its own (the ch. 5 detector reads the sensed depth)."""
     of: tuple[str, ...] = ()
-    """The trials.conditions run again so (none: no sensed condition)."""
+    """The group's conditions run again so (none: no sensed condition)."""
 
     @staticmethod
     def expand(conditions: Mapping[str, Any], sensed: Mapping[str, Any]) -> dict[str, Any]:
@@ -32,12 +46,44 @@ class SensedRows:
         __post_init__'s one-line error)."""
         sensing = sensed.get("sensing", SensedRows.sensing)
         perception = sensed.get("perception", SensedRows.perception)
+        extra = {"sensing": sensing} | ({} if perception is None else {"perception": perception})
         out = dict(conditions)
         for name in sensed.get("of") or ():
             if isinstance(conditions.get(name), Mapping):
-                extra = {"sensing": sensing, "perception": perception}
                 out.setdefault(f"{name}_{sensing}", {**conditions[name], **extra})
         return out
+
+    @staticmethod
+    def add_to(data: Mapping[str, Any]) -> dict[str, Any]:
+        """A raw trials section with each group's sensed conditions added (SENSED_GROUPS)."""
+        out = dict(data)
+        for group, key in SENSED_GROUPS.items():
+            if isinstance(data.get(key), Mapping) and isinstance(data.get(group), Mapping):
+                out[group] = SensedRows.expand(data[group], data[key])
+        return out
+
+    @staticmethod
+    def problem_in(trials: Any) -> str | None:
+        """One line when a parsed trials section's sensed rows name a condition their group
+        lacks; None when none does."""
+        for group, key in SENSED_GROUPS.items():
+            if problem := getattr(trials, key).problem(group, getattr(trials, group)):
+                return f"{key}.of: {problem}"
+        return None
+
+    def table_rows(self, rows: Mapping[str, str]) -> dict[str, str]:
+        """A table's rows (row -> condition) and, after them, for each condition run again
+        under the sensor, the row '<row>/<sensing>' of its sensed twin."""
+        out = dict(rows)
+        for row, cond in rows.items():
+            if cond in self.of:
+                out.setdefault(f"{row}/{self.sensing}", f"{cond}_{self.sensing}")
+        return out
+
+    def problem(self, group: str, conditions: Mapping[str, Any]) -> str | None:
+        """One line when `of` names no condition of the group (its params key `group`)."""
+        unknown = [name for name in self.of if name not in conditions]
+        return f"no condition {unknown[0]!r} in trials.{group}" if unknown else None
 
 
 KEPT_ROLES = {

@@ -17,7 +17,7 @@ from clutterbench.data.trial_params import PULL_MAP_HEADS, SceneStreamConfig  # 
 from clutterbench.errors import ClutterbenchError
 from clutterbench.maniskill.config import ArmConfig
 from clutterbench.trials.ch6_groups import PullExecution, PullLevers, SearchLimits
-from clutterbench.trials.condition_sets import OptInRows, SensedRows
+from clutterbench.trials.condition_sets import OptInRows, SensedRows, Sensing
 
 DEV_PREFIX = "dev_"
 """Every dev stream's name starts with it (experiments/params.yaml), and no table stream's does."""
@@ -44,9 +44,8 @@ class ConditionConfig:
     growing on the (sensed) depth image, each segment named by the box its grasp takes
     (depth: trials/ch6/seeing.py, docs/sensing.md; planners that read only what a robot sees,
     on the kinematic executor)."""
-    sensing: Literal["ideal", "structured_light", "d415"] = "ideal"
-    """The depth sensor its planner's pictures pass through (sim.camera.sensing for this
-    condition: sim/sensor.py, docs/sensing.md); ideal: the renderer's exact depth."""
+    sensing: Sensing = "ideal"
+    """The depth sensor of its planner's pictures (sim/sensor.py); ideal: the exact depth."""
     executor: Literal["kinematic", "arm"] = "kinematic"
     """Who executes a pull: the box moved kinematically (BoxWorld), or Pandas in a ManiSkill
     scene (trials.arm); the same judge and records either way."""
@@ -262,7 +261,7 @@ canonical start, the best kept."""
 
 @dataclasses.dataclass(frozen=True)
 class Ch4ConditionConfig:
-    """One chapter 4 trials condition -> stage trials_ch4@<name> (thesis Table 4.1)."""
+    """One chapter 4 trials condition (stage trials_ch4 runs every one; thesis Table 4.1)."""
 
     planner: Literal["risk", "random", "oracle"]
     """Policy (trials.config.CH4_PLANNERS)."""
@@ -277,6 +276,8 @@ class Ch4ConditionConfig:
     """The ch. 4 network of the risk planner (a key of train.models); null for the others."""
     perception: Literal["instance", "depth"] = "instance"
     """Object masks from the simulator's instance image, or from the depth image alone."""
+    sensing: Sensing = "ideal"
+    """The depth sensor of the planner's picture (sim/sensor.py); ideal: the exact depth."""
     executor: Literal["kinematic", "arm"] = "kinematic"
     """Who executes the pull and holds the support: kinematic, or Pandas (trials.arm)."""
 
@@ -333,6 +334,8 @@ class Ch5ConditionConfig:
     perception: Literal["detector", "clusters"] = "detector"
     """Arrangement clusters from the trained detector (models/detector), or the generator's
     ground-truth clusters (the detector's share of the failures)."""
+    sensing: Sensing = "ideal"
+    """The depth sensor of the planner's pictures (sim/sensor.py); ideal: the exact depth."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -402,11 +405,15 @@ class TrialsConfig:
     ch4: Ch4TrialParams = Ch4TrialParams()
     """Chapter 4 judging."""
     ch4_conditions: Mapping[str, Ch4ConditionConfig] = dataclasses.field(default_factory=dict)
-    """Condition name -> ch. 4 planner on a stream; each becomes stage trials_ch4@<name>."""
+    """Condition name -> ch. 4 planner on a stream; stage trials_ch4 runs them all."""
+    ch4_sensed: SensedRows = SensedRows()
+    """ch. 4 conditions run again under a depth sensor (added to ch4_conditions)."""
     ch5: Ch5TrialParams = Ch5TrialParams()
     """Chapter 5 replenishment planning and judging."""
     ch5_conditions: Mapping[str, Ch5ConditionConfig] = dataclasses.field(default_factory=dict)
     """Condition name -> ch. 5 planner on a stream; stage trials_ch5 runs them all."""
+    ch5_sensed: SensedRows = SensedRows()
+    """ch. 5 conditions run again under a depth sensor (added to ch5_conditions)."""
     max_attempts: int = bounded(30, ge=1)
     """A trial scene is redrawn at most this often."""
     planner_modules: tuple[str, ...] = ()
@@ -425,9 +432,7 @@ class TrialsConfig:
     def prepare_params(data: Mapping[str, Any]) -> Mapping[str, Any]:
         """The raw section with every condition that names no `episodes` given its chapter's
         (trials.ch6/ch4/ch5.episodes, else their defaults), as params.yaml states it once."""
-        out = dict(data)
-        if isinstance(data.get("sensed"), Mapping) and isinstance(data.get("conditions"), Mapping):
-            out["conditions"] = SensedRows.expand(data["conditions"], data["sensed"])
+        out = SensedRows.add_to(data)
         for group, chapter in EPISODE_DEFAULTS.items():
             conditions = out.get(group)
             if not isinstance(conditions, Mapping):
@@ -459,9 +464,8 @@ class TrialsConfig:
         return {n: c for n, c in self.conditions.items() if n in only} or self.run_conditions
 
     def __post_init__(self) -> None:
-        unknown = [name for name in self.sensed.of if name not in self.conditions]
-        if unknown:
-            raise ValueError(f"sensed.of: no condition {unknown[0]!r} in trials.conditions")
+        if problem := SensedRows.problem_in(self):
+            raise ValueError(problem)
         arm_of = {name: arm.of for name, arm in self.arm_conditions.items()}
         if problem := self.opt_in.problem(self.conditions, self.sensed.of, arm_of):
             raise ValueError(problem)

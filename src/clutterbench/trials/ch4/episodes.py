@@ -32,6 +32,7 @@ from clutterbench.maniskill.config import ArmConfig
 from clutterbench.observation import Observation
 from clutterbench.perception.depth_segmentation import shelf_roi
 from clutterbench.perception.masks import Segmentation, match_segments, segment
+from clutterbench.perception.seen import see_segments
 from clutterbench.planning.ch4.risk import (
     candidate_pairs,
     random_pair,
@@ -60,12 +61,27 @@ RISKS_LOGGED = 8
 # -- one episode ---------------------------------------------------------------------------
 def observe_and_segment(
     world: BoxWorld, spec: SceneSpec, job: Ch4Job
-) -> tuple[Observation, Segmentation]:
+) -> tuple[Observation, Segmentation, list[int | None], str | None]:
+    """The picture (its depth through the condition's sensor, the simulator's instance image:
+    the harness's), the planner's object masks, the box a pull of each mask takes (the
+    harness's, never the planner's) and why the segmentation found nothing (None: it ran).
+
+    Masks from depth: on exact depth perception/depth_segmentation.py, each segment the box
+    covering most of it; under a sensor, region growing, each segment the box its grasp takes
+    (perception/seen.py, as in chapter 6): the normals of depth_segmentation do not survive a
+    sensor's noise."""
     cond: Ch4ConditionConfig = job.cond
     params: Ch4TrialParams = job.params
-    obs = observe(world, job.camera)
-    seg = segment(obs, cond.perception, min_pixels=params.min_pixels, roi=shelf_roi(spec.shelf))
-    return obs, seg
+    obs = observe(world, job.camera, cond.sensing)
+    roi = shelf_roi(spec.shelf)
+    if cond.perception == "depth" and cond.sensing != "ideal":
+        seen = see_segments(obs, roi, spec.n, params.min_pixels)
+        ids = sorted(seen.grasps)
+        masks = seen.obs.instance[None] == (np.array(ids, dtype=np.int64) + 1)[:, None, None]
+        seg = Segmentation(ids=ids, masks=masks, source="depth")
+        return obs, seg, [seen.box_of(i) for i in ids], seen.failure
+    seg = segment(obs, cond.perception, min_pixels=params.min_pixels, roi=roi)
+    return obs, seg, match_segments(seg, obs.instance), None
 
 
 def target_segment(seg: Segmentation, instance: np.ndarray, box: int) -> int | None:
@@ -84,12 +100,11 @@ def run_ch4_episode(job: Ch4Job) -> EpisodeResult:
     start = job.start
     spec = start.spec()
     world = BoxWorld.from_spec(spec, physics, render=True)
-    obs, seg = observe_and_segment(world, spec, job)
+    obs, seg, boxes, failure = observe_and_segment(world, spec, job)
     log = EpisodeLog(record_images=job.record_images)
     log.scene(0.0, spec.sizes_m, spec.shelf.boards(), obs.camera, obs.depth_m.shape)
     log.observation(0.0, obs.depth_m, obs.instance)
     log.poses(0.0, world.poses())
-    boxes = match_segments(seg, obs.instance)  # the harness's, never the planner's
     target_box = target_k = None
     if cond.mode == "target":
         target_box = start.target(obs, params.min_target_pixels, spec)
@@ -109,6 +124,8 @@ def run_ch4_episode(job: Ch4Job) -> EpisodeResult:
     valid = bool(valid and (target_box is None or x_box == target_box))
     out = count_if_valid(out, valid)
     record = _record(job, spec, seg, decision, target_box, x_box, s_box, risk, ties, valid)
+    if cond.sensing != "ideal":  # exact-depth records keep their old fields
+        record |= {"sensing": cond.sensing, "perception_failure": failure}
     record = record | {k: _plain(v) for k, v in out.items()}
     if cond.executor == "arm":  # kinematic records keep their old fields
         record["executor"] = "arm"

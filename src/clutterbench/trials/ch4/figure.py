@@ -162,7 +162,7 @@ def draw_figure(job: Any, out_path: Path) -> None:
     start = job.start
     spec = start.spec()
     world = BoxWorld.from_spec(spec, job.physics, render=True)
-    obs, seg = observe_and_segment(world, spec, job)
+    obs, seg, _, _ = observe_and_segment(world, spec, job)
     box = start.target(obs, params.min_target_pixels, spec)
     k = target_segment(seg, obs.instance, box)
     if k is None or len(seg.ids) < 2:

@@ -16,6 +16,12 @@ was released and the scene settled. The trials are the one place that holds both
 and a planner: which boxes a detection holds (what the robot grasps) is decided from the
 instance image (ch5_execution.members), never by the planner.
 
+A condition with a depth sensor (`sensing`, sim/sensor.py) gives its planner each picture
+through that sensor (`sim.render.sensed` of the one exact rendering): the detector, the collapse
+map network and the planner's depth points read the sensed depth, and the MCAP logs it. The
+harness's side stays exact: the free places at the start, execution and judging (the true
+instance image and physics) and the oracle (it simulates the world).
+
 The chapter in four modules: this one (the episode, its record, the jobs), `ch5_perception`
 (clusters and collapse maps), `ch5_execution` (executing and judging a plan) and `ch5_oracle`
 (the action set and the oracle's search over it).
@@ -51,7 +57,7 @@ from clutterbench.sim import benchmark
 from clutterbench.sim.catalog import box_extents_m
 from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
 from clutterbench.sim.pull import SceneState, world_at
-from clutterbench.sim.render import observe
+from clutterbench.sim.render import observe, sensed
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch5.execution import execute
 from clutterbench.trials.ch5.jobs import Ch5Job
@@ -184,22 +190,23 @@ def replenish(spec: SceneSpec, job: Ch5Job, size_m: np.ndarray | None = None):
         planner = ReplenishPlanner(rp, space, cmap)
     state = SceneState.start(spec)
     world = world_at(spec, state, physics, render=True)
-    obs = observe(world, camera)
+    obs = observe(world, camera)  # exact: the harness's (free places, execution, the oracle)
+    seen = sensed(obs, cond.sensing)  # the planner's: through the condition's sensor
     free_at_start = free_places(spec, job, size_m, obs)
     log = EpisodeLog(record_images=job.record_images)
-    log.scene(0.0, spec.sizes_m, spec.shelf.boards(), obs.camera, obs.depth_m.shape)
+    log.scene(0.0, spec.sizes_m, spec.shelf.boards(), seen.camera, seen.depth_m.shape)
     steps: list[dict[str, Any]] = []
     end, t, dt = "max_steps", 0.0, physics.timestep_s
     queued: list[Plan] = []
     simulated = 0
     gave_up_why: list[str] = []
     while len(steps) < params.max_steps:
-        log.observation(t, obs.depth_m, obs.instance)
+        log.observation(t, seen.depth_m, seen.instance)  # what the planner saw
         log.poses(t, state.poses)
-        dets = perceive(job, spec, state, obs)
+        dets = perceive(job, spec, state, seen)
         log.json(t, "/perception/detections", _detections_json(dets))
         plan, queued, tried = _next_plan(
-            job, spec, state, obs, dets, size_m, rp, space, planner, queued, len(steps), log, t
+            job, spec, state, seen, obs, dets, size_m, planner, queued, len(steps), log, t
         )
         simulated += tried
         log.json(t, DECISION_TOPIC, plan_json(plan))
@@ -221,6 +228,7 @@ def replenish(spec: SceneSpec, job: Ch5Job, size_m: np.ndarray | None = None):
         state = SceneState.of(world)
         world = world_at(spec, state, physics, render=True)  # the next step's canonical start
         obs = observe(world, camera)
+        seen = sensed(obs, cond.sensing)
     log.json(t, "/trial/result", {"end": end})
     record = _episode_record(job, spec, size_m, steps, end, free_at_start, gave_up_why)
     if cond.planner in ("oracle", "oracle_no_contact"):
@@ -233,10 +241,9 @@ def _next_plan(
     spec: SceneSpec,
     state: SceneState,
     obs: Observation,
+    exact: Observation,
     dets: list[Detection],
     size_m: np.ndarray,
-    rp: ReplenishParams,
-    space: WorkingSpace,
     planner: ReplenishPlanner | None,
     queued: list[Plan],
     n_steps: int,
@@ -244,8 +251,11 @@ def _next_plan(
     t: float,
 ) -> tuple[Plan, list[Plan], int]:
     """The step's plan: the next of a queued sequence, else the planner's, a random one of the
-    action set, or the oracle's -> (the plan, the sequence still queued, slides simulated)."""
+    action set, or the oracle's -> (the plan, the sequence still queued, slides simulated).
+    `obs`: the planner's picture (through the condition's sensor); `exact`: the renderer's,
+    which the oracle reads (it simulates the world)."""
     cond: Ch5ConditionConfig = job.cond
+    rp, space = planner_params(job), space_of(spec)
     tried = 0
     if queued:  # the oracle's simulated sequence goes on as simulated
         plan = queued.pop(0)
@@ -262,8 +272,8 @@ def _next_plan(
     else:
         views = [dets]
         if job.oracle_detector:  # the detector's actions too: no planner beats it
-            views.append(perceive(job, spec, state, obs, "detector"))
-        seq, tried = oracle_choice(spec, state, obs, views, size_m, rp, space, job)
+            views.append(perceive(job, spec, state, exact, "detector"))
+        seq, tried = oracle_choice(spec, state, exact, views, size_m, rp, space, job)
         plan = seq[0]
         queued = seq[1:]
     return plan, queued, tried
@@ -316,6 +326,8 @@ def _episode_record(
     }
     if end == "gave_up":  # why no candidate had a plan (planning/ch5/replenish.py why_not)
         record["gave_up_why"] = gave_up_why
+    if cond.sensing != "ideal":  # exact-depth records keep their old fields
+        record["sensing"] = cond.sensing
     return record
 
 

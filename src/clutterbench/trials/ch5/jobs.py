@@ -18,7 +18,7 @@ class Ch5Job(ShelfJob):
     """One ch. 5 replenishment trial: scene `index` of the condition's stream, one new box."""
 
     cond: Ch5ConditionConfig
-    """The condition (its planner, stream, perception)."""
+    """The condition (its planner, stream, perception, sensing)."""
     params: Ch5TrialParams
     """The ch. 5 trials' parameters (trials.ch5)."""
     model_path: Path
