@@ -92,3 +92,11 @@ def tiny_box_head(tmp_path_factory, tiny_cp_three_heads) -> Path:
     path = tmp_path_factory.mktemp("box_head") / "best.pt"
     save_box_head(BoxHead(len(meta.features), meta.hidden), meta, path)
     return path
+
+
+@pytest.fixture(scope="session")
+def toy_networks(tiny_cp, tiny_cp_heads, tiny_cp_three_heads, tiny_box_head, tiny_ch4):
+    """Every untrained network a ch. 6 planner may read (tests/toy_jobs.py ToyNetworks)."""
+    from tests.toy_jobs import ToyNetworks
+
+    return ToyNetworks(tiny_cp, tiny_cp_heads, tiny_cp_three_heads, tiny_box_head, tiny_ch4)

@@ -15,9 +15,9 @@ from clutterbench.sim.pull import SceneState, world_at
 from clutterbench.sim.render import observe
 from clutterbench.sim.spec import SceneSpec
 from clutterbench.trials.ch6.episodes import ch6_jobs, run_ch6_episode
-from clutterbench.trials.ch6.planners import make_planner
+from clutterbench.trials.ch6.planners import BUILT_IN, make_planner, planner_info
 from clutterbench.trials.config import ConditionConfig, SceneStreamConfig, TrialsConfig
-from tests.toy_jobs import TOY_SUPPORT, toy_ch6_jobs
+from tests.toy_jobs import TOY_SUPPORT, toy_ch6_jobs, toy_planner_jobs
 
 STACK3 = Path(__file__).resolve().parents[1] / "data" / "stack3.json"
 STREAM = SceneStreamConfig(families={"stacked": 1, "random": 1}, n_objects=(3, 6))
@@ -90,15 +90,18 @@ def _defeating(obs: Observation, rng: np.random.Generator) -> dict[str, Observat
     return {k: dataclasses.replace(obs, depth_m=v.astype(np.float32)) for k, v in images.items()}
 
 
-@pytest.mark.parametrize(
-    "planner", ["pull_target", "random", "physics_from_depth", "physics_from_depth_hold"]
-)
-def test_no_depth_image_crashes_a_planner(planner, physics):
+ROBOT_PLANNERS = [p for p in BUILT_IN if planner_info(p).world != "truth"]
+"""Every built-in planner a robot could run: it reads the picture (and networks, or boxes
+fitted to the picture), not the true scene."""
+
+
+@pytest.mark.parametrize("planner", ROBOT_PLANNERS)
+def test_no_depth_image_crashes_a_planner(planner, physics, toy_networks):
     """A planner handed a depth image that defeats its perception decides (or gives up with
     ValueError, the harness' gave_up); nothing else may escape."""
     spec = SceneSpec.load(STACK3)
     obs = observe(world_at(spec, SceneState.start(spec), physics, render=True), CAM)
-    job = toy_ch6_jobs(planner, STREAM, CAM)[0]
+    job = toy_planner_jobs(planner, STREAM, CAM, toy_networks)[0]
     for name, seen in _defeating(obs, np.random.default_rng(0)).items():
         decider = make_planner(job, spec)
         try:
@@ -106,3 +109,16 @@ def test_no_depth_image_crashes_a_planner(planner, physics):
         except ValueError:
             continue  # no action left: the episode ends gave_up
         assert decision.pull in range(spec.n), (name, decision)
+
+
+@pytest.mark.parametrize("planner", ROBOT_PLANNERS)
+def test_every_planner_a_robot_could_run_ends_sensed_episodes_with_masks_from_depth(
+    planner, toy_networks
+):
+    """Whole episodes under the D415-class sensor with masks from depth, the networks untrained:
+    an episode ends judged (or gave up), counted in the record, never an exception."""
+    for job in toy_planner_jobs(planner, STREAM, CAM, toy_networks, episodes=2):
+        rec = run_ch6_episode(dataclasses.replace(job, sensing="d415", perception="depth")).record
+        assert (rec["sensing"], rec["perception"]) == ("d415", "depth")
+        assert rec["success"] == (rec["end"] == "target_out")
+        assert rec["end"] in ("target_out", "collapse", "target_fell", "gave_up", "max_steps")

@@ -29,7 +29,7 @@ from clutterbench.trials.config import SceneStreamConfig, TrialsConfig
 from clutterbench.trials.core.harness import run_episodes, write_mcap
 from clutterbench.trials.core.protocol import judge_pull
 from clutterbench.trials.core.records import read_records, write_records
-from tests.toy_jobs import toy_ch6_jobs
+from tests.toy_jobs import toy_ch6_jobs, toy_planner_jobs
 
 STACK3 = Path(__file__).resolve().parents[1] / "data" / "stack3.json"
 TOWER6 = Path(__file__).resolve().parents[1] / "data" / "tower6.json"
@@ -497,18 +497,10 @@ def _jobs(planner: str, cp: Path, episodes: int = 2) -> list[Ch6Job]:
 
 
 @pytest.mark.parametrize("planner", PLANNER_NAMES)
-def test_every_planner_gives_a_judged_record(
-    planner, tiny_cp, tiny_cp_heads, tiny_cp_three_heads, tiny_box_head, tiny_ch4
-):
+def test_every_planner_gives_a_judged_record(planner, toy_networks):
     maps = planner_info(planner).maps
-    cp = tiny_cp_heads if maps == "pull" else tiny_cp
-    box = {}
-    if maps in ("box", "box_physics"):  # the box head over a three-head CP's maps
-        cp = tiny_cp_three_heads
-        box = {"box_head_path": tiny_box_head, "box_edge_threshold": 0.5, "cp_max": 0.5}
-        if maps == "box_physics":  # the fusion: the head's logit and the simulation
-            box["box_fusion"] = (1.0, 2.0, -2.0, 0.0)
-    job = dataclasses.replace(_jobs(planner, cp, 1)[0], ch4_model_path=tiny_ch4, **box)
+    stream = SceneStreamConfig(families={"stacked": 1, "random": 1}, n_objects=(3, 5))
+    job = toy_planner_jobs(planner, stream, CAM, toy_networks)[0]
     rec = run_ch6_episode(job).record
     assert rec["planner"] == planner and rec["steps"]
     if maps == "pull":  # the record says which head its maps came from
