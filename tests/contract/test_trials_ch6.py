@@ -525,6 +525,35 @@ def test_every_planner_gives_a_judged_record(planner, toy_networks):
     assert rec["end"] in ("target_out", "collapse", "target_fell", "gave_up", "max_steps")
 
 
+@pytest.mark.parametrize("planner", ["multi_step_box", "bimanual_box_physics"])
+def test_box_planners_load_their_networks_once_per_worker(planner, toy_networks, monkeypatch):
+    """Every episode of a box planner reads the same two checkpoints: a worker loads each
+    once, not once per episode (a load took about a fifth of a second of each episode)."""
+    from clutterbench.collapse import box_head
+    from clutterbench.collapse.predict import CollapsePredictor
+    from clutterbench.trials.core import harness
+
+    loads: list[str] = []
+    real_head, real_cp = box_head.load_box_head, CollapsePredictor.from_checkpoint
+
+    def head(*args, **kwargs):
+        loads.append("box_head")
+        return real_head(*args, **kwargs)
+
+    def cp(*args, **kwargs):
+        loads.append("cp")
+        return real_cp(*args, **kwargs)
+
+    monkeypatch.setattr(box_head, "load_box_head", head)
+    monkeypatch.setattr(CollapsePredictor, "from_checkpoint", cp)
+    monkeypatch.setattr(harness, "_BOX_HEADS", {})
+    monkeypatch.setattr(harness, "_PREDICTORS", {})
+    stream = SceneStreamConfig(families={"stacked": 1, "random": 1}, n_objects=(3, 5))
+    for job in toy_planner_jobs(planner, stream, CAM, toy_networks, episodes=3):
+        assert run_ch6_episode(job).record["steps"]
+    assert sorted(loads) == ["box_head", "cp"]
+
+
 def test_same_scenes_and_targets_on_one_stream(tiny_cp):
     a = [run_ch6_episode(j).record for j in _jobs("pull_target", tiny_cp)]
     b = [run_ch6_episode(j).record for j in _jobs("random", tiny_cp)]

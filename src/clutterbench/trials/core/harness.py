@@ -47,6 +47,21 @@ def load_predictor(path: Path, image_size: int, head: str = "deletion"):
     return _PREDICTORS[key]
 
 
+_BOX_HEADS: dict[str, Any] = {}
+
+
+def load_box_networks(cp_path: Path, box_path: Path, image_size: int) -> tuple[Any, Any, Any]:
+    """(the collapse predictor of `cp_path`, the box head of `box_path`, its meta) for the box
+    planners, loaded once per worker process (the box head refused where it read another
+    network's maps: collapse/box_head.py load_box_head)."""
+    from clutterbench.collapse.box_head import load_box_head
+
+    key = f"{box_path}@{Path(cp_path).parent.name}"
+    if key not in _BOX_HEADS:
+        _BOX_HEADS[key] = load_box_head(Path(box_path), cp_model=Path(cp_path).parent.name)
+    return (load_predictor(cp_path, image_size), *_BOX_HEADS[key])
+
+
 @dataclasses.dataclass(frozen=True)
 class SceneInfo:
     """What the MCAP needs to draw an episode's scene: the boxes, the shelf, the camera."""

@@ -31,16 +31,18 @@ def box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = Fa
     a pull made holding a box is simulated holding it where trials.ch6.box_hold says so."""
     from clutterbench.collapse.box_predict import BoxMaps, FusedBoxMaps
     from clutterbench.planning.ch6.extraction import CollapseGraphPlanner
+    from clutterbench.trials.core.harness import load_box_networks
 
     params = job.params
     assert job.box_head_path is not None and job.box_edge_threshold is not None, job.planner
     head = PULL_MAP_HEADS[params.pull_map_meaning]
-    args = (job.model_path, job.box_head_path, job.camera, head, job.box_edge_threshold)
+    networks = load_box_networks(job.model_path, job.box_head_path, job.camera.image_size)
+    args = (*networks, job.camera, head, job.box_edge_threshold)
     if physics:
         assert job.box_fusion is not None, job.planner
         simulate = fitted_pull(job, spec, head)
         learned = job.box_contact is not None  # trials.ch6.box_contact learned
-        maps = FusedBoxMaps.from_paths(
+        maps = FusedBoxMaps(
             *args,
             simulate=simulate,
             weights=job.box_fusion,
@@ -49,7 +51,7 @@ def box_planner(job: Ch6Job, bimanual: bool, spec: SceneSpec, physics: bool = Fa
             contact_weights=job.box_contact,
         )
     else:
-        maps = BoxMaps.from_paths(*args)
+        maps = BoxMaps(*args)
     return CollapseGraphPlanner(
         maps,
         job.support,
