@@ -234,9 +234,7 @@ def test_table_4_1_sensed_rows_stand_apart_with_no_thesis_figure(tmp_path):
     }
     raw = table_4_1(records, rows, figures, tmp_path, "tiny")
     md = (tmp_path / "table_4_1.md").read_text()
-    label = (
-        "| trained with same-size boxes + depth-only segmentation, through the d415 sensor model"
-    )
+    label = "| trained with same-size boxes + depth-only segmentation, D415-class sensor (d415)"
     line = cells(line_of(md, f"{label} ["))
     assert line[2].startswith("1/2 = 50.0%") and line[3] == "—"  # no thesis figure beside
     assert cells(line_of(md, f"{label}: total of 1 cell"))[3] == "—"

@@ -16,23 +16,25 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, get_args
+from typing import Any
 
 import pandas as pd
 
 from clutterbench.errors import ClutterbenchError
 from clutterbench.report.tables import (
+    IDEAL,
+    SENSORS,
     Column,
     comparison_frame,
     grouped,
     rate_text,
+    sensed_text,
     thesis_rate_text,
     thesis_row,
     values_text,
     write_raw_csv,
     write_table,
 )
-from clutterbench.trials.condition_sets import Sensing
 from clutterbench.trials.core.stats import aggregate, rate
 
 TABLE = "table_4_1"
@@ -43,9 +45,6 @@ TARGET_THESIS_ROW = "predetermined_target"
 TARGET_THESIS_METHOD = "various_model"
 """The thesis ran its predetermined-target trials with the various-size model only."""
 TOTAL = "total"
-IDEAL = "ideal"
-"""The sensing of a row that names none: the renderer's exact depth."""
-SENSED_PRESETS = get_args(Sensing)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -121,11 +120,11 @@ class _Row:
 def _parse_row(row: str) -> tuple[str, str, str]:
     """'<method>/<objects>[/<sensing>]' -> (method, objects, sensing; ideal where none)."""
     method, objects, sensing = [*row.split("/", 2), IDEAL][:3]
-    if method not in METHODS or objects not in OBJECTS or sensing not in SENSED_PRESETS:
+    if method not in METHODS or objects not in OBJECTS or sensing not in (IDEAL, *SENSORS):
         raise ClutterbenchError(
             f"report.{TABLE}.{row}: a row must read '<method>/<objects>[/<sensing>]' with method "
             f"one of {', '.join(METHODS)}, objects one of {', '.join(OBJECTS)} and sensing one of "
-            f"{', '.join(p for p in SENSED_PRESETS if p != IDEAL)} (totals are added)"
+            f"{', '.join(SENSORS)} (totals are added)"
         )
     return method, objects, sensing
 
@@ -285,7 +284,7 @@ def table_4_1(
         _check(records, where, {**METHODS[method].requires, "mode": "pair"})
         _check(records, where, OBJECTS[objects])
         _check_sensing(records, where, sensing)
-        label = f"{METHODS[method].label}{_sensed_text(sensing)} [{condition}]"
+        label = f"{METHODS[method].label}{sensed_text(sensing)} [{condition}]"
         thesis = thesis_row(figures, TABLE, row) if sensing == IDEAL else {}
         cells.setdefault((method, sensing), []).append(
             _Row(row, method, objects, label, (condition,), records, thesis)
@@ -299,7 +298,7 @@ def table_4_1(
         conditions = tuple(c for cell in method_cells for c in cell.conditions)
         n = len(method_cells)
         label = (
-            f"{METHODS[method].label}{_sensed_text(sensing)}: total of {n} "
+            f"{METHODS[method].label}{sensed_text(sensing)}: total of {n} "
             f"cell{'s' if n > 1 else ''}"
         )
         thesis = thesis_row(figures, TABLE, total) if sensing == IDEAL else {}
@@ -354,11 +353,6 @@ def table_4_1_target(
     ]
     title = "Predetermined target (simulated; thesis 4.3.3)"
     return _write(TARGET_TABLE, title, table_rows, out_dir, notes)
-
-
-def _sensed_text(sensing: str) -> str:
-    """What a row's label adds for its sensor ('' for the exact depth)."""
-    return "" if sensing == IDEAL else f", through the {sensing} sensor model"
 
 
 def _thesis_trials_text(figures: Mapping[str, Any], table: str) -> str:

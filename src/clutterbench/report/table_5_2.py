@@ -21,7 +21,10 @@ import pandas as pd
 
 from clutterbench.errors import ClutterbenchError
 from clutterbench.report.tables import (
+    IDEAL,
+    SENSORS,
     grouped,
+    sensed_text,
     thesis_row,
     values_text,
     write_raw_csv,
@@ -42,10 +45,6 @@ METHODS = {
     "oracle_no_contact": "oracle over the actions that move no box into another (the thesis "
     "planners' ceiling)",
 }
-IDEAL = "ideal"
-"""The sensing of a row that names none: the renderer's exact depth."""
-SENSORS = {"structured_light": "structured-light sensor", "d415": "D415-class sensor"}
-"""How a sensed row's label names its preset (sim/sensor.py PRESETS, docs/sensing.md)."""
 NOTE = (
     "protocol: every step starts from a fresh world at the present state; a blocker is carried "
     "aside and held (bimanual) or let go (rearrangement), the new box is let go at the "
@@ -85,7 +84,7 @@ def _method_key(method: str, sensing: str) -> str:
 def _label(key: str) -> str:
     """A method row's label: the method's, with the sensor named for a sensed one."""
     method, _, sensing = key.partition("/")
-    return METHODS[method] + (f", {SENSORS[sensing]} ({sensing})" if sensing else "")
+    return METHODS[method] + sensed_text(sensing or IDEAL)
 
 
 def _thesis_text(figures: Mapping[str, Any], row: str) -> str | None:

@@ -69,6 +69,18 @@ def grouped(used: Mapping[str, Sequence[Mapping[str, Any]]], describe: Callable)
     return "; ".join(f"{d} ({', '.join(c)})" for d, c in groups.items())
 
 
+IDEAL = "ideal"
+"""The sensing of a row that names none: the renderer's exact depth."""
+SENSORS = {"structured_light": "structured-light sensor", "d415": "D415-class sensor"}
+"""How a sensed row's label names its preset (sim/sensor.py PRESETS, docs/sensing.md)."""
+
+
+def sensed_text(sensing: str) -> str:
+    """What a row's label adds for its sensor: '' for the exact depth, else
+    ', D415-class sensor (d415)'."""
+    return "" if sensing == IDEAL else f", {SENSORS[sensing]} ({sensing})"
+
+
 def values_text(records: Iterable[Mapping[str, Any]], key: str) -> str:
     """'a, b': the distinct values of `key` over the records, as text, sorted."""
     return ", ".join(sorted({str(r.get(key)) for r in records}))
