@@ -31,7 +31,13 @@ from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import load_npz, read_json, write_json
 from experiments.command import OUT, run_command, save
-from experiments.config import Ch4PilesConfig, DevConfig, check_dev_streams, load_dev
+from experiments.config import (
+    Ch4PilesConfig,
+    Ch4SensingConfig,
+    DevConfig,
+    check_dev_streams,
+    load_dev,
+)
 from experiments.stats import (
     ALPHA,
     CRITERIA,
@@ -178,28 +184,31 @@ def trial_jobs(
     return jobs
 
 
-def summary_rows(records: Sequence[Mapping[str, Any]], dev: DevConfig) -> list[dict[str, Any]]:
-    """One row per condition: success and strict success with Wilson 95% intervals, the mean
-    disturbed boxes, and the points below the oracle on the same stream."""
+def summary_rows(
+    records: Sequence[Mapping[str, Any]], dev: DevConfig, label: str = "piles"
+) -> list[dict[str, Any]]:
+    """One row per condition ('<candidate>/<stream>', the candidate under `label`): success
+    and strict success with Wilson 95% intervals, the mean disturbed boxes, and the points
+    below the oracle on the same stream."""
     from clutterbench.trials.core.stats import aggregate
 
     frame = aggregate(records)
     rows = []
     for r in frame.to_dict("records"):
-        piles, stream = r["condition"].split("/")
-        row = {"condition": r["condition"], "piles": piles, "stream": stream}
+        candidate, stream = r["condition"].split("/")
+        row = {"condition": r["condition"], label: candidate, "stream": stream}
         s = dev.streams[stream]
         row |= {"n_objects": list(s.n_objects), "catalogue": s.catalogue}
         for key in CRITERIA:
             row |= {f"{key}_{f}": plain(r[f"{key}_{f}"]) for f in ("k", "n", "rate", "lo", "hi")}
         row["mean_n_disturbed"] = float(r["mean_n_disturbed"])
         rows.append(row)
-    oracle = {r["stream"]: r for r in rows if r["piles"] == "oracle"}
+    oracle = {r["stream"]: r for r in rows if r[label] == "oracle"}
     for row in rows:
         for key in CRITERIA:
             top = oracle.get(row["stream"])
             gap = 100 * (top[f"{key}_rate"] - row[f"{key}_rate"]) if top else None
-            row[f"{key}_below_oracle_points"] = None if row["piles"] == "oracle" else gap
+            row[f"{key}_below_oracle_points"] = None if row[label] == "oracle" else gap
     return rows
 
 
@@ -335,8 +344,10 @@ def markdown(result: Mapping[str, Any]) -> str:
 
 
 # -- the command -----------------------------------------------------------------------------
-def ch4_dataset(cfg: Ch4PilesConfig, params: Mapping[str, Any]) -> tuple[str, Any]:
-    """The dataset of dev.ch4_piles.model, which must be a ch. 4 network -> (its name, its
+def ch4_dataset(
+    cfg: Ch4PilesConfig | Ch4SensingConfig, params: Mapping[str, Any], key: str = "ch4_piles"
+) -> tuple[str, Any]:
+    """The dataset of dev.<key>.model, which must be a ch. 4 network -> (its name, its
     generate config)."""
     from clutterbench.collapse.config import TrainConfig
     from clutterbench.data.config import GenerateConfig
@@ -344,13 +355,12 @@ def ch4_dataset(cfg: Ch4PilesConfig, params: Mapping[str, Any]) -> tuple[str, An
     train = load_section(TrainConfig, "train", params)
     if cfg.model not in train.models:
         known = ", ".join(train.models)
-        raise ClutterbenchError(f"dev.ch4_piles.model: no such network '{cfg.model}' ({known})")
+        raise ClutterbenchError(f"dev.{key}.model: no such network '{cfg.model}' ({known})")
     dataset = train.models[cfg.model].dataset
     ds = load_section(GenerateConfig, "generate", params).datasets[dataset]
     if getattr(train.models[cfg.model].net, "n_masks", 1) != 2 or not ds.pulls:
         raise ClutterbenchError(
-            f"dev.ch4_piles.model: '{cfg.model}' is not a ch. 4 network (2 masks in, "
-            "trained on pulls)"
+            f"dev.{key}.model: '{cfg.model}' is not a ch. 4 network (2 masks in, trained on pulls)"
         )
     return dataset, ds
 

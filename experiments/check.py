@@ -45,7 +45,8 @@ def check_dev(p: Resolved) -> list[str]:
         if types.get(check) is Ch6PullConfig:  # a ch. 6 recheck runs trial planners
             for planner in _list(cfg.get("planners")):
                 out += unknown_name(f"dev.{check}.planners", planner, planners, "planner")
-    return out + _model_ref(p, "dev.ch4_piles.model", _at(p, "dev.ch4_piles.model"))
+    out += _model_ref(p, "dev.ch4_piles.model", _at(p, "dev.ch4_piles.model"))
+    return out + _model_ref(p, "dev.ch4_sensing.model", _at(p, "dev.ch4_sensing.model"))
 
 
 def check_experiments(params: Path = Path("params.yaml"), dev: Path = PARAMS) -> list[str]:

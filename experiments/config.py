@@ -15,6 +15,7 @@ import yaml
 
 from clutterbench.config import bounded, load_section, parse
 from clutterbench.errors import ClutterbenchError
+from clutterbench.trials.condition_sets import Sensing
 from clutterbench.trials.config import DEV_PREFIX, SceneStreamConfig, TrialsConfig
 
 PARAMS = Path(__file__).resolve().parent / "params.yaml"
@@ -44,6 +45,29 @@ class Ch4PilesConfig:
                 raise ValueError(f"ch4_piles.pile_ranges: [{lo}, {hi}] is not a range of boxes")
         if not self.streams:
             raise ValueError("ch4_piles.streams: no dev stream to run on")
+
+
+@dataclasses.dataclass(frozen=True)
+class Ch4SensingConfig:
+    """The ch. 4 sensed-training recheck (`python -m experiments.ch4_sensing`)."""
+
+    model: str = "ch4_various"
+    """The ch. 4 network retrained with each training sensor (a key of train.models)."""
+    training: tuple[Sensing, ...] = ("ideal", "d415")
+    """Candidate train.sensing presets (ideal: the parametric noise of train.noise); each
+    network is trained on the pipeline's dataset, all else as params'."""
+    sensing: Sensing = "d415"
+    """The sensor of the trials' pictures (trials.ch4_sensed's), masks by region growing."""
+    streams: tuple[str, ...] = ()
+    """Dev streams the risk planner runs on with each network (keys of dev.streams)."""
+    episodes: int = bounded(100, ge=1)
+    """Trials per network and stream."""
+    oracle: bool = True
+    """Also the oracle on the same scenes: the ceiling each network falls below."""
+
+    def __post_init__(self) -> None:
+        if len(set(self.training)) < 2 or len(set(self.training)) < len(self.training):
+            raise ValueError("ch4_sensing.training: need two or more different presets")
 
 
 VARIED = ("blocker_goal", "upright_footprint")
@@ -192,6 +216,8 @@ class DevConfig:
     """Dev stream name (dev_*) -> the scenes it draws, seeded from base.seed and its name."""
     ch4_piles: Ch4PilesConfig = Ch4PilesConfig()
     """The ch. 4 training-pile recheck."""
+    ch4_sensing: Ch4SensingConfig = Ch4SensingConfig()
+    """The ch. 4 sensed-training recheck (train the network on the sensor's images?)."""
     ch5_planner: Ch5PlannerConfig = Ch5PlannerConfig()
     """The ch. 5 planner recheck (how a blocker is carried)."""
     perturbed_fit: PerturbedFitConfig = PerturbedFitConfig()
@@ -330,6 +356,7 @@ class DevConfig:
                 raise ValueError(f"streams.{name}: a dev stream's name starts with '{DEV_PREFIX}'")
         for check, names in (
             ("ch4_piles", self.ch4_piles.streams),
+            ("ch4_sensing", self.ch4_sensing.streams),
             ("ch5_planner", self.ch5_planner.streams),
             ("perturbed_fit", self.perturbed_fit.streams),
             ("ch6_pull", self.ch6_pull.streams),
