@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import pytest
 
+from clutterbench.collapse.config import TrainConfig
 from clutterbench.config import load_params, load_section
 from clutterbench.trials.condition_sets import SensedRows
 from clutterbench.trials.config import TrialsConfig
@@ -50,6 +51,18 @@ def test_a_twin_of_no_condition_is_a_one_line_error(key, group):
         _trials(**{key: {"of": ["nope"]}})
 
 
+def test_a_twin_reads_the_network_trained_for_its_sensor():
+    cfg = _trials(
+        ch4_conditions={
+            "r": {"planner": "risk", "model": "m", "perception": "depth", "stream": "s"},
+            "x": {"planner": "random", "stream": "s"},
+        },
+        ch4_sensed={"perception": "depth", "of": ["r", "x"], "models": {"m": "m_d415"}},
+    )
+    assert (cfg.ch4_conditions["r"].model, cfg.ch4_conditions["r_d415"].model) == ("m", "m_d415")
+    assert cfg.ch4_conditions["x_d415"].model is None
+
+
 def test_table_rows_add_the_twins_after_the_rows():
     rows = {"a/5": "a", "b/5": "b"}
     assert SensedRows(sensing="d415", of=("b",)).table_rows(rows) == {
@@ -64,6 +77,10 @@ def test_params_yaml_twins_table_4_1_s_depth_rows_and_table_5_2_s_planners():
     cfg = load_section(TrialsConfig, "trials", load_params())
     ch4 = [n for n, c in cfg.ch4_conditions.items() if c.sensing != "ideal"]
     assert ch4 and all(cfg.ch4_conditions[n].perception == "depth" for n in ch4)
+    train = load_section(TrainConfig, "train", load_params())
+    for name in ch4:  # each network a sensed row reads was trained on that sensor's images
+        model = cfg.ch4_conditions[name].model
+        assert model is None or train.sensing_of(model).preset == cfg.ch4_sensed.sensing
     assert all(n.removesuffix(f"_{cfg.ch4_sensed.sensing}") in cfg.ch4_conditions for n in ch4)
     ch5 = [c for c in cfg.ch5_conditions.values() if c.sensing != "ideal"]
     assert ch5 and all(c.perception == "detector" for c in ch5)

@@ -357,6 +357,29 @@ def test_training_augmentation_is_the_noise_unless_a_sensor_is_named():
     assert (one == 0).any() and not np.array_equal(one, depth)  # shadows, steps: sensed
 
 
+def test_a_network_s_own_training_sensor_overrides_train_s():
+    """train.models.<m>.sensing: that network trains on its own sensor, the others on
+    train.sensing; a checkpoint of a network without its own keeps its old metadata."""
+    from clutterbench.collapse.config import TrainConfig, TrainSensingConfig
+    from clutterbench.collapse.train import _checkpoint_meta
+    from clutterbench.config import parse
+    from clutterbench.sim.sensor import SensedAugmentation
+
+    base = {"arch": "collapse_map", "dataset": "d", "batch_size": 2, "lr": 1e-3, "epochs": 1}
+    base |= {"net": {"input_size": 64}}
+    own = base | {"sensing": {"preset": "structured_light", "spread": 0.1}}
+    cfg = parse(TrainConfig, {"models": {"m": base, "s": own}}, "train")
+    assert cfg.augmentation("m", 42.0) is cfg.noise  # train.sensing: ideal
+    sensed = cfg.augmentation("s", 42.0)
+    assert isinstance(sensed, SensedAugmentation) and sensed.sensor == preset("structured_light")
+    assert sensed.spread == 0.1 and cfg.sensing_of("s").preset == "structured_light"
+    d415 = dataclasses.replace(cfg, sensing=TrainSensingConfig(preset="d415"))
+    assert d415.sensing_of("m").preset == "d415" and d415.sensing_of("s").spread == 0.1
+    assert "sensing" not in _checkpoint_meta("m", cfg.models["m"], 0.005, 64, 0, "fp32")["train"]
+    meta = _checkpoint_meta("s", cfg.models["s"], 0.005, 64, 0, "fp32")
+    assert meta["train"]["sensing"] == {"preset": "structured_light", "spread": 0.1}
+
+
 def test_a_support_scene_under_a_sensor_keeps_its_masks_and_truth():
     from clutterbench.sim.config import CameraConfig
     from clutterbench.support.evaluate import Scene, sensed_scene

@@ -36,7 +36,7 @@ from clutterbench.cli.common import (
 )
 from clutterbench.config import SCALES, BaseConfig, as_dict, load_base, load_params, parse
 from clutterbench.errors import ClutterbenchError
-from clutterbench.trials.condition_sets import opt_in_lines, thesis_row_lines
+from clutterbench.trials.condition_sets import SENSED_GROUPS, opt_in_lines, thesis_row_lines
 
 Resolved = Mapping[str, Any]
 """params.yaml's sections at one scale profile (scale mappings resolved), as read."""
@@ -257,6 +257,10 @@ def check_trials(p: Resolved) -> list[str]:
                 out += _model_ref(p, f"{key}.model", cond.get("model"))
     for field in ("ch6.model", "ch6.ch4_model", "ch5.model"):
         out += _model_ref(p, f"trials.{field}", _at(p, f"trials.{field}"))
+    for key in SENSED_GROUPS.values():  # the networks the sensed twins read instead
+        models = _at(p, f"trials.{key}.models")
+        for name, twin in models.items() if isinstance(models, Mapping) else ():
+            out += _model_ref(p, f"trials.{key}.models.{name}", twin)
     role = {name: _role(name) for name in planners}
     return out + check_arm_conditions(p) + opt_in_lines(_mapping(p, "trials"), role.get)
 

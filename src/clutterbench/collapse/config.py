@@ -56,6 +56,9 @@ class TrainModelConfig:
     shelf when the trials pull it out; the dataset needs pull_outcomes: true). More than
     deletion: the collapse_map arch with one input mask and bce or focal loss, summed over
     heads."""
+    sensing: TrainSensingConfig | None = None
+    """This network's own training sensor (a network for the sensed rows, trained on what they
+    see: docs/sensing.md); null: train.sensing, every network's."""
 
 
 HEADS_ARCH = "collapse_map"
@@ -173,7 +176,12 @@ class TrainConfig:
         parametric noise, or the sensor preset's model (sim.camera's fovy_deg at the
         network's input size gives our focal length)."""
         m = self.models[name]
-        return depth_augmentation(m.noise, self.noise, self.sensing, m.net.input_size, fovy_deg)
+        sensing = self.sensing_of(name)
+        return depth_augmentation(m.noise, self.noise, sensing, m.net.input_size, fovy_deg)
+
+    def sensing_of(self, name: str) -> TrainSensingConfig:
+        """The sensor model `name`'s training depth passes through: its own, else train's."""
+        return self.models[name].sensing or self.sensing
 
     @staticmethod
     def prepare_params(data: Mapping[str, Any]) -> Mapping[str, Any]:

@@ -248,8 +248,9 @@ def train_model(
                 if stale >= mcfg.patience:
                     break
         summary = _summary(name, mcfg, epoch, best, (train_ds, val_ds), model, precision)
-        if mcfg.noise and cfg.sensing.preset != "ideal":  # the sensor its images passed through
-            summary["sensing"] = {"preset": cfg.sensing.preset, "spread": cfg.sensing.spread}
+        sensing = cfg.sensing_of(name)
+        if mcfg.noise and sensing.preset != "ideal":  # the sensor its images passed through
+            summary["sensing"] = {"preset": sensing.preset, "spread": sensing.spread}
         mcap.set_outcome({"best_epoch": best["epoch"], "best_val_loss": best["val_loss"]})
     write_json(paths.report_dir / "summary.json", summary)
     timing = {"model": name, "seconds": time.perf_counter() - started, "epoch_seconds": epoch_s}
@@ -334,6 +335,8 @@ def _checkpoint_meta(
     train_meta = as_dict(dataclasses.replace(mcfg, net={}))
     if heads == DEFAULT_HEADS:  # deletion-only checkpoints stay byte for byte as before heads
         del train_meta["labels"]
+    if mcfg.sensing is None:  # networks of train.sensing stay byte for byte as before
+        del train_meta["sensing"]
     meta = {
         "name": name,
         "dataset": mcfg.dataset,

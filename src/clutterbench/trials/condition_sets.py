@@ -39,6 +39,9 @@ class SensedRows:
     instance or depth); null: each keeps its own (the ch. 5 detector reads the sensed depth)."""
     of: tuple[str, ...] = ()
     """The group's conditions run again so (none: no sensed condition)."""
+    models: Mapping[str, str] = dataclasses.field(default_factory=dict)
+    """A network a condition reads (its `model`) -> the one its sensed twin reads instead: a
+    train.models entry trained on the sensor's images (its own `sensing`); none: the same."""
 
     @staticmethod
     def expand(conditions: Mapping[str, Any], sensed: Mapping[str, Any]) -> dict[str, Any]:
@@ -47,10 +50,12 @@ class SensedRows:
         sensing = sensed.get("sensing", SensedRows.sensing)
         perception = sensed.get("perception", SensedRows.perception)
         extra = {"sensing": sensing} | ({} if perception is None else {"perception": perception})
+        models = sensed.get("models") if isinstance(sensed.get("models"), Mapping) else {}
         out = dict(conditions)
         for name in sensed.get("of") or ():
-            if isinstance(conditions.get(name), Mapping):
-                out.setdefault(f"{name}_{sensing}", {**conditions[name], **extra})
+            if isinstance(cond := conditions.get(name), Mapping):
+                swap = {"model": models[cond["model"]]} if cond.get("model") in models else {}
+                out.setdefault(f"{name}_{sensing}", {**cond, **extra, **swap})
         return out
 
     @staticmethod
