@@ -268,6 +268,21 @@ def test_table_4_1_sensed_rows_check_their_sensor(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
+def test_a_sensed_row_may_read_the_network_trained_on_its_sensor(tmp_path):
+    """trials.ch4_sensed.models: the twin of a various-size row reads another network; the
+    table accepts it only through that mapping and names it."""
+    twin = sensed(cell("v", "risk", "same", [True], model="ch4_various_d415", perception="depth"))
+    records = {**RECORDS, "v_d415": twin}
+    rows = {"various_model_depth/same_size_5/d415": "v_d415"}
+    with pytest.raises(ClutterbenchError, match="ran model ch4_various_d415, not ch4_various"):
+        table_4_1(records, rows, FIGURES, tmp_path, "t")
+    table_4_1(records, rows, FIGURES, tmp_path, "t", {"ch4_various": "ch4_various_d415"})
+    md = (tmp_path / "table_4_1.md").read_text()
+    assert (
+        "D415-class sensor (d415), network trained on its images (ch4_various_d415) [v_d415]" in md
+    )
+
+
 TARGET_RECORDS = {
     "tv": cell("tv", "risk", "various", [True, True, False], model="ch4_various", mode="target"),
     "ts": cell("ts", "risk", "various", [True, False], model="ch4_same", mode="target"),

@@ -242,8 +242,9 @@ def table_6_3_extraction(r: Report) -> None:
 
 
 def table_4_1_pull_with_support(r: Report) -> None:
-    rows = r.trials.ch4_sensed.table_rows(r.cfg.table_4_1)
-    table_4_1(r.ch4_records, rows, r.figures, TABLES, r.base.scale)
+    sensed = r.trials.ch4_sensed
+    rows = sensed.table_rows(r.cfg.table_4_1)
+    table_4_1(r.ch4_records, rows, r.figures, TABLES, r.base.scale, sensed.models)
     table_4_1_target(r.ch4_records, r.cfg.table_4_1_target, r.figures, TABLES, r.base.scale)
 
 

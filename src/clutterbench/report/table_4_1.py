@@ -264,13 +264,15 @@ def table_4_1(
     figures: dict[str, Any],
     out_dir: Path,
     scale: str,
+    sensed_models: Mapping[str, str] | None = None,
 ) -> pd.DataFrame:
     """Table 4.1 as reports/tables/table_4_1.md (ours beside the thesis) and .csv (the raw
     aggregate, with the thesis counts beside it). Returns the raw frame; with no rows,
     writes nothing and returns an empty frame.
 
     rows: '<method>/<objects>' -> trials_ch4 condition. Each method's cells are followed by
-    a '<method>/total' row pooling their episodes."""
+    a '<method>/total' row pooling their episodes. sensed_models: a network -> the one a
+    sensed row of its method reads instead (trials.ch4_sensed.models)."""
     if not rows:
         return pd.DataFrame()
     if TABLE not in figures:
@@ -281,10 +283,15 @@ def table_4_1(
         method, objects, sensing = _parse_row(row)
         where = f"report.{TABLE}.{row}"
         records = _condition_records(records_by_condition, where, condition)
-        _check(records, where, {**METHODS[method].requires, "mode": "pair"})
+        requires = dict(METHODS[method].requires)
+        swapped = sensing != IDEAL and requires.get("model") in (sensed_models or {})
+        if swapped:  # the network trained on the sensor's images (trials.ch4_sensed.models)
+            requires["model"] = (sensed_models or {})[requires["model"]]
+        _check(records, where, {**requires, "mode": "pair"})
         _check(records, where, OBJECTS[objects])
         _check_sensing(records, where, sensing)
-        label = f"{METHODS[method].label}{sensed_text(sensing)} [{condition}]"
+        trained = f", network trained on its images ({requires['model']})" if swapped else ""
+        label = f"{METHODS[method].label}{sensed_text(sensing)}{trained} [{condition}]"
         thesis = thesis_row(figures, TABLE, row) if sensing == IDEAL else {}
         cells.setdefault((method, sensing), []).append(
             _Row(row, method, objects, label, (condition,), records, thesis)
