@@ -198,7 +198,11 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     n63 = sum(c not in skipped for c in rows63) + len(set(rows63) & set(trials.sensed.of))
     t63 = (a / "reports/tables/table_6_3.md").read_text().splitlines()
     assert sum(NOT_RUN in line for line in t63 if line.startswith("|")) == len(skipped)
-    for table, rows in (("table_4_1", 24 + 6), ("table_4_1_target", 3), ("table_6_3", n63)):
+    # Table 4.1: its cells and their sensed twins, then a total per method and sensor
+    rows41 = trials.ch4_sensed.table_rows(load_section(ReportConfig, "report", params).table_4_1)
+    n41 = len(rows41) + len({(r.split("/")[0], r.count("/")) for r in rows41})
+    assert n41 == 24 + 8 + 6 + 2  # as params.yaml has it now: 8 twins of 2 methods
+    for table, rows in (("table_4_1", n41), ("table_4_1_target", 3), ("table_6_3", n63)):
         frame = pd.read_csv(a / "reports/tables" / f"{table}.csv")
         assert len(frame) == rows and frame["success_rate"].between(0, 1).all(), table
     # Table 6.3 decomposed: every stream with a CP row, its truth-map row and its oracle,

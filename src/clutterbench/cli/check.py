@@ -258,8 +258,7 @@ def check_trials(p: Resolved) -> list[str]:
     for field in ("ch6.model", "ch6.ch4_model", "ch5.model"):
         out += _model_ref(p, f"trials.{field}", _at(p, f"trials.{field}"))
     for key in SENSED_GROUPS.values():  # the networks the sensed twins read instead
-        models = _at(p, f"trials.{key}.models")
-        for name, twin in models.items() if isinstance(models, Mapping) else ():
+        for name, twin in _mapping(p, f"trials.{key}.models").items():
             out += _model_ref(p, f"trials.{key}.models.{name}", twin)
     role = {name: _role(name) for name in planners}
     return out + check_arm_conditions(p) + opt_in_lines(_mapping(p, "trials"), role.get)
