@@ -28,6 +28,7 @@ from clutterbench.report.tables import (
     comparison_frame,
     grouped,
     rate_text,
+    sensed_by_preset,
     sensed_text,
     thesis_rate_text,
     thesis_row,
@@ -412,10 +413,9 @@ def _notes(
 
 def _sensing_notes(used: Mapping[str, Sequence[Mapping[str, Any]]]) -> list[str]:
     """Which rows saw through a sensor model (none: no note, as before any was run)."""
-    sensed = {c: rs for c, rs in used.items() if any("sensing" in r for r in rs)}
-    if not sensed:
+    by = sensed_by_preset(used)
+    if by is None:
         return []
-    by = grouped(sensed, lambda rs: values_text(rs, "sensing"))
     return [
         f"sensing (docs/sensing.md): {by}; every other row reads the renderer's exact depth. "
         "A sensed row's planner reads the sensed depth and its masks from depth by region "

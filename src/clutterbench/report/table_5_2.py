@@ -23,10 +23,9 @@ from clutterbench.errors import ClutterbenchError
 from clutterbench.report.tables import (
     IDEAL,
     SENSORS,
-    grouped,
+    sensed_by_preset,
     sensed_text,
     thesis_row,
-    values_text,
     write_raw_csv,
     write_table,
 )
@@ -262,9 +261,9 @@ def _sensing_notes(
     """Which rows saw through a sensor model, by preset (none: no note, as before any was
     run)."""
     used = {cond: by_condition[cond] for row, cond in rows.items() if _parse(row)[2] != IDEAL}
-    if not used:
+    by = sensed_by_preset(used)
+    if by is None:
         return []
-    by = grouped(used, lambda rs: values_text(rs, "sensing"))
     return [
         f"sensed rows (trials.ch5_sensed, docs/sensing.md), by sensor preset: {by}. Their "
         "planner reads every picture through the sensor model: the detector, the collapse map "

@@ -81,6 +81,13 @@ def sensed_text(sensing: str) -> str:
     return "" if sensing == IDEAL else f", {SENSORS[sensing]} ({sensing})"
 
 
+def sensed_by_preset(used: Mapping[str, Sequence[Mapping[str, Any]]]) -> str | None:
+    """'d415 (cond_a, cond_b)': the conditions of `used` whose records saw through a sensor
+    model, by preset; None when none did (a table then says nothing of sensing)."""
+    sensed = {c: rs for c, rs in used.items() if any("sensing" in r for r in rs)}
+    return grouped(sensed, lambda rs: values_text(rs, "sensing")) if sensed else None
+
+
 def values_text(records: Iterable[Mapping[str, Any]], key: str) -> str:
     """'a, b': the distinct values of `key` over the records, as text, sorted."""
     return ", ".join(sorted({str(r.get(key)) for r in records}))
