@@ -70,6 +70,25 @@ class Ch4SensingConfig:
             raise ValueError("ch4_sensing.training: need two or more different presets")
 
 
+@dataclasses.dataclass(frozen=True)
+class DetectorSensingConfig:
+    """The detector's sensed-training recheck (`python -m experiments.detector_sensing`)."""
+
+    training: tuple[Sensing, ...] = ("ideal", "d415")
+    """Candidate detector.sensing presets (ideal: the parametric noise of detector.noise); the
+    first is the one every other is compared with."""
+    scored_on: tuple[Sensing, ...] = ("ideal", "d415")
+    """The sensors whose returns of the val images each network is scored on."""
+    bootstrap: int = bounded(1000, ge=10)
+    """Scene bootstrap draws for the interval of each mAP difference."""
+
+    def __post_init__(self) -> None:
+        if len(set(self.training)) < 2 or len(set(self.training)) < len(self.training):
+            raise ValueError("detector_sensing.training: need two or more different presets")
+        if not self.scored_on or len(set(self.scored_on)) < len(self.scored_on):
+            raise ValueError("detector_sensing.scored_on: one or more different presets")
+
+
 VARIED = ("blocker_goal", "upright_footprint")
 """The trials.ch5 fields a ch. 5 planner variant may set."""
 
@@ -218,6 +237,8 @@ class DevConfig:
     """The ch. 4 training-pile recheck."""
     ch4_sensing: Ch4SensingConfig = Ch4SensingConfig()
     """The ch. 4 sensed-training recheck (train the network on the sensor's images?)."""
+    detector_sensing: DetectorSensingConfig = DetectorSensingConfig()
+    """The detector's sensed-training recheck (train the detector on the sensor's images?)."""
     ch5_planner: Ch5PlannerConfig = Ch5PlannerConfig()
     """The ch. 5 planner recheck (how a blocker is carried)."""
     perturbed_fit: PerturbedFitConfig = PerturbedFitConfig()
