@@ -43,24 +43,26 @@ CI = (2.5, 97.5)
 """The bootstrap interval's percentiles."""
 
 
-def dataset_dir(params: Mapping[str, Any], data_dir: Path, scratch: Path) -> tuple[Path, str, bool]:
-    """detector.dataset's generate dir (the pipeline's where made with these params, else made
-    under `scratch`) -> (that dir, the data's config hash, whether it is the pipeline's)."""
-    from clutterbench.collapse.detector import DetectorParams
+def dataset_dir(
+    name: str, params: Mapping[str, Any], data_dir: Path, scratch: Path
+) -> tuple[Path, str, bool]:
+    """Generated dataset `name`'s generate dir (the pipeline's where made with these params,
+    else made under `scratch`) -> (that dir, the data's config hash, whether it is the
+    pipeline's)."""
     from clutterbench.data.config import GenerateConfig
     from clutterbench.data.generate import config_hash, generate_dataset
     from clutterbench.sim.config import SimConfig
 
-    name = load_section(DetectorParams, "detector", params).dataset
     gen = load_section(GenerateConfig, "generate", params)
     if name not in gen.datasets:
-        raise ClutterbenchError(f"detector.dataset: unknown dataset '{name}'")
+        raise ClutterbenchError(f"generate.datasets: unknown dataset '{name}'")
     sim = load_section(SimConfig, "sim", params)
     seed = load_section(BaseConfig, "base", params).seed
     digest = config_hash(name, gen.datasets[name], sim, seed)
     if made_with(data_dir / "generate" / name, digest):
         return data_dir / "generate", digest, True
-    generate_dataset(name, gen.datasets[name], gen, sim, seed, scratch / "generate" / name)
+    if not made_with(scratch / "generate" / name, digest):
+        generate_dataset(name, gen.datasets[name], gen, sim, seed, scratch / "generate" / name)
     return scratch / "generate", digest, False
 
 
@@ -115,20 +117,6 @@ def candidate(
     }
 
 
-def sensed_depth(depth_m: np.ndarray, preset: str, fovy_deg: float, seed: int) -> np.ndarray:
-    """(N, H, W) depth as sensor `preset` returns each image (seeded by `seed` and the image)."""
-    from clutterbench.sim import sensor
-
-    cfg = sensor.preset(preset)
-    if cfg is None:
-        return depth_m
-    fx = sensor.focal_px(depth_m.shape[-1], fovy_deg)
-    camera = sensor.pinhole(fx, depth_m.shape[-2:])
-    return np.stack(
-        [sensor.sense(d, camera, cfg, sensor.observation_rng(seed, d)) for d in depth_m]
-    )
-
-
 def scores(
     candidates: Sequence[Mapping[str, Any]], params: Mapping[str, Any], gen_dir: Path
 ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
@@ -144,6 +132,7 @@ def scores(
     )
     from clutterbench.data.arrangement import load_arrangement_split
     from clutterbench.sim.config import SimConfig
+    from clutterbench.sim.sensor import sense_images
 
     cfg = load_dev(params).detector_sensing
     p = load_section(DetectorParams, "detector", params)
@@ -160,7 +149,7 @@ def scores(
     rows, diffs = [], []
     draws = np.random.default_rng(seed).integers(0, len(val), size=(cfg.bootstrap, len(val)))
     for scored_on in cfg.scored_on:
-        images = dataclasses.replace(val, depth_m=sensed_depth(val.depth_m, scored_on, fovy, seed))
+        images = dataclasses.replace(val, depth_m=sense_images(val.depth_m, scored_on, fovy, seed))
         dets = {name: detect_all(net, images, p.eval_score_threshold) for name, net in nets.items()}
         for name, d in dets.items():
             map50, prs = mean_ap(d, truth, p.net.n_classes, p.match_iou)
@@ -215,7 +204,8 @@ def markdown(result: Mapping[str, Any]) -> str:
         "",
         "## Networks",
         "",
-        "| training | data | network | best epoch / run | val mAP@0.5 (exact depth) | train s |",
+        "| training | data | network | best epoch / run | val mAP@0.5 (its own sensor's images) "
+        "| train s |",
         "|---|---|---|---|---|---|",
     ]
     data = "the pipeline's" if result["data_reused"] else "data/dev"
@@ -264,7 +254,7 @@ def markdown(result: Mapping[str, Any]) -> str:
         f"**What it shows.** {result['shows']}.",
         "",
         "- Both networks share the data, the split and the training seed; the val split also "
-        "picked each one's epoch, on exact depth.",
+        "picked each one's epoch, on the images of its own training sensor.",
         f"- Networks on {cpu['cpu_model']} ({instruction_set(cpu)}), {cpu['torch_threads']} "
         f"torch threads; this run took {result['seconds'] / 60:.1f} min.",
     ]
@@ -284,7 +274,8 @@ def detector_sensing(
     started = time.perf_counter()
     base = load_section(BaseConfig, "base", params)
     cfg = load_dev(params).detector_sensing
-    gen_dir, digest, data_reused = dataset_dir(params, data_dir, scratch)
+    dataset = load_section(DetectorParams, "detector", params).dataset
+    gen_dir, digest, data_reused = dataset_dir(dataset, params, data_dir, scratch)
     candidates = []
     for preset in cfg.training:
         candidates.append(candidate(preset, params, gen_dir, digest, scratch))
@@ -294,7 +285,7 @@ def detector_sensing(
         "scale": base.scale,
         "seed": base.seed,
         "config": as_dict(cfg),
-        "dataset": load_section(DetectorParams, "detector", params).dataset,
+        "dataset": dataset,
         "data_reused": data_reused,
         "val_images": candidates[0]["summary"]["val_images"],
         "candidates": candidates,

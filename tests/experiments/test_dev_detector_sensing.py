@@ -9,8 +9,9 @@ import pytest
 
 from clutterbench.config import load_params, parse
 from clutterbench.sim import sensor
+from clutterbench.sim.sensor import sense_images
 from experiments.config import DetectorSensingConfig, DevConfig, load_dev
-from experiments.detector_sensing import markdown, sensed_depth, what_it_shows
+from experiments.detector_sensing import markdown, what_it_shows
 
 CPU = {"cpu_model": "X", "torch_cpu_capability": "AVX2", "cpu_flags": {}, "torch_threads": 2}
 
@@ -45,12 +46,12 @@ def _scenes(n: int = 3, size: int = 32) -> np.ndarray:
 
 def test_ideal_images_are_the_renderers():
     depth = _scenes()
-    assert sensed_depth(depth, "ideal", 42.0, 7) is depth
+    assert sense_images(depth, "ideal", 42.0, 7) is depth
 
 
 def test_sensed_images_are_the_sensors_returns_seeded_per_image():
     depth = _scenes()
-    once, again = sensed_depth(depth, "d415", 42.0, 7), sensed_depth(depth, "d415", 42.0, 7)
+    once, again = sense_images(depth, "d415", 42.0, 7), sense_images(depth, "d415", 42.0, 7)
     assert once.shape == depth.shape and once.dtype == np.float32
     assert np.array_equal(once, again)  # a rerun sees the same returns
     assert not np.array_equal(once, depth)
@@ -59,7 +60,7 @@ def test_sensed_images_are_the_sensors_returns_seeded_per_image():
     for d, got in zip(depth, once):  # each image as `sense` returns it alone
         want = sensor.sense(d, camera, sensor.preset("d415"), sensor.observation_rng(7, d))
         assert np.array_equal(got, want)
-    assert not np.array_equal(sensed_depth(depth, "d415", 42.0, 8), once)  # the seed matters
+    assert not np.array_equal(sense_images(depth, "d415", 42.0, 8), once)  # the seed matters
 
 
 @pytest.mark.parametrize(

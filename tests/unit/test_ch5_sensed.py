@@ -50,6 +50,36 @@ def test_each_named_ch5_condition_runs_again_under_the_sensor_with_its_own_perce
     assert set(sensed_rows.values()) == added
 
 
+def test_a_sensed_condition_reads_the_detector_trained_on_its_sensor(tmp_path, monkeypatch):
+    cfg = load_section(TrialsConfig, "trials", PARAMS)
+    exact, twin = (
+        cfg.ch5_conditions["replenish_stacked"],
+        cfg.ch5_conditions["replenish_stacked_d415"],
+    )
+    assert ch5.detector_path(exact) == Path("models/detector/best.pt")
+    assert ch5.detector_path(twin) == Path("models/detector_d415/best.pt")  # stage detector_sensed
+    jobs = ch5.ch5_jobs(
+        "replenish_stacked_d415",
+        twin,
+        trials=cfg,
+        sim=load_section(SimConfig, "sim", PARAMS),
+        seed=0,
+        prob_threshold=0.5,
+        scene_type="stacked",
+    )
+    assert {j.detector_path for j in jobs} == {Path("models/detector_d415/best.pt")}
+    # a missing sensed detector names the stage that makes it
+    monkeypatch.chdir(tmp_path)
+    for name in ("detector", cfg.ch5.model):
+        (tmp_path / "models" / name).mkdir(parents=True)
+        (tmp_path / "models" / name / "best.pt").write_bytes(b"")
+    ch5.check_models({"replenish_stacked": exact}, cfg.ch5)
+    with pytest.raises(
+        ClutterbenchError, match="detector_d415/best.pt missing; run the detector_sensed"
+    ):
+        ch5.check_models({"replenish_stacked": exact, "replenish_stacked_d415": twin}, cfg.ch5)
+
+
 def test_an_unknown_ch5_sensed_name_is_one_line():
     params = copy.deepcopy(PARAMS)
     params["trials"]["ch5_sensed"]["of"] = ["replenish_stacked", "replenish_nowhere"]
@@ -131,7 +161,8 @@ def seen_by(monkeypatch):
 
         monkeypatch.setattr(module, name, spy)
 
-    monkeypatch.setitem(ch5_perception._MODELS, str(Path("models/detector/best.pt")), Detector())
+    for path in ("models/detector/best.pt", "models/detector_d415/best.pt"):
+        monkeypatch.setitem(ch5_perception._MODELS, str(Path(path)), Detector())
     monkeypatch.setattr(ch5, "collapse_map_fn", collapse_map_fn)
     watch(ch5, "free_places", "free places", 3)
     watch(ch5, "execute", "execution", 1)

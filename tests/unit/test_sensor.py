@@ -434,3 +434,105 @@ def test_a_step_beside_a_steep_slope_is_still_a_step():
     assert np.all(out[41:79, [39, 40, 79, 80]] == 0)  # both sides of each vertical edge
     assert np.all(out[41:79, 82:-2] > 0)  # the slope beyond the box
     assert np.all(out[41:79, 2:30] > 0)  # and before its shadow (columns 31-39)
+
+
+def _dense_pairs_along(z: np.ndarray, step_m: float) -> np.ndarray:
+    """step_pairs' definition along rows, written densely over every pair."""
+    valid = z > 0
+    both = valid[:, :-1] & valid[:, 1:]
+    d = np.where(both, z[:, 1:] - z[:, :-1], np.nan)
+    pad = np.pad(d, ((0, 0), (1, 1)), constant_values=np.nan)
+    with np.errstate(invalid="ignore"):
+        beside = np.fmin(np.abs(d - pad[:, :-2]), np.abs(d - pad[:, 2:]))
+        residual = np.where(np.isnan(beside), np.abs(d), beside)
+        return both & (np.abs(d) > step_m) & (residual > step_m)
+
+
+def _dense_steps(z: np.ndarray, step_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """_steps' definition over every pixel: beside a step, and the depth across the largest
+    (ties: above, below, left, right)."""
+    right, down = _dense_pairs_along(z, step_m), _dense_pairs_along(z.T, step_m).T
+    pad = np.pad(z, 1, mode="edge")
+    row, col = np.zeros((1, z.shape[1]), bool), np.zeros((z.shape[0], 1), bool)
+    biggest, across = np.zeros_like(z), z.copy()
+    for nb, step in (
+        (pad[:-2, 1:-1], np.vstack([row, down])),
+        (pad[2:, 1:-1], np.vstack([down, row])),
+        (pad[1:-1, :-2], np.hstack([col, right])),
+        (pad[1:-1, 2:], np.hstack([right, col])),
+    ):
+        diff = np.where(step, np.abs(nb - z), 0.0)
+        bigger = diff > biggest
+        biggest, across = np.where(bigger, diff, biggest), np.where(bigger, nb, across)
+    return biggest > 0, across
+
+
+def random_clutter(rng: np.random.Generator, size: int) -> np.ndarray:
+    """Slanted boxes in front of a wall, a corner whose two steps tie, holes
+    and a noisy patch: every kind of pair the step test meets."""
+    v, u = np.mgrid[0:size, 0:size] / size
+    depth = 0.6 + 0.05 * v
+    for _ in range(8):
+        r0, c0 = rng.integers(0, size - 4, 2)
+        r1, c1 = r0 + rng.integers(2, size // 3), c0 + rng.integers(2, size // 3)
+        z0 = rng.choice([0.45, 0.5, 0.5 + 0.02 * rng.random()])
+        depth[r0:r1, c0:c1] = z0 + rng.uniform(-0.05, 0.05) * u[r0:r1, c0:c1]
+    depth[rng.random((size, size)) < 0.03] = 0.0
+    r, c = rng.integers(0, size - 8, 2)  # a corner whose two steps tie (depths exact in
+    depth[r : r + 4, c : c + 8] = 0.5  # binary): (r + 4, c + 4) is 1/16 m farther than the
+    depth[r + 4 : r + 8, c : c + 4] = 0.625  # pixel above and 1/16 m nearer than the one on
+    depth[r + 4 : r + 8, c + 4 : c + 8] = 0.5625  # its left
+    patch = slice(size // 2, size // 2 + size // 8)
+    depth[patch, patch] += rng.normal(0, 0.01, depth[patch, patch].shape)
+    return depth
+
+
+@pytest.mark.parametrize("size", SIZES)
+def test_the_sparse_step_and_shadow_search_equal_their_dense_definition(size):
+    from clutterbench.sim import sensor
+
+    rng = np.random.default_rng(size)
+    for _ in range(5):
+        z = random_clutter(rng, size)
+        for step_m in (0.005, 0.01, 0.03):
+            right, down = sensor.step_pairs(z, step_m)
+            assert np.array_equal(right, _dense_pairs_along(z, step_m))
+            assert np.array_equal(down, _dense_pairs_along(z.T, step_m).T)
+            at_step, across = sensor._steps(z, step_m)
+            want_at, want_across = _dense_steps(z, step_m)
+            assert np.array_equal(at_step, want_at) and np.array_equal(across, want_across)
+        for cfg in SENSORS.values():
+            # the reference z-buffer: every gap column of a joined pair filled, one by one
+            fx = camera(size).K[0, 0]
+            got = sensor.shadowed(z, fx, cfg.baseline_m, cfg.second_view, cfg.step_m)
+            assert got.shape == z.shape and got.any()
+            assert np.array_equal(got, _dense_shadowed(z, fx, cfg.baseline_m, cfg.step_m))
+
+
+def _dense_shadowed(z: np.ndarray, fx: float, baseline_m: float, tol_m: float) -> np.ndarray:
+    """`shadowed` for a second view at +x, pixel by pixel and pair by pair."""
+    from clutterbench.sim.sensor import _MAX_GAP_PX
+
+    h, w = z.shape
+    zbuf = np.full((h, w), np.inf)
+    col = np.zeros((h, w), np.int64)
+    for i in range(h):
+        for j in range(w):
+            if z[i, j] > 0:
+                col[i, j] = math.floor(j + 0.5 - fx * baseline_m / z[i, j])
+                if 0 <= col[i, j] < w:
+                    zbuf[i, col[i, j]] = min(zbuf[i, col[i, j]], z[i, j])
+    for i in range(h):
+        for j in range(w - 1):
+            a, b = z[i, j], z[i, j + 1]
+            if a > 0 and b > 0 and abs(a - b) <= tol_m:
+                lo, hi = sorted((col[i, j], col[i, j + 1]))
+                for c in range(lo + 1, min(hi, lo + _MAX_GAP_PX + 1)):
+                    if 0 <= c < w:
+                        zbuf[i, c] = min(zbuf[i, c], max(a, b))
+    seen = np.zeros((h, w), bool)
+    for i in range(h):
+        for j in range(w):
+            c = col[i, j]
+            seen[i, j] = z[i, j] > 0 and 0 <= c < w and z[i, j] > zbuf[i, c] + tol_m
+    return seen

@@ -18,6 +18,7 @@ from clutterbench.bench.models import bench_models
 from clutterbench.bench.physics_depth import bench_physics_depth
 from clutterbench.bench.replenish import bench_ch5
 from clutterbench.bench.scaling import bench_ray
+from clutterbench.bench.sensor import bench_sensor
 from clutterbench.bench.sim import bench_replay, bench_sim
 from clutterbench.bench.sim_profile import bench_sim_profile
 from clutterbench.bench.train_profile import bench_train_profile
@@ -43,6 +44,7 @@ PARTS: list[tuple[str, Callable[[], object]]] = [
     ("ch5", bench_ch5),  # ch5.json, ch5.md (needs the detector and the ch. 5 network)
     ("arm", bench_arm),  # arm.json, arm.md (ManiSkill Pandas vs the kinematic pull)
     ("physics_depth", bench_physics_depth),  # physics_depth.json, .md (no network needed)
+    ("sensor", bench_sensor),  # sensor.json, .md (the depth-sensor model per image; no data)
     ("box_planners", bench_box_planners),  # box_planners.json, .md (needs the box head)
     ("envs", bench_envs),  # envs.json, envs.md (every registered env: make, reset, 5 steps)
     ("ray", bench_ray),  # ray.json, ray.md (both parallel backends, 1 and 2 workers; needs ray)

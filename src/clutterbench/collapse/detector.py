@@ -42,6 +42,7 @@ from clutterbench.perception.boxes import ARRANGEMENT_CLASSES, Detection, nms
 from clutterbench.precision import check_precision, resolve_precision
 from clutterbench.progress import progress_bar
 from clutterbench.sim.noise import DepthAugmentation, DepthNoiseConfig
+from clutterbench.sim.sensor import sense_images
 
 SCORE_THRESHOLD = 0.30
 """Thesis 5.2.1: confidence threshold of a detection."""
@@ -319,9 +320,11 @@ def detector_seed(base_seed: int, dataset: str) -> int:
 def train_detector(
     p: DetectorParams, base_seed: int, paths: DetectorPaths, fovy_deg: float = 42.0
 ) -> tuple[ArrangementDetector, dict[str, Any]]:
-    """Train on the train split, keep the best val-mAP epoch; returns (its detector, the
-    training summary). `fovy_deg`: sim.camera's, for a sensor model (detector.sensing)."""
+    """Train on the train split, keep the best val-mAP epoch (val images as detector.sensing
+    returns them); returns (its detector, the training summary). `fovy_deg`: sim.camera's."""
     train, val, size = _train_val_splits(p, paths)
+    val_depth = sense_images(val.depth_m, p.sensing.preset, fovy_deg, base_seed)  # ideal: as is
+    val = dataclasses.replace(val, depth_m=val_depth)
     seed = detector_seed(base_seed, p.dataset)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)

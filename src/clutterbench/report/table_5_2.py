@@ -266,8 +266,9 @@ def _sensing_notes(
         return []
     return [
         f"sensed rows (trials.ch5_sensed, docs/sensing.md), by sensor preset: {by}. Their "
-        "planner reads every picture through the sensor model: the detector, the collapse map "
-        "network and the planner's depth points see the sensed depth; the starts' free places, "
+        "planner reads every picture through the sensor model: the detector (trained on that "
+        "sensor's images: stage detector_sensed), the collapse map network (trained on exact "
+        "depth) and the planner's depth points see the sensed depth; the starts' free places, "
         "execution and judging read the exact picture and physics, as in every other row, "
         "which reads the renderer's exact depth. The thesis' figures stand beside the "
         "thesis' own rows only."

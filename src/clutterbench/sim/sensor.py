@@ -217,6 +217,17 @@ def observation_rng(seed: int, depth_m: np.ndarray) -> np.random.Generator:
     return np.random.default_rng([int(seed), int.from_bytes(h.digest(), "little")])
 
 
+def sense_images(depth_m: np.ndarray, name: str, fovy_deg: float, seed: int) -> np.ndarray:
+    """Stored depth images (N, H, W), rendered over `fovy_deg`, as the preset `name` returns
+    each (`sense`, seeded by `seed` and the image: a rerun sees the same returns); `ideal`
+    returns `depth_m` itself. A network trained on a sensor is validated and scored on these."""
+    cfg = preset(name)
+    if cfg is None:
+        return depth_m
+    camera = pinhole(focal_px(depth_m.shape[-1], fovy_deg), depth_m.shape[-2:])
+    return np.stack([sense(d, camera, cfg, observation_rng(seed, d)) for d in depth_m])
+
+
 def sense(
     depth_m: np.ndarray,
     camera: CameraModel,
@@ -278,12 +289,14 @@ def shadowed(
     np.minimum.at(zbuf, flat[inside], z[inside])
     # a surface the second view sees stretched reprojects with gaps between neighbours
     a, b, ca, cb = z[:, :-1], z[:, 1:], col[:, :-1], col[:, 1:]
-    joined = valid[:, :-1] & valid[:, 1:] & (np.abs(a - b) <= tol_m)
-    lo, hi, zfar = np.minimum(ca, cb), np.maximum(ca, cb), np.maximum(a, b)
+    lo, hi = np.minimum(ca, cb), np.maximum(ca, cb)
+    gap = valid[:, :-1] & valid[:, 1:] & (np.abs(a - b) <= tol_m) & (hi - lo > 1)
+    lo, hi, zfar = lo[gap], hi[gap], np.maximum(a, b)[gap]
+    starts = np.broadcast_to(row_start, gap.shape)[gap]
     for k in range(1, _MAX_GAP_PX + 1):
         c = lo + k
-        fill = joined & (c < hi) & (c >= 0) & (c < w)
-        np.minimum.at(zbuf, (row_start + c)[fill], zfar[fill])
+        fill = (c < hi) & (c >= 0) & (c < w)
+        np.minimum.at(zbuf, (starts + c)[fill], zfar[fill])
     return inside & (z > zbuf[flat] + tol_m)
 
 
@@ -300,15 +313,24 @@ def step_pairs(z: np.ndarray, step_m: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _pairs_along(z: np.ndarray, step_m: float) -> np.ndarray:
-    """step_pairs along each row of `z`: (H, W - 1) bool."""
+    """step_pairs along each row of `z`: (H, W - 1) bool. Only the pairs whose difference
+    exceeds `step_m` (few: the edges of objects) are compared with their neighbours."""
     valid = z > 0
     both = valid[:, :-1] & valid[:, 1:]
-    d = np.where(both, z[:, 1:] - z[:, :-1], np.nan)
-    pad = np.pad(d, ((0, 0), (1, 1)), constant_values=np.nan)
-    with np.errstate(invalid="ignore"):
-        beside = np.fmin(np.abs(d - pad[:, :-2]), np.abs(d - pad[:, 2:]))  # NaN: neither side
-        residual = np.where(np.isnan(beside), np.abs(d), beside)
-        return both & (np.abs(d) > step_m) & (residual > step_m)
+    d = z[:, 1:] - z[:, :-1]
+    out = both & (np.abs(d) > step_m)
+    i, j = np.nonzero(out)
+    if i.size == 0:
+        return out
+    last = d.shape[1] - 1
+    jl, jr = np.maximum(j - 1, 0), np.minimum(j + 1, last)
+    has_l, has_r = (j > 0) & both[i, jl], (j < last) & both[i, jr]
+    dij = d[i, j]
+    by_l, by_r = np.abs(dij - d[i, jl]), np.abs(dij - d[i, jr])
+    beside = np.where(has_l, np.where(has_r, np.minimum(by_l, by_r), by_l), by_r)
+    residual = np.where(has_l | has_r, beside, np.abs(dij))  # neither side: the difference
+    out[i, j] = residual > step_m
+    return out
 
 
 def fatten(depth_m: np.ndarray, radius_px: float, step_m: float) -> np.ndarray:
@@ -348,24 +370,32 @@ def _step_sides(z: np.ndarray, pairs: tuple[np.ndarray, np.ndarray]):
 
 def _steps(z: np.ndarray, step_m: float) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) bool of the pixels beside a step (`step_pairs`) and the depth across the largest
-    of their steps (the pixel's own elsewhere)."""
+    of their steps (the pixel's own elsewhere; of equal steps, the first of above, below,
+    left, right)."""
     right, down = step_pairs(z, step_m)
-    pad = np.pad(z, 1, mode="edge")
-    row, col = np.zeros((1, z.shape[1]), bool), np.zeros((z.shape[0], 1), bool)
+    h, w = z.shape
+    row, col = np.zeros((1, w), bool), np.zeros((h, 1), bool)
     steps = (
-        (pad[:-2, 1:-1], np.vstack([row, down])),  # the pixel above
-        (pad[2:, 1:-1], np.vstack([down, row])),  # below
-        (pad[1:-1, :-2], np.hstack([col, right])),  # left
-        (pad[1:-1, 2:], np.hstack([right, col])),  # right
+        (np.vstack([row, down]), -1, 0),  # the pixel above
+        (np.vstack([down, row]), 1, 0),  # below
+        (np.hstack([col, right]), 0, -1),  # left
+        (np.hstack([right, col]), 0, 1),  # right
     )
-    biggest = np.zeros_like(z)
-    across = z.copy()
-    for nb, step in steps:
-        diff = np.where(step, np.abs(nb - z), 0.0)
+    i, j = np.nonzero(steps[0][0] | steps[1][0] | steps[2][0] | steps[3][0])
+    zij = z[i, j]
+    biggest = np.zeros_like(zij)
+    across_ij = zij.copy()
+    for step, di, dj in steps:
+        nb = z[np.clip(i + di, 0, h - 1), np.clip(j + dj, 0, w - 1)]
+        diff = np.where(step[i, j], np.abs(nb - zij), 0.0)
         bigger = diff > biggest
         biggest = np.where(bigger, diff, biggest)
-        across = np.where(bigger, nb, across)
-    return biggest > 0, across
+        across_ij = np.where(bigger, nb, across_ij)
+    at_step = np.zeros(z.shape, bool)
+    at_step[i, j] = biggest > 0
+    across = z.copy()
+    across[i, j] = across_ij
+    return at_step, across
 
 
 def _disparity_noise(

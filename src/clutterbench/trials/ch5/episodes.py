@@ -413,7 +413,7 @@ def ch5_jobs(
             params=params,
             index=i,
             model_path=Path(f"models/{params.model}/best.pt"),
-            detector_path=Path("models/detector/best.pt"),
+            detector_path=detector_path(cond),
             prob_threshold=prob_threshold,
             scene_type=scene_type,
             oracle_detector=oracle_detector,
@@ -421,6 +421,14 @@ def ch5_jobs(
         )
         for i in range(cond.episodes)
     ]
+
+
+def detector_path(cond: Ch5ConditionConfig) -> Path:
+    """The arrangement detector a condition reads: the thesis' (stage detector, trained on exact
+    depth with the parametric noise), or, under a sensor, the one trained on that sensor's
+    images (models/detector_<sensing>: stage detector_sensed, for trials.ch5_sensed's)."""
+    name = "detector" if cond.sensing == "ideal" else f"detector_{cond.sensing}"
+    return Path(f"models/{name}/best.pt")
 
 
 def collapse_threshold(params: Ch5TrialParams) -> float:
@@ -443,6 +451,7 @@ def check_models(conds: dict[str, Ch5ConditionConfig], params: Ch5TrialParams) -
             raise ClutterbenchError(
                 f"models/{params.model}/best.pt missing; run train@{params.model}"
             )
-    if any(c.perception == "detector" for c in conds.values()):
-        if not Path("models/detector/best.pt").exists():
-            raise ClutterbenchError("models/detector/best.pt missing; run the detector stage")
+    for c in conds.values():
+        if c.perception == "detector" and not (path := detector_path(c)).exists():
+            stage = "detector" if c.sensing == "ideal" else "detector_sensed"
+            raise ClutterbenchError(f"{path} missing; run the {stage} stage")
