@@ -232,9 +232,8 @@ def markdown(result: Mapping[str, Any]) -> str:
         "- success: collapse-free (the thesis' trial notion, criteria.py); strict: also no "
         "other box moved more than trials.ch4.moved_threshold_m. Both judged after the "
         "support's release, as in Table 4.1. The oracle reads the world, not the sensor.",
-        "- The networks share the data, the split and the training seed; validation scores "
-        "are on val images through each network's own training sensor, so they do not compare "
-        "across rows.",
+        "- The networks share the data, the split and the training seed; each picked its "
+        "epoch on the exact-depth val images, as stage train@ does.",
         f"- Networks in {result['network_precision']} on {cpu['cpu_model']} "
         f"({instruction_set(cpu)}), {cpu['torch_threads']} torch threads; this run took "
         f"{result['seconds'] / 60:.1f} min, its trials {result['trials_seconds'] / 60:.1f}.",

@@ -89,6 +89,30 @@ class DetectorSensingConfig:
             raise ValueError("detector_sensing.scored_on: one or more different presets")
 
 
+@dataclasses.dataclass(frozen=True)
+class Ch5SensingConfig:
+    """The ch. 5 network's sensed-training recheck (`python -m experiments.ch5_sensing`)."""
+
+    training: tuple[Sensing, ...] = ("ideal", "d415")
+    """Candidate train.sensing presets of trials.ch5.model (ideal: the parametric noise of
+    train.noise); each network is trained on the pipeline's dataset, all else as params'."""
+    sensing: Sensing = "d415"
+    """The sensor of the trials' pictures (trials.ch5_sensed's); the planner's clusters come
+    from the detector trained on its images (models/detector_<sensing>)."""
+    streams: tuple[str, ...] = ()
+    """Dev streams of the ch. 5 trial families the planner runs on (keys of dev.streams)."""
+    episodes: int = bounded(100, ge=1)
+    """Trials per network and stream."""
+    oracle: bool = True
+    """Also the oracle on the same scenes (the generator's clusters, the world's outcomes)."""
+
+    def __post_init__(self) -> None:
+        if len(set(self.training)) < 2 or len(set(self.training)) < len(self.training):
+            raise ValueError("ch5_sensing.training: need two or more different presets")
+        if self.sensing == "ideal":
+            raise ValueError("ch5_sensing.sensing: a sensor preset (the trials' pictures)")
+
+
 VARIED = ("blocker_goal", "upright_footprint")
 """The trials.ch5 fields a ch. 5 planner variant may set."""
 
@@ -239,6 +263,8 @@ class DevConfig:
     """The ch. 4 sensed-training recheck (train the network on the sensor's images?)."""
     detector_sensing: DetectorSensingConfig = DetectorSensingConfig()
     """The detector's sensed-training recheck (train the detector on the sensor's images?)."""
+    ch5_sensing: Ch5SensingConfig = Ch5SensingConfig()
+    """The ch. 5 network's sensed-training recheck (train it on the sensor's images?)."""
     ch5_planner: Ch5PlannerConfig = Ch5PlannerConfig()
     """The ch. 5 planner recheck (how a blocker is carried)."""
     perturbed_fit: PerturbedFitConfig = PerturbedFitConfig()
@@ -378,6 +404,7 @@ class DevConfig:
         for check, names in (
             ("ch4_piles", self.ch4_piles.streams),
             ("ch4_sensing", self.ch4_sensing.streams),
+            ("ch5_sensing", self.ch5_sensing.streams),
             ("ch5_planner", self.ch5_planner.streams),
             ("perturbed_fit", self.perturbed_fit.streams),
             ("ch6_pull", self.ch6_pull.streams),

@@ -14,6 +14,7 @@ from clutterbench.collapse.evaluate import (
     SplitRef,
     check_val_split,
     evaluate_checkpoint,
+    val_chosen_threshold,
     evaluate_sets,
 )
 from clutterbench.collapse.figure import collapse_figure
@@ -94,3 +95,18 @@ def test_a_two_mask_checkpoint_is_evaluated_on_pull_samples(piles, tmp_path):
     )
     test_ds = pile_ref(piles, "test").load(piles / "gen", n_masks=2)
     assert result.metrics["pairs"] == len(test_ds) and 0 <= result.metrics["pair_mean_iou"] <= 1
+
+
+def test_the_val_threshold_alone_is_the_one_a_whole_evaluation_chooses(piles, tmp_path):
+    torch.manual_seed(1)
+    net = CollapseMapConfig(
+        input_size=32, encoder=VGGConfig(width=0.0625), decoder_channels=(8, 8, 8, 8, 8)
+    )
+    save_checkpoint(tmp_path / "best.pt", "collapse_map", CollapseMapNet(net), {"dataset": "piles"})
+    cfg = EvaluateConfig(threshold=0.4, batch_size=16, figure_samples=2)
+    whole = evaluate_checkpoint(
+        tmp_path / "best.pt", piles / "gen", pile_ref(piles, "test"), pile_ref(piles, "val"), cfg
+    ).metrics
+    alone = val_chosen_threshold(tmp_path / "best.pt", piles / "gen", pile_ref(piles, "val"), cfg)
+    assert alone["threshold"] == whole["val_chosen_threshold"]
+    assert alone["iou"] == whole["val_iou_at_chosen"]

@@ -138,6 +138,33 @@ def accumulate(
     return counts, samples
 
 
+def choose_on_val(
+    val_ds: PairDataset, probs: ProbSource, cfg: EvaluateConfig, desc: str = "evaluate"
+) -> tuple[dict[str, float], list[dict[str, float]]]:
+    """The threshold sweep row with the best IoU on `val_ds` (the chosen threshold), and the
+    whole val sweep; a one-line error where the split holds no collapse pixel."""
+    val_counts, _ = accumulate(val_ds, probs, cfg.threshold, cfg.batch_size, desc=f"{desc} val")
+    if val_counts.tp + val_counts.fn == 0:
+        raise ClutterbenchError(
+            f"{desc}: the validation split holds no collapse pixels; no threshold can be chosen"
+        )
+    val_sweep = val_counts.sweep()
+    return best_iou_row(val_sweep), val_sweep
+
+
+def val_chosen_threshold(
+    ckpt_path: Path, gen_dir: Path, val: SplitRef, cfg: EvaluateConfig, head: str = "deletion"
+) -> dict[str, float]:
+    """The val sweep row a checkpoint's threshold is chosen by, as evaluate_checkpoint chooses
+    it (its `threshold` and `iou`), scoring no other split."""
+    ckpt = load_checkpoint(ckpt_path)
+    channel = head_channel(ckpt, ckpt_path, head)
+    val_ds = val.load(gen_dir, ckpt.net.n_masks, head)
+    check_compatible(ckpt, ckpt_path, int(val_ds.scenes["depth_m"].shape[-1]))
+    predictor = CollapsePredictor(ckpt.model(), channel=channel, head=head)
+    return choose_on_val(val_ds, network_probs(predictor), cfg, f"val {ckpt_path.parent.name}")[0]
+
+
 def evaluate_sets(
     test_ds: PairDataset,
     val_ds: PairDataset,
@@ -148,13 +175,7 @@ def evaluate_sets(
     """Choose the threshold on `val_ds`, then score `test_ds` at the params threshold and
     at the chosen one (sweep rows count prob > t like the summary, so reading the test sweep
     at the chosen threshold is exact)."""
-    val_counts, _ = accumulate(val_ds, probs, cfg.threshold, cfg.batch_size, desc=f"{desc} val")
-    if val_counts.tp + val_counts.fn == 0:
-        raise ClutterbenchError(
-            f"{desc}: the validation split holds no collapse pixels; no threshold can be chosen"
-        )
-    val_sweep = val_counts.sweep()
-    chosen = best_iou_row(val_sweep)
+    chosen, val_sweep = choose_on_val(val_ds, probs, cfg, desc)
     picks = figure_pairs(test_ds, cfg.figure_samples)
     counts, samples = accumulate(
         test_ds, probs, cfg.threshold, cfg.batch_size, picks, desc=f"{desc} test"
