@@ -14,8 +14,8 @@ from clutterbench.collapse.evaluate import (
     SplitRef,
     check_val_split,
     evaluate_checkpoint,
-    val_chosen_threshold,
     evaluate_sets,
+    val_chosen_threshold,
 )
 from clutterbench.collapse.figure import collapse_figure
 from clutterbench.data.split import Fractions, split_dataset
