@@ -216,7 +216,10 @@ def markdown(result: Mapping[str, Any]) -> str:
             f"| {cand['training']} | {data} | {net} | {s['best']['epoch']} / {s['epochs_run']} "
             f"| {s['best'].get('val_map50') or float('nan'):.3f} | {cand['seconds']:.0f} |"
         )
-    classes = list(result["rows"][0]["per_class"])
+    from clutterbench.sim.clusters import CLASSES
+
+    seen = result["rows"][0]["per_class"]  # the thesis' order, whatever the JSON's
+    classes = [k for k in CLASSES if k in seen] + [k for k in seen if k not in CLASSES]
     lines += [
         "",
         "## Val scores by the sensor of the images",
@@ -227,7 +230,7 @@ def markdown(result: Mapping[str, Any]) -> str:
         "|---|---|---|" + "---|" * len(classes) + "---|",
     ]
     for r in result["rows"]:
-        pcs = r["per_class"].values()
+        pcs = [r["per_class"][k] for k in classes]
         prec = np.nanmean([v["precision_at_threshold"] for v in pcs])
         rec = np.nanmean(
             [np.nan if v["recall_at_threshold"] is None else v["recall_at_threshold"] for v in pcs]
