@@ -118,6 +118,33 @@ def comparisons_of(
     return out
 
 
+def run_and_pair(
+    title: str,
+    episode: Any,
+    jobs: Sequence[Any],
+    cfg: Any,
+    params: Mapping[str, Any],
+    scratch: Path,
+) -> tuple[list[dict[str, Any]], float, str, list[dict[str, Any]]]:
+    """A sensed-training recheck's episodes, run as the trials stages run them (records also in
+    scratch/records.jsonl), and each candidate paired against the params' own training preset
+    (the first of cfg.training where the params' is none of them) -> (records, trials seconds,
+    that preset, the comparisons)."""
+    from clutterbench.collapse.config import TrainConfig
+    from clutterbench.trials.config import TrialsConfig
+    from clutterbench.trials.core.harness import run_episodes
+    from clutterbench.trials.core.records import write_records
+
+    t0 = time.perf_counter()
+    workers = load_section(TrialsConfig, "trials", params).workers
+    records = [r.record for r in run_episodes(title, episode, list(jobs), workers)]
+    trials_s = time.perf_counter() - t0
+    write_records(scratch / "records.jsonl", records)
+    current = load_section(TrainConfig, "train", params).sensing.preset
+    against = current if current in cfg.training else cfg.training[0]
+    return records, trials_s, against, comparisons_of(records, cfg, against)
+
+
 def what_it_shows(
     comparisons: Sequence[Mapping[str, Any]], rows: Sequence[Mapping[str, Any]], current: str
 ) -> str:
@@ -248,14 +275,11 @@ def ch4_sensing(
     out_dir: Path = OUT,
 ) -> dict[str, Any]:
     """Run the recheck of dev.ch4_sensing; writes out_dir/ch4_sensing.{json,md}."""
-    from clutterbench.collapse.config import TrainConfig
     from clutterbench.data.config import GenerateConfig
     from clutterbench.platform_info import cpu_description
     from clutterbench.precision import inference_from_params
     from clutterbench.trials.ch4.episodes import run_ch4_episode
     from clutterbench.trials.config import TrialsConfig
-    from clutterbench.trials.core.harness import run_episodes
-    from clutterbench.trials.core.records import write_records
 
     started = time.perf_counter()
     base = load_section(BaseConfig, "base", params)
@@ -267,16 +291,11 @@ def ch4_sensing(
         raise ClutterbenchError("dev.ch4_sensing.streams: no dev stream to run on")
     dataset, _ = ch4_dataset(cfg, params, "ch4_sensing")
     candidates = candidate_networks(cfg, dataset, params, data_dir, scratch)
-    t0 = time.perf_counter()
     jobs = trial_jobs(candidates, dev, params)
-    results = run_episodes("dev ch4 sensing", run_ch4_episode, jobs, trials.workers)
-    records = [r.record for r in results]
-    trials_s = time.perf_counter() - t0
-    write_records(scratch / "records.jsonl", records)
+    records, trials_s, against, comparisons = run_and_pair(
+        "dev ch4 sensing", run_ch4_episode, jobs, cfg, params, scratch
+    )
     rows = summary_rows(records, dev, LABEL)
-    current = load_section(TrainConfig, "train", params).sensing.preset
-    against = current if current in cfg.training else cfg.training[0]
-    comparisons = comparisons_of(records, cfg, against)
     result = {
         "scale": base.scale,
         "seed": base.seed,

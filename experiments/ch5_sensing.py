@@ -32,7 +32,7 @@ from typing import Any
 from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.errors import ClutterbenchError
 from experiments.ch4_piles import candidate_network
-from experiments.ch4_sensing import LABEL, comparisons_of, what_it_shows, with_training_sensing
+from experiments.ch4_sensing import LABEL, run_and_pair, what_it_shows, with_training_sensing
 from experiments.command import OUT, run_command, save
 from experiments.config import Ch5SensingConfig, DevConfig, check_dev_streams, load_dev
 from experiments.detector_sensing import dataset_dir
@@ -253,13 +253,10 @@ def ch5_sensing(
     out_dir: Path = OUT,
 ) -> dict[str, Any]:
     """Run the recheck of dev.ch5_sensing; writes out_dir/ch5_sensing.{json,md}."""
-    from clutterbench.collapse.config import TrainConfig
     from clutterbench.platform_info import cpu_description
     from clutterbench.precision import inference_from_params
     from clutterbench.trials.ch5.episodes import run_ch5_episode
     from clutterbench.trials.config import TrialsConfig
-    from clutterbench.trials.core.harness import run_episodes
-    from clutterbench.trials.core.records import write_records
 
     started = time.perf_counter()
     base = load_section(BaseConfig, "base", params)
@@ -270,16 +267,11 @@ def ch5_sensing(
     if not cfg.streams:
         raise ClutterbenchError("dev.ch5_sensing.streams: no dev stream to run on")
     candidates = candidate_networks(cfg, params, data_dir, scratch)
-    t0 = time.perf_counter()
     jobs = trial_jobs(candidates, dev, params)
-    results = run_episodes("dev ch5 sensing", run_ch5_episode, jobs, trials.workers)
-    records = [r.record for r in results]
-    trials_s = time.perf_counter() - t0
-    write_records(scratch / "records.jsonl", records)
+    records, trials_s, against, comparisons = run_and_pair(
+        "dev ch5 sensing", run_ch5_episode, jobs, cfg, params, scratch
+    )
     rows = summary_rows(records, dev)
-    current = load_section(TrainConfig, "train", params).sensing.preset
-    against = current if current in cfg.training else cfg.training[0]
-    comparisons = comparisons_of(records, cfg, against)
     result = {
         "scale": base.scale,
         "seed": base.seed,

@@ -7,7 +7,7 @@ Imports no SAPIEN and no torch (the checks read configs only).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
@@ -47,6 +47,12 @@ class Ch4PilesConfig:
             raise ValueError("ch4_piles.streams: no dev stream to run on")
 
 
+def check_training(check: str, training: Sequence[str]) -> None:
+    """A sensed-training recheck compares two or more different training presets."""
+    if len(set(training)) < 2 or len(set(training)) < len(training):
+        raise ValueError(f"{check}.training: need two or more different presets")
+
+
 @dataclasses.dataclass(frozen=True)
 class Ch4SensingConfig:
     """The ch. 4 sensed-training recheck (`python -m experiments.ch4_sensing`)."""
@@ -66,8 +72,7 @@ class Ch4SensingConfig:
     """Also the oracle on the same scenes: the ceiling each network falls below."""
 
     def __post_init__(self) -> None:
-        if len(set(self.training)) < 2 or len(set(self.training)) < len(self.training):
-            raise ValueError("ch4_sensing.training: need two or more different presets")
+        check_training("ch4_sensing", self.training)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,8 +88,7 @@ class DetectorSensingConfig:
     """Scene bootstrap draws for the interval of each mAP difference."""
 
     def __post_init__(self) -> None:
-        if len(set(self.training)) < 2 or len(set(self.training)) < len(self.training):
-            raise ValueError("detector_sensing.training: need two or more different presets")
+        check_training("detector_sensing", self.training)
         if not self.scored_on or len(set(self.scored_on)) < len(self.scored_on):
             raise ValueError("detector_sensing.scored_on: one or more different presets")
 
@@ -107,8 +111,7 @@ class Ch5SensingConfig:
     """Also the oracle on the same scenes (the generator's clusters, the world's outcomes)."""
 
     def __post_init__(self) -> None:
-        if len(set(self.training)) < 2 or len(set(self.training)) < len(self.training):
-            raise ValueError("ch5_sensing.training: need two or more different presets")
+        check_training("ch5_sensing", self.training)
         if self.sensing == "ideal":
             raise ValueError("ch5_sensing.sensing: a sensor preset (the trials' pictures)")
 

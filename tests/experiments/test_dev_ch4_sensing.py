@@ -74,6 +74,18 @@ def _records(label: str, wins: list[bool]) -> list[dict]:
     ]
 
 
+def _eight_episodes_on_dev_a() -> DevConfig:
+    return parse(
+        DevConfig,
+        {
+            "streams": {"dev_a": PILE},
+            "ch4_piles": {"streams": ["dev_a"]},
+            "ch4_sensing": {"streams": ["dev_a"], "episodes": 8},
+        },
+        "dev",
+    )
+
+
 @pytest.mark.parametrize(
     ("ideal_wins", "d415_wins", "finding"),
     [
@@ -83,15 +95,7 @@ def _records(label: str, wins: list[bool]) -> list[dict]:
     ],
 )
 def test_the_finding_follows_the_paired_numbers(ideal_wins, d415_wins, finding):
-    dev = parse(
-        DevConfig,
-        {
-            "streams": {"dev_a": PILE},
-            "ch4_piles": {"streams": ["dev_a"]},
-            "ch4_sensing": {"streams": ["dev_a"], "episodes": 8},
-        },
-        "dev",
-    )
+    dev = _eight_episodes_on_dev_a()
     records = _records("ideal", ideal_wins) + _records("d415", d415_wins)
     records += _records("oracle", [True] * 8)
     rows = summary_rows(records, dev, LABEL)
@@ -118,3 +122,30 @@ def test_the_finding_follows_the_paired_numbers(ideal_wins, d415_wins, finding):
     )
     assert "## Trials under d415" in text and f"**What it shows.** {shows}" in text
     assert "| dev_a | success | d415 |" in text
+
+
+def _toy_episode(job):
+    """An episode that wins on even episodes for d415 only: a known paired difference."""
+    from clutterbench.trials.core.harness import EpisodeLog, EpisodeResult
+
+    label, e = job
+    win = label.startswith("d415") and e % 2 == 0
+    record = {"condition": label, "episode": e, "success": win, "strict_success": win}
+    return EpisodeResult(record, EpisodeLog())
+
+
+def test_the_recheck_runs_its_episodes_and_pairs_them_against_the_params_preset(root, tmp_path):
+    from experiments.ch4_sensing import run_and_pair
+
+    params = load_params(root / "params.yaml")
+    params["trials"]["workers"] = 1
+    dev = _eight_episodes_on_dev_a()
+    jobs = [(f"{t}/dev_a", e) for t in ("ideal", "d415") for e in range(8)]
+    records, seconds, against, comparisons = run_and_pair(
+        "toy", _toy_episode, jobs, dev.ch4_sensing, params, tmp_path
+    )
+    assert against == params["train"]["sensing"]["preset"] == "ideal" and seconds >= 0
+    assert [r["episode"] for r in records] == [e for _ in range(2) for e in range(8)]
+    assert (tmp_path / "records.jsonl").read_text().count("\n") == 16
+    success = next(c for c in comparisons if c["criterion"] == "success")
+    assert (success[LABEL], success[f"only_{LABEL}"], success["only_against"]) == ("d415", 4, 0)
