@@ -107,9 +107,11 @@ def candidate_network(
     report: checkpoint, training summary, seconds, reused."""
     from clutterbench.collapse.config import TrainConfig
     from clutterbench.collapse.train import TrainPaths, train_model
+    from clutterbench.criteria import label_thresholds
     from clutterbench.data.config import GenerateConfig
     from clutterbench.data.split import SplitConfig, split_dataset
     from clutterbench.precision import resolve_precision
+    from clutterbench.sim.config import SimConfig
 
     seed = load_section(BaseConfig, "base", params).seed
     cfg = load_section(TrainConfig, "train", params)
@@ -123,6 +125,8 @@ def candidate_network(
         "precision": resolve_precision(cfg.precision),
         "seed": seed,
         "moved_threshold_m": threshold,
+        "collapse_free": list(label_thresholds(params)),  # a pull_collapse head's labels
+        "fovy_deg": load_section(SimConfig, "sim", params).camera.fovy_deg,  # a sensor's focal
     }
     paths = TrainPaths(
         gen_dir=gen_dir,
@@ -138,7 +142,7 @@ def candidate_network(
     if not reused:
         split_dataset(dataset, fractions, seed, gen_dir, paths.split_file.parent)
         stamp_file.unlink(missing_ok=True)
-        train_model(model, cfg, threshold, seed, paths)
+        train_model(model, cfg, threshold, seed, paths, label_thresholds(params), stamp["fovy_deg"])
         write_json(stamp_file, stamp)
     split = read_json(paths.split_file)
     return {

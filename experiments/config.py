@@ -116,6 +116,33 @@ class Ch5SensingConfig:
             raise ValueError("ch5_sensing.sensing: a sensor preset (the trials' pictures)")
 
 
+@dataclasses.dataclass(frozen=True)
+class Ch6SensingConfig:
+    """The ch. 6 CP's sensed-training recheck (`python -m experiments.ch6_sensing`)."""
+
+    training: tuple[Sensing, ...] = ("ideal", "d415")
+    """Candidate train.sensing presets of trials.ch6.model, every head (as ch5_sensing's)."""
+    sensing: Sensing = "d415"
+    """The sensor of the trials' pictures (trials.sensed's), masks by region growing."""
+    planners: tuple[str, ...] = ("multi_step_pull", "bimanual_pull")
+    """ch. 6 planners that read the CP's maps and no other network, run with each candidate;
+    the training-free planner each is paired against in Table 6.3 (its `baseline`) runs once
+    under the same sensor and masks: what learning must beat where sensing is real."""
+    streams: tuple[str, ...] = ()
+    """Dev streams of the ch. 6 trial families (keys of dev.streams)."""
+    episodes: int = bounded(100, ge=1)
+    """Trials per network, planner and stream."""
+    oracle: bool = True
+    """Also both search oracles on the same scenes (they read the world): the ceilings."""
+
+    def __post_init__(self) -> None:
+        check_training("ch6_sensing", self.training)
+        if self.sensing == "ideal":
+            raise ValueError("ch6_sensing.sensing: a sensor preset (the trials' pictures)")
+        if not self.planners:
+            raise ValueError("ch6_sensing.planners: no planner to run")
+
+
 VARIED = ("blocker_goal", "upright_footprint")
 """The trials.ch5 fields a ch. 5 planner variant may set."""
 
@@ -268,6 +295,8 @@ class DevConfig:
     """The detector's sensed-training recheck (train the detector on the sensor's images?)."""
     ch5_sensing: Ch5SensingConfig = Ch5SensingConfig()
     """The ch. 5 network's sensed-training recheck (train it on the sensor's images?)."""
+    ch6_sensing: Ch6SensingConfig = Ch6SensingConfig()
+    """The ch. 6 CP's sensed-training recheck (train it on the sensor's images?)."""
     ch5_planner: Ch5PlannerConfig = Ch5PlannerConfig()
     """The ch. 5 planner recheck (how a blocker is carried)."""
     perturbed_fit: PerturbedFitConfig = PerturbedFitConfig()
@@ -408,6 +437,7 @@ class DevConfig:
             ("ch4_piles", self.ch4_piles.streams),
             ("ch4_sensing", self.ch4_sensing.streams),
             ("ch5_sensing", self.ch5_sensing.streams),
+            ("ch6_sensing", self.ch6_sensing.streams),
             ("ch5_planner", self.ch5_planner.streams),
             ("perturbed_fit", self.perturbed_fit.streams),
             ("ch6_pull", self.ch6_pull.streams),

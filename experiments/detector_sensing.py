@@ -52,17 +52,23 @@ def dataset_dir(
     from clutterbench.data.config import GenerateConfig
     from clutterbench.data.generate import config_hash, generate_dataset
     from clutterbench.sim.config import SimConfig
+    from clutterbench.trials.config import TrialsConfig
 
     gen = load_section(GenerateConfig, "generate", params)
     if name not in gen.datasets:
         raise ClutterbenchError(f"generate.datasets: unknown dataset '{name}'")
     sim = load_section(SimConfig, "sim", params)
     seed = load_section(BaseConfig, "base", params).seed
-    digest = config_hash(name, gen.datasets[name], sim, seed)
+    # a dataset with pull outcomes pulls as the ch. 6 trials do, as stage generate makes it
+    ch6 = load_section(TrialsConfig, "trials", params).ch6
+    pull = (ch6.pull_increment_m, ch6.grasp_lift_m)
+    digest = config_hash(name, gen.datasets[name], sim, seed, pull)
     if made_with(data_dir / "generate" / name, digest):
         return data_dir / "generate", digest, True
     if not made_with(scratch / "generate" / name, digest):
-        generate_dataset(name, gen.datasets[name], gen, sim, seed, scratch / "generate" / name)
+        generate_dataset(
+            name, gen.datasets[name], gen, sim, seed, scratch / "generate" / name, pull
+        )
     return scratch / "generate", digest, False
 
 

@@ -16,6 +16,8 @@ def toy_train_params(n_scenes: int) -> dict[str, Any]:
             }
         },
         "split": {"datasets": {"toy": {"train": 0.75, "val": 0.25, "test": 0.0}}},
+        "sim": {"camera": {"fovy_deg": 42.0}},  # a sensor model's focal length in our pixels
+        "trials": {"collapse_free": {"drop_m": 0.01, "tilt_deg": 15.0}},  # pull_collapse labels
         "train": {
             "models": {
                 "m": {

@@ -32,8 +32,12 @@ def test_each_design_gets_the_same_minutes_and_the_best_val_iou_is_chosen(tmp_pa
     assert {r["design"] for r in rows} == set(designs)
     for r in rows:  # epochs sized by the design's own speed: minutes x pairs/s of pairs
         assert r["epochs"] == max(1, round(0.02 * 60 * r["pairs_per_s"] / r["train_pairs"]))
+        # the row's rate is rounded to 0.1 pairs/s: on a loaded machine (a few pairs/s) that
+        # alone moves the minutes by a few percent
         assert r["minutes"] == pytest.approx(
-            r["epoch"] * r["train_pairs"] / r["pairs_per_s"] / 60, abs=1e-3
+            r["epoch"] * r["train_pairs"] / r["pairs_per_s"] / 60,
+            rel=0.05 / r["pairs_per_s"],
+            abs=1e-3,
         )
     assert rows[-1]["parameters"] < rows[0]["parameters"]  # the half-size decoder is smaller
     best = best_rows(rows)

@@ -1,0 +1,444 @@
+"""Recheck on dev streams: should the ch. 6 collapse predictor train on the sensor's images?
+
+    python -m experiments.ch6_sensing      # make dev-ch6-sensing
+
+Table 6.3's sensed rows (trials.sensed) run the ch. 6 planners on a depth sensor's pictures
+with masks by region growing, while the collapse predictor (trials.ch6.model, every head)
+trains on exact depth with the parametric noise of train.noise (train.sensing: ideal). For
+each preset of dev.ch6_sensing.training, that network is trained on its dataset as stages
+split@ and train@ do (same seed, epochs, precision, heads), its training depth through that
+preset's sensor model (train.sensing.preset; spread as params'); its support thresholds are
+chosen on the val scenes as the support stage chooses them (exact val depth, as the stages
+pick every network's epoch). Then each planner of dev.ch6_sensing.planners (planners that read
+the CP and no other network) runs with each network on every stream of
+dev.ch6_sensing.streams under dev.ch6_sensing.sensing with masks from depth, beside its Table
+6.3 baseline (the training-free planner it is paired with there) under the same sensor and
+masks, and both search oracles. Every row meets the same scenes and targets, so the networks
+are compared episode by episode (McNemar's exact test) against the params' own
+train.sensing.preset, and each network's planner against its baseline.
+
+The pipeline's data/generate/<dataset> is used where it was made with the same params;
+anything else is made under data/dev/ch6_sensing/ and reused by a rerun whose params match, as
+are the networks. The baselines read reports/support/thresholds.json, as the trials stage does.
+Writes experiments/reports/ch6_sensing.{json,md}; not a dvc stage.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from clutterbench.config import BaseConfig, as_dict, load_section
+from clutterbench.errors import ClutterbenchError
+from experiments.ch4_piles import candidate_network
+from experiments.ch4_sensing import LABEL, comparisons_of, run_and_pair, with_training_sensing
+from experiments.ch6_pull import ORACLE_VARIANT, THRESHOLDS, condition_label
+from experiments.command import OUT, run_command, save
+from experiments.config import Ch6SensingConfig, DevConfig, check_dev_streams, load_dev
+from experiments.detector_sensing import dataset_dir
+from experiments.stats import ALPHA, CRITERIA, below_oracle_text, paired, plain, rate_text
+
+NAME = "ch6_sensing"
+SCRATCH = Path("data/dev/ch6_sensing")
+BASELINE = "baseline"
+"""The label of the rows of the training-free planners (they read no network)."""
+
+
+def check_planners(cfg: Ch6SensingConfig) -> list[str]:
+    """Each planner reads the collapse predictor and no other network -> their baselines, in
+    order (one-line errors otherwise)."""
+    from clutterbench.trials.ch6.episodes import planner_info
+
+    baselines = []
+    for name in cfg.planners:
+        info = planner_info(name)
+        if info.networks != {"cp"}:
+            raise ClutterbenchError(
+                f"dev.ch6_sensing.planners: {name} reads {sorted(info.networks) or 'no network'}"
+                ", not the collapse predictor alone"
+            )
+        if info.baseline is None:
+            raise ClutterbenchError(f"dev.ch6_sensing.planners: {name} has no baseline")
+        baselines.append(info.baseline)
+    return list(dict.fromkeys(baselines))
+
+
+def chosen_thresholds(
+    params: Mapping[str, Any], checkpoint: Path, gen_dir: Path, split_file: Path, out: Path
+) -> Path:
+    """The support stage's first step for the network `checkpoint`: every method's thresholds
+    chosen on the val scenes of support.val_dataset (val_sweep, choose_all), written as
+    out/thresholds.json in the stage's format (the box head's entries copied from the stage's
+    own: no planner here reads them) -> its path."""
+    from clutterbench.criteria import label_thresholds
+    from clutterbench.io import read_json
+    from clutterbench.precision import inference_from_params
+    from clutterbench.sim.config import SimConfig
+    from clutterbench.support.config import SupportEvalConfig
+    from clutterbench.support.evaluate import choose_all, contact_edge_rate
+    from clutterbench.support.run import SupportPaths, load_predictors, val_sweep, write_thresholds
+
+    cfg = load_section(SupportEvalConfig, "support", params)
+    sim = load_section(SimConfig, "sim", params)
+    precision = inference_from_params(params)
+    models = load_predictors(checkpoint, sim.camera.image_size)
+    read = {"heads": models.heads, "collapse_free": label_thresholds(params)}
+    paths = dataclasses.replace(
+        SupportPaths.of(cfg, out, out), model=checkpoint, gen_dir=gen_dir, split_file=split_file
+    )
+    val, sweep = val_sweep(cfg, sim, paths, models, read)
+    chosen = choose_all(sweep)
+    box = read_json(THRESHOLDS)["box_head"]
+    write_thresholds(
+        out, chosen, contact_edge_rate(val, chosen["coverage"]), sweep, len(val), precision, box
+    )
+    return out / "thresholds.json"
+
+
+def candidate_networks(
+    cfg: Ch6SensingConfig, params: Mapping[str, Any], data_dir: Path, scratch: Path
+) -> list[dict[str, Any]]:
+    """One network per training preset, all on the params' dataset, each with the support
+    thresholds chosen on its val scenes -> the report's facts."""
+    from clutterbench.collapse.config import TrainConfig
+    from clutterbench.io import read_json
+    from clutterbench.trials.config import TrialsConfig
+
+    model = load_section(TrialsConfig, "trials", params).ch6.model
+    dataset = load_section(TrainConfig, "train", params).models[model].dataset
+    gen_dir, digest, data_reused = dataset_dir(dataset, params, data_dir, scratch)
+    candidates = []
+    for preset in cfg.training:
+        where = scratch / preset
+        net = candidate_network(
+            model, with_training_sensing(params, preset), gen_dir, digest, where
+        )
+        split_file = where / "split" / f"{dataset}.json"
+        thresholds = chosen_thresholds(params, Path(net["checkpoint"]), gen_dir, split_file, where)
+        candidates.append(
+            {LABEL: preset, "model": model, "dataset": dataset, "data_reused": data_reused}
+            | net
+            | {"thresholds": str(thresholds), "chosen": read_json(thresholds)["chosen"]}
+        )
+        print(f"training {preset}: best epoch {net['summary']['best']['epoch']}", flush=True)
+    return candidates
+
+
+def trial_jobs(
+    candidates: Sequence[Mapping[str, Any]], dev: DevConfig, params: Mapping[str, Any]
+) -> list[Any]:
+    """Stage trials' jobs: each planner with each candidate's network and thresholds under the
+    recheck's sensor and masks from depth ('<training>:<planner>/<stream>'), the planners'
+    baselines under the same ('baseline:<planner>/<stream>'), and both search oracles on the
+    world ('-:<oracle>/<stream>'), on every dev stream."""
+    from clutterbench.sim.config import SimConfig
+    from clutterbench.trials.ch6.episodes import ch6_jobs, planner_support
+    from clutterbench.trials.config import ConditionConfig, TrialsConfig
+
+    cfg: Ch6SensingConfig = dev.ch6_sensing
+    trials = load_section(TrialsConfig, "trials", params)
+    sim = load_section(SimConfig, "sim", params)
+    seed = load_section(BaseConfig, "base", params).seed
+    seen = {"sensing": cfg.sensing, "perception": "depth"}
+    runs = [
+        (c[LABEL], p, Path(c["checkpoint"]), Path(c["thresholds"]), seen)
+        for c in candidates
+        for p in cfg.planners
+    ]
+    runs += [(BASELINE, p, None, THRESHOLDS, seen) for p in check_planners(cfg)]
+    runs += [(ORACLE_VARIANT, o, None, THRESHOLDS, {}) for o in ("oracle", "oracle_hold")] * (
+        cfg.oracle
+    )
+    rule = ConditionConfig.__dataclass_fields__["rule"].default
+    jobs = []
+    for stream in cfg.streams:
+        for label, planner, checkpoint, thresholds, how in runs:
+            support, cp_max = planner_support(thresholds, planner, rule, trials.ch6)
+            built = ch6_jobs(
+                f"{condition_label(label, planner)}/{stream}",
+                ConditionConfig(planner, stream, cfg.episodes, rule, **how),
+                trials=trials,
+                sim=sim,
+                seed=seed,
+                support=support,
+                cp_max=cp_max,
+                model_path=checkpoint,
+                stream_cfg=dev.streams[stream],
+            )
+            jobs += [dataclasses.replace(j, record_images=False) for j in built]
+    return jobs
+
+
+def summary_rows(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """One row per condition: success and strict success (Wilson 95%), the episodes that gave
+    up or grasped no box, and the points below the planner's search oracle on the stream."""
+    from clutterbench.trials.ch6.episodes import planner_info
+    from clutterbench.trials.core.stats import aggregate
+
+    rows = []
+    for r in aggregate(records).to_dict("records"):
+        label, stream = r["condition"].split("/")
+        training, planner = label.split(":")
+        mine = [x for x in records if x["condition"] == r["condition"]]
+        row = {"condition": r["condition"], "stream": stream, LABEL: training, "planner": planner}
+        for key in CRITERIA:
+            row |= {f"{key}_{f}": plain(r[f"{key}_{f}"]) for f in ("k", "n", "rate", "lo", "hi")}
+        row["gave_up"] = sum(x["end"] == "gave_up" for x in mine)
+        row["missed_grasp"] = sum(x["end"] == "missed_grasp" for x in mine)
+        rows.append(row)
+    oracles = {(r["stream"], r["planner"]): r for r in rows if r[LABEL] == ORACLE_VARIANT}
+    for row in rows:
+        top = oracles.get((row["stream"], planner_info(row["planner"]).ceiling))
+        for key in CRITERIA:
+            gap = 100 * (top[f"{key}_rate"] - row[f"{key}_rate"]) if top else None
+            row[f"{key}_below_oracle_points"] = None if row[LABEL] == ORACLE_VARIANT else gap
+    return rows
+
+
+def comparisons(
+    records: Sequence[Mapping[str, Any]], cfg: Ch6SensingConfig, against: str
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """(each other candidate against `against`, planner by planner; each candidate's planner
+    against its baseline), per stream and criterion, episode by episode."""
+    from clutterbench.trials.ch6.episodes import planner_info
+
+    by_training = []
+    for planner in cfg.planners:
+        mine = [
+            r | {"condition": r["condition"].replace(f":{planner}/", "/")}
+            for r in records
+            if f":{planner}/" in r["condition"]
+        ]
+        by_training += [c | {"planner": planner} for c in comparisons_of(mine, cfg, against)]
+    by_baseline = [
+        paired(
+            records,
+            condition_label(preset, planner),
+            condition_label(BASELINE, planner_info(planner).baseline),
+            stream,
+            key,
+        )
+        | {LABEL: preset, "planner": planner, "baseline": planner_info(planner).baseline}
+        for stream in cfg.streams
+        for preset in cfg.training
+        for planner in cfg.planners
+        for key in CRITERIA
+    ]
+    return by_training, by_baseline
+
+
+def what_it_shows(
+    by_training: Sequence[Mapping[str, Any]],
+    by_baseline: Sequence[Mapping[str, Any]],
+    rows: Sequence[Mapping[str, Any]],
+    against: str,
+) -> str:
+    """The finding in words, from the numbers: the paired differences between trainings beyond
+    chance (Bonferroni over them) and which way they go; then, per network and planner, the
+    collapse-free difference to the baseline and whether it is beyond chance (exact McNemar
+    p < ALPHA, the table's own test); then the points below the oracles."""
+    level = ALPHA / max(len(by_training), 1)
+    sig = [c for c in by_training if c["p"] < level]
+    out = []
+    if not sig:
+        out.append(
+            f"No training changes a planner's dev-stream rate beyond chance against {against} "
+            f"(paired McNemar p >= {level:.3g} on every planner, stream and criterion, "
+            f"Bonferroni over {len(by_training)})."
+        )
+    else:
+        cells = "; ".join(
+            f"{c[LABEL]} {c['difference_points']:+.1f} points {CRITERIA[c['criterion']]} for "
+            f"{c['planner']} on {c['stream']} (p = {c['p']:.2g})"
+            for c in sig
+        )
+        ups = all(c["difference_points"] > 0 for c in sig)
+        downs = all(c["difference_points"] < 0 for c in sig)
+        verdict = (
+            "the dev streams favour training on the sensor"
+            if ups
+            else f"the dev streams favour training on {against}"
+            if downs
+            else "the dev streams are split"
+        )
+        out.append(
+            f"Against {against} (paired McNemar, Bonferroni level {level:.3g}): {cells}; {verdict}."
+        )
+    vs = [
+        f"{c['planner']} ({c[LABEL]}) {c['difference_points']:+.1f} points against "
+        f"{c['baseline']} on {c['stream']} (p = {c['p']:.2g}"
+        f"{', beyond chance' if c['p'] < ALPHA else ''})"
+        for c in by_baseline
+        if c["criterion"] == "success"
+    ]
+    out.append("Collapse-free, against the baseline under the same sensing: " + "; ".join(vs) + ".")
+    gaps = ", ".join(
+        f"{r['planner']} ({r[LABEL]}) {r['success_below_oracle_points']:.0f}"
+        for r in rows
+        if r["success_below_oracle_points"] is not None
+    )
+    out.append(f"Points below the search oracle (collapse-free): {gaps}.")
+    return " ".join(out)
+
+
+def paired_tables(result: Mapping[str, Any]) -> list[str]:
+    """The report's two paired tables: each training against the params' own, and each
+    network's planner against its baseline."""
+    lines: list[str] = []
+    lines += [
+        "",
+        f"## Paired, episode by episode: each training against {result['current']}",
+        "",
+        "| stream | planner | criterion | training | won only by it | won only by "
+        f"{result['current']} | difference (points) | McNemar p |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for p in result["by_training"]:
+        lines.append(
+            f"| {p['stream']} | {p['planner']} | {CRITERIA[p['criterion']]} | {p[LABEL]} | "
+            f"{p[f'only_{LABEL}']} | {p['only_against']} | {p['difference_points']:+.1f} | "
+            f"{p['p']:.2g} |"
+        )
+    lines += [
+        "",
+        "## Paired, episode by episode: each network's planner against its baseline",
+        "",
+        "| stream | planner (training) | criterion | baseline | won only by the planner | "
+        "won only by the baseline | difference (points) | McNemar p |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for p in result["by_baseline"]:
+        lines.append(
+            f"| {p['stream']} | {p['planner']} ({p[LABEL]}) | {CRITERIA[p['criterion']]} | "
+            f"{p['baseline']} | {p['only_piles']} | {p['only_against']} | "
+            f"{p['difference_points']:+.1f} | {p['p']:.2g} |"
+        )
+    return lines
+
+
+def markdown(result: Mapping[str, Any]) -> str:
+    from clutterbench.platform_info import instruction_set
+
+    c, cpu = result["config"], result["cpu"]
+    first = result["candidates"][0]
+    lines = [
+        f"# Dev recheck: the ch. 6 collapse predictor trained on the sensor's images "
+        f"({result['scale']} scale)",
+        "",
+        f"`{first['model']}` (every head) retrained on its dataset `{first['dataset']}` with "
+        f"each training sensor (train.sensing.preset; ideal: the parametric noise of "
+        f"train.noise), its support thresholds chosen on the val scenes as the support stage "
+        f"chooses them, then the planners {', '.join(c['planners'])} with each network on dev "
+        f"streams (own seeds, never a table's scenes) under the {c['sensing']} sensor with "
+        f"masks from depth, as Table 6.3's sensed rows, beside their baselines under the same "
+        f"sensing and both search oracles, {c['episodes']} episodes each; the params' preset "
+        f"is {result['current']}.",
+        "",
+        "## Networks",
+        "",
+        "| training | data | network | best epoch / run | val loss | val IoU | pull-head "
+        "thresholds (prob / score) | train s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for cand in result["candidates"]:
+        s, best = cand["summary"], cand["summary"]["best"]
+        data = "the pipeline's" if cand["data_reused"] else "data/dev"
+        net = "an earlier run's" if cand["network_reused"] else "trained by this run"
+        pull = cand["chosen"].get(result["pull_method"], {})
+        lines.append(
+            f"| {cand[LABEL]} | {data} | {net} | {best['epoch']} / {s['epochs_run']} | "
+            f"{best['val_loss']:.4f} | {best['val_iou']:.3f} | "
+            f"{pull.get('prob_threshold', '-')} / {pull.get('score_threshold', '-')} | "
+            f"{cand['seconds']:.0f} |"
+        )
+    lines += [
+        "",
+        f"## Trials under {c['sensing']}, masks from depth (Wilson 95%)",
+        "",
+        "| stream | training | planner | success | strict success | below its oracle: "
+        "success / strict (points) | gave up | grasped no box |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in result["rows"]:
+        lines.append(
+            f"| {r['stream']} | {r[LABEL]} | {r['planner']} | {rate_text(r, 'success')} | "
+            f"{rate_text(r, 'strict_success')} | {below_oracle_text(r)} | {r['gave_up']} | "
+            f"{r['missed_grasp']} |"
+        )
+    lines += paired_tables(result)
+    lines += [
+        "",
+        f"**What it shows.** {result['shows']}",
+        "",
+        "- success: collapse-free (the thesis' trial notion, criteria.py); strict: also no "
+        "other box moved beyond trials.ch6.moved_threshold_m; judged from physics as in Table "
+        "6.3. The search oracles read the world, not the sensor; a holding planner's is "
+        "oracle_hold.",
+        "- The networks share the data, the split and the training seed; each picked its "
+        "epoch and its support thresholds on the exact-depth val scenes, as the stages do. "
+        "The baselines read the support stage's thresholds, as in the trials stage.",
+        f"- Networks in {result['network_precision']} on {cpu['cpu_model']} "
+        f"({instruction_set(cpu)}), {cpu['torch_threads']} torch threads; this run took "
+        f"{result['seconds'] / 60:.1f} min, its {result['n_episodes']} episodes "
+        f"{result['trials_seconds'] / 60:.1f}.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def ch6_sensing(
+    params: Mapping[str, Any],
+    data_dir: Path = Path("data"),
+    scratch: Path = SCRATCH,
+    out_dir: Path = OUT,
+) -> dict[str, Any]:
+    """Run the recheck of dev.ch6_sensing; writes out_dir/ch6_sensing.{json,md}."""
+    from clutterbench.platform_info import cpu_description
+    from clutterbench.precision import inference_from_params
+    from clutterbench.trials.ch6.episodes import planner_info, run_ch6_episode
+    from clutterbench.trials.config import ConditionConfig, TrialsConfig
+
+    started = time.perf_counter()
+    base = load_section(BaseConfig, "base", params)
+    dev = load_dev(params)
+    trials = load_section(TrialsConfig, "trials", params)
+    check_dev_streams(dev, trials)
+    cfg = dev.ch6_sensing
+    if not cfg.streams:
+        raise ClutterbenchError("dev.ch6_sensing.streams: no dev stream to run on")
+    check_planners(cfg)
+    if not THRESHOLDS.exists():
+        raise ClutterbenchError(f"{THRESHOLDS} missing (the baselines read it); run support")
+    candidates = candidate_networks(cfg, params, data_dir, scratch)
+    jobs = trial_jobs(candidates, dev, params)
+    records, trials_s, against, _ = run_and_pair(
+        "dev ch6 sensing", run_ch6_episode, jobs, cfg, params, scratch
+    )
+    by_training, by_baseline = comparisons(records, cfg, against)
+    rows = summary_rows(records)
+    result = {
+        "scale": base.scale,
+        "seed": base.seed,
+        "config": as_dict(cfg),
+        "streams": {s: as_dict(dev.streams[s]) for s in cfg.streams},
+        "current": against,
+        "candidates": candidates,
+        "pull_method": planner_info(cfg.planners[0]).support_method(
+            ConditionConfig.__dataclass_fields__["rule"].default, trials.ch6.pull_map_meaning
+        ),
+        "rows": rows,
+        "by_training": by_training,
+        "by_baseline": by_baseline,
+        "network_precision": inference_from_params(params),
+        "n_episodes": len(records),
+        "trials_seconds": trials_s,
+        "cpu": cpu_description(),
+    }
+    result["shows"] = what_it_shows(by_training, by_baseline, rows, against)
+    return save(result, started, out_dir, NAME, markdown)
+
+
+if __name__ == "__main__":
+    run_command(ch6_sensing, NAME)

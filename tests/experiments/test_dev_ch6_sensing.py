@@ -1,0 +1,185 @@
+"""The ch. 6 sensed-training recheck: its trials are Table 6.3's sensed CP pull rows on dev
+streams, each network with its own val-chosen thresholds, beside their baselines under the same
+sensing and the oracles; its finding comes from the paired numbers."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+
+from clutterbench.config import load_params, load_section, parse
+from clutterbench.errors import ClutterbenchError
+from experiments.ch6_sensing import (
+    BASELINE,
+    LABEL,
+    check_planners,
+    comparisons,
+    markdown,
+    summary_rows,
+    trial_jobs,
+    what_it_shows,
+)
+from experiments.config import DevConfig, with_dev
+
+STREAM = {"families": {"random": 1}, "n_objects": [3, 5], "catalogue": "various"}
+CPU = {"cpu_model": "X", "torch_cpu_capability": "AVX2", "cpu_flags": {}, "torch_threads": 2}
+THRESHOLDS = "reports/support/thresholds.json"
+
+
+def _dev(**ch6_sensing) -> DevConfig:
+    return parse(
+        DevConfig,
+        {
+            "streams": {"dev_ch6_a": STREAM},
+            "ch4_piles": {"streams": ["dev_ch6_a"]},  # their defaults name other streams
+            "ch4_sensing": {"streams": ["dev_ch6_a"]},
+            "ch6_sensing": {"streams": ["dev_ch6_a"], **ch6_sensing},
+        },
+        "dev",
+    )
+
+
+def test_its_streams_sensor_and_planners_are_checked():
+    with pytest.raises(ClutterbenchError, match="ch6_sensing.streams: unknown dev stream .dev_b."):
+        _dev(streams=["dev_b"])
+    with pytest.raises(ClutterbenchError, match="ch6_sensing.sensing: a sensor preset"):
+        _dev(sensing="ideal")
+    with pytest.raises(ClutterbenchError, match="two or more different presets"):
+        _dev(training=["d415", "d415"])
+    for other in ("multi_step_box", "physics_from_depth"):  # reads the box head too; no network
+        with pytest.raises(ClutterbenchError, match=f"{other} reads .*not the collapse predictor"):
+            check_planners(_dev(planners=["multi_step_pull", other]).ch6_sensing)
+    cfg = _dev(planners=["multi_step_pull", "bimanual_pull", "multi_step"]).ch6_sensing
+    assert check_planners(cfg) == ["physics_from_depth", "physics_from_depth_hold"]
+
+
+@pytest.fixture
+def tiny_params(root):
+    params = with_dev(load_params(root / "params.yaml"))
+    params["base"]["scale"] = "tiny"
+    return params
+
+
+def test_trials_are_the_sensed_rows_with_each_networks_thresholds(
+    tiny_params, root, tmp_path, monkeypatch
+):
+    dev = load_section(DevConfig, "dev", tiny_params)
+    cfg = dev.ch6_sensing
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / THRESHOLDS).parent.mkdir(parents=True)
+    shutil.copy(root / THRESHOLDS, tmp_path / THRESHOLDS)
+    stage = json.loads((root / THRESHOLDS).read_text())
+    candidates = []
+    for k, preset in enumerate(cfg.training):  # each network its own thresholds
+        own = json.loads(json.dumps(stage))
+        for chosen in own["chosen"].values():
+            if "score_threshold" in chosen:
+                chosen["score_threshold"] = 0.11 * (k + 1)
+        (tmp_path / preset).mkdir()
+        (tmp_path / preset / "thresholds.json").write_text(json.dumps(own))
+        candidates.append(
+            {LABEL: preset, "checkpoint": f"{preset}/best.pt"}
+            | {"thresholds": str(tmp_path / preset / "thresholds.json")}
+        )
+    jobs = trial_jobs(candidates, dev, tiny_params)
+    baselines = check_planners(cfg)
+    per_stream = len(candidates) * len(cfg.planners) + len(baselines) + 2 * cfg.oracle
+    assert len(jobs) == len(cfg.streams) * per_stream * cfg.episodes
+    seen = set()
+    for job in jobs:
+        label, stream = job.condition.split("/")
+        training, planner = label.split(":")
+        seen.add((training, planner))
+        assert stream in cfg.streams and job.stream_cfg == dev.streams[stream]
+        assert job.planner == planner and not job.record_images
+        if planner.startswith("oracle"):  # read the world: no sensor, the simulator's masks
+            assert (job.sensing, job.perception, job.model_path) == ("ideal", "instance", None)
+            continue
+        assert (job.sensing, job.perception) == (cfg.sensing, "depth")
+        if training == BASELINE:
+            assert job.model_path is None
+            continue
+        k = [c[LABEL] for c in candidates].index(training)
+        assert str(job.model_path) == candidates[k]["checkpoint"]
+        assert job.support.score_threshold == pytest.approx(0.11 * (k + 1))
+        assert job.cp_max == pytest.approx(0.11 * (k + 1))
+    expected = {(t, p) for t in cfg.training for p in cfg.planners}
+    expected |= {(BASELINE, b) for b in baselines} | {("-", "oracle"), ("-", "oracle_hold")}
+    assert seen == expected
+
+
+def _records(label: str, wins: list[bool]) -> list[dict]:
+    return [
+        {"condition": f"{label}/dev_ch6_a", "episode": e, "success": w, "strict_success": w}
+        | {"end": "cleared" if w else "gave_up", "n_disturbed": 0}
+        for e, w in enumerate(wins)
+    ]
+
+
+@pytest.mark.parametrize(
+    ("ideal_wins", "d415_wins", "finding"),
+    [
+        ([False] * 8, [True] * 8, "favour training on the sensor"),
+        ([True] * 8, [False] * 8, "favour training on ideal"),
+        ([True] * 3 + [False] * 5, [True] * 4 + [False] * 4, "No training changes"),
+    ],
+)
+def test_the_finding_follows_the_paired_numbers(ideal_wins, d415_wins, finding):
+    cfg = _dev(episodes=8, planners=["multi_step_pull"]).ch6_sensing
+    records = _records("ideal:multi_step_pull", ideal_wins)
+    records += _records("d415:multi_step_pull", d415_wins)
+    records += _records(f"{BASELINE}:physics_from_depth", [False] * 8)
+    records += _records("-:oracle", [True] * 8) + _records("-:oracle_hold", [True] * 8)
+    rows = summary_rows(records)
+    by = {(r[LABEL], r["planner"]): r for r in rows}
+    assert by["ideal", "multi_step_pull"]["gave_up"] == ideal_wins.count(False)
+    assert by["-", "oracle"]["success_below_oracle_points"] is None
+    gap = 100 * d415_wins.count(False) / 8
+    assert by["d415", "multi_step_pull"]["success_below_oracle_points"] == pytest.approx(gap)
+    by_training, by_baseline = comparisons(records, cfg, "ideal")
+    assert {c[LABEL] for c in by_training} == {"d415"}
+    assert {(c[LABEL], c["baseline"]) for c in by_baseline} == {
+        ("ideal", "physics_from_depth"),
+        ("d415", "physics_from_depth"),
+    }
+    d415 = next(c for c in by_baseline if c[LABEL] == "d415" and c["criterion"] == "success")
+    assert d415["only_piles"] == d415_wins.count(True) and d415["only_against"] == 0
+    shows = what_it_shows(by_training, by_baseline, rows, "ideal")
+    assert finding in shows
+    beyond = "beyond chance" in shows.split("against physics_from_depth")[-1]
+    assert beyond == (d415_wins.count(True) == 8)  # 8 / 0 pairs: p = 0.0078
+    summary = {"best": {"epoch": 2, "val_loss": 0.5, "val_iou": 0.4}, "epochs_run": 2}
+    chosen = {"pull_collapse_coverage": {"prob_threshold": 0.4, "score_threshold": 0.3}}
+    candidates = [
+        {LABEL: t, "model": "cp_focal", "dataset": "ch6", "data_reused": True}
+        | {"network_reused": False, "summary": summary, "seconds": 10.0, "chosen": chosen}
+        for t in ("ideal", "d415")
+    ]
+    text = markdown(
+        {
+            "scale": "tiny",
+            "config": {"episodes": 8, "sensing": "d415", "planners": ["multi_step_pull"]},
+            "current": "ideal",
+            "candidates": candidates,
+            "pull_method": "pull_collapse_coverage",
+            "rows": rows,
+            "by_training": by_training,
+            "by_baseline": by_baseline,
+            "shows": shows,
+            "network_precision": "fp32",
+            "n_episodes": len(records),
+            "cpu": CPU,
+            "seconds": 60.0,
+            "trials_seconds": 30.0,
+        }
+    )
+    assert (
+        "## Trials under d415, masks from depth" in text and f"**What it shows.** {shows}" in text
+    )
+    assert (
+        "| d415 | the pipeline's | trained by this run | 2 / 2 | 0.5000 | 0.400 | 0.4 / 0.3 |"
+        in text
+    )
+    assert "| dev_ch6_a | multi_step_pull (d415) | success | physics_from_depth |" in text
