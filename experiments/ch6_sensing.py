@@ -36,15 +36,38 @@ from clutterbench.errors import ClutterbenchError
 from experiments.ch4_piles import candidate_network
 from experiments.ch4_sensing import LABEL, comparisons_of, run_and_pair, with_training_sensing
 from experiments.ch6_pull import ORACLE_VARIANT, THRESHOLDS, condition_label
+from experiments.ch6_sensing_report import markdown, parts_text
 from experiments.command import OUT, run_command, save
 from experiments.config import Ch6SensingConfig, DevConfig, check_dev_streams, load_dev
 from experiments.detector_sensing import dataset_dir
-from experiments.stats import ALPHA, CRITERIA, below_oracle_text, paired, plain, rate_text
+from experiments.stats import ALPHA, CRITERIA, paired, plain
 
 NAME = "ch6_sensing"
 SCRATCH = Path("data/dev/ch6_sensing")
 BASELINE = "baseline"
 """The label of the rows of the training-free planners (they read no network)."""
+PARTS = (("ideal", "instance"), ("sensor", "instance"), ("ideal", "depth"))
+"""(sensing, masks) each planner also runs under with the params' own network, beside the
+sensor with masks from depth: where the points go (sensor: dev.ch6_sensing.sensing)."""
+
+
+def part_label(label: str, sensing: str, perception: str) -> str:
+    """A row's label when it saw other than the sensor with masks from depth."""
+    return f"{label} ({sensing}, {perception} masks)"
+
+
+def parts_of(cfg: Ch6SensingConfig) -> list[tuple[str, str]]:
+    """PARTS with the recheck's sensor named."""
+    return [(cfg.sensing if s == "sensor" else s, m) for s, m in PARTS]
+
+
+def params_preset(cfg: Ch6SensingConfig, params: Mapping[str, Any]) -> str:
+    """The params' own training preset, or the first candidate where it is none of them (the
+    one every other is paired against, as run_and_pair says)."""
+    from clutterbench.collapse.config import TrainConfig
+
+    current = load_section(TrainConfig, "train", params).sensing.preset
+    return current if current in cfg.training else cfg.training[0]
 
 
 def check_planners(cfg: Ch6SensingConfig) -> list[str]:
@@ -132,8 +155,10 @@ def trial_jobs(
 ) -> list[Any]:
     """Stage trials' jobs: each planner with each candidate's network and thresholds under the
     recheck's sensor and masks from depth ('<training>:<planner>/<stream>'), the planners'
-    baselines under the same ('baseline:<planner>/<stream>'), and both search oracles on the
-    world ('-:<oracle>/<stream>'), on every dev stream."""
+    baselines under the same ('baseline:<planner>/<stream>'), both search oracles on the
+    world ('-:<oracle>/<stream>') and, with dev.ch6_sensing.parts, the params' network's
+    planners and the baselines under each of PARTS ('<label> (<sensing>, <masks> masks):...'),
+    on every dev stream."""
     from clutterbench.sim.config import SimConfig
     from clutterbench.trials.ch6.episodes import ch6_jobs, planner_support
     from clutterbench.trials.config import ConditionConfig, TrialsConfig
@@ -152,6 +177,24 @@ def trial_jobs(
     runs += [(ORACLE_VARIANT, o, None, THRESHOLDS, {}) for o in ("oracle", "oracle_hold")] * (
         cfg.oracle
     )
+    if cfg.parts:  # the params' network's planners and the baselines, under each part
+        own = next(c for c in candidates if c[LABEL] == params_preset(cfg, params))
+        for sensing, masks in parts_of(cfg):
+            how = {"sensing": sensing, "perception": masks}
+            runs += [
+                (
+                    part_label(own[LABEL], sensing, masks),
+                    p,
+                    Path(own["checkpoint"]),
+                    Path(own["thresholds"]),
+                    how,
+                )
+                for p in cfg.planners
+            ]
+            runs += [
+                (part_label(BASELINE, sensing, masks), p, None, THRESHOLDS, how)
+                for p in check_planners(cfg)
+            ]
     rule = ConditionConfig.__dataclass_fields__["rule"].default
     jobs = []
     for stream in cfg.streams:
@@ -230,6 +273,31 @@ def comparisons(
     return by_training, by_baseline
 
 
+def by_part(
+    records: Sequence[Mapping[str, Any]], cfg: Ch6SensingConfig, against: str
+) -> list[dict[str, Any]]:
+    """Where the points go: for the params' network's planners and the baselines, each other
+    (sensing, masks) against exact depth with the simulator's masks, collapse-free, episode by
+    episode (empty without dev.ch6_sensing.parts)."""
+    if not cfg.parts:
+        return []
+    first, *others = parts_of(cfg)
+    out = []
+    for stream in cfg.streams:
+        for label, planner in [(against, p) for p in cfg.planners] + [
+            (BASELINE, b) for b in check_planners(cfg)
+        ]:
+            ref = condition_label(part_label(label, *first), planner)
+            for sensing, masks in [*others, (cfg.sensing, "depth")]:
+                shown = label if masks == "depth" and sensing == cfg.sensing else None
+                name = shown or part_label(label, sensing, masks)
+                out.append(
+                    paired(records, condition_label(name, planner), ref, stream, "success")
+                    | {"row": label, "planner": planner, "sensing": sensing, "masks": masks}
+                )
+    return out
+
+
 def what_it_shows(
     by_training: Sequence[Mapping[str, Any]],
     by_baseline: Sequence[Mapping[str, Any]],
@@ -278,114 +346,10 @@ def what_it_shows(
     gaps = ", ".join(
         f"{r['planner']} ({r[LABEL]}) {r['success_below_oracle_points']:.0f}"
         for r in rows
-        if r["success_below_oracle_points"] is not None
+        if r["success_below_oracle_points"] is not None and " (" not in r[LABEL]  # no part
     )
     out.append(f"Points below the search oracle (collapse-free): {gaps}.")
     return " ".join(out)
-
-
-def paired_tables(result: Mapping[str, Any]) -> list[str]:
-    """The report's two paired tables: each training against the params' own, and each
-    network's planner against its baseline."""
-    lines: list[str] = []
-    lines += [
-        "",
-        f"## Paired, episode by episode: each training against {result['current']}",
-        "",
-        "| stream | planner | criterion | training | won only by it | won only by "
-        f"{result['current']} | difference (points) | McNemar p |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for p in result["by_training"]:
-        lines.append(
-            f"| {p['stream']} | {p['planner']} | {CRITERIA[p['criterion']]} | {p[LABEL]} | "
-            f"{p[f'only_{LABEL}']} | {p['only_against']} | {p['difference_points']:+.1f} | "
-            f"{p['p']:.2g} |"
-        )
-    lines += [
-        "",
-        "## Paired, episode by episode: each network's planner against its baseline",
-        "",
-        "| stream | planner (training) | criterion | baseline | won only by the planner | "
-        "won only by the baseline | difference (points) | McNemar p |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for p in result["by_baseline"]:
-        lines.append(
-            f"| {p['stream']} | {p['planner']} ({p[LABEL]}) | {CRITERIA[p['criterion']]} | "
-            f"{p['baseline']} | {p['only_piles']} | {p['only_against']} | "
-            f"{p['difference_points']:+.1f} | {p['p']:.2g} |"
-        )
-    return lines
-
-
-def markdown(result: Mapping[str, Any]) -> str:
-    from clutterbench.platform_info import instruction_set
-
-    c, cpu = result["config"], result["cpu"]
-    first = result["candidates"][0]
-    lines = [
-        f"# Dev recheck: the ch. 6 collapse predictor trained on the sensor's images "
-        f"({result['scale']} scale)",
-        "",
-        f"`{first['model']}` (every head) retrained on its dataset `{first['dataset']}` with "
-        f"each training sensor (train.sensing.preset; ideal: the parametric noise of "
-        f"train.noise), its support thresholds chosen on the val scenes as the support stage "
-        f"chooses them, then the planners {', '.join(c['planners'])} with each network on dev "
-        f"streams (own seeds, never a table's scenes) under the {c['sensing']} sensor with "
-        f"masks from depth, as Table 6.3's sensed rows, beside their baselines under the same "
-        f"sensing and both search oracles, {c['episodes']} episodes each; the params' preset "
-        f"is {result['current']}.",
-        "",
-        "## Networks",
-        "",
-        "| training | data | network | best epoch / run | val loss | val IoU | pull-head "
-        "thresholds (prob / score) | train s |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for cand in result["candidates"]:
-        s, best = cand["summary"], cand["summary"]["best"]
-        data = "the pipeline's" if cand["data_reused"] else "data/dev"
-        net = "an earlier run's" if cand["network_reused"] else "trained by this run"
-        pull = cand["chosen"].get(result["pull_method"], {})
-        lines.append(
-            f"| {cand[LABEL]} | {data} | {net} | {best['epoch']} / {s['epochs_run']} | "
-            f"{best['val_loss']:.4f} | {best['val_iou']:.3f} | "
-            f"{pull.get('prob_threshold', '-')} / {pull.get('score_threshold', '-')} | "
-            f"{cand['seconds']:.0f} |"
-        )
-    lines += [
-        "",
-        f"## Trials under {c['sensing']}, masks from depth (Wilson 95%)",
-        "",
-        "| stream | training | planner | success | strict success | below its oracle: "
-        "success / strict (points) | gave up | grasped no box |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for r in result["rows"]:
-        lines.append(
-            f"| {r['stream']} | {r[LABEL]} | {r['planner']} | {rate_text(r, 'success')} | "
-            f"{rate_text(r, 'strict_success')} | {below_oracle_text(r)} | {r['gave_up']} | "
-            f"{r['missed_grasp']} |"
-        )
-    lines += paired_tables(result)
-    lines += [
-        "",
-        f"**What it shows.** {result['shows']}",
-        "",
-        "- success: collapse-free (the thesis' trial notion, criteria.py); strict: also no "
-        "other box moved beyond trials.ch6.moved_threshold_m; judged from physics as in Table "
-        "6.3. The search oracles read the world, not the sensor; a holding planner's is "
-        "oracle_hold.",
-        "- The networks share the data, the split and the training seed; each picked its "
-        "epoch and its support thresholds on the exact-depth val scenes, as the stages do. "
-        "The baselines read the support stage's thresholds, as in the trials stage.",
-        f"- Networks in {result['network_precision']} on {cpu['cpu_model']} "
-        f"({instruction_set(cpu)}), {cpu['torch_threads']} torch threads; this run took "
-        f"{result['seconds'] / 60:.1f} min, its {result['n_episodes']} episodes "
-        f"{result['trials_seconds'] / 60:.1f}.",
-    ]
-    return "\n".join(lines) + "\n"
 
 
 def ch6_sensing(
@@ -417,6 +381,7 @@ def ch6_sensing(
         "dev ch6 sensing", run_ch6_episode, jobs, cfg, params, scratch
     )
     by_training, by_baseline = comparisons(records, cfg, against)
+    parts = by_part(records, cfg, against)
     rows = summary_rows(records)
     result = {
         "scale": base.scale,
@@ -431,12 +396,15 @@ def ch6_sensing(
         "rows": rows,
         "by_training": by_training,
         "by_baseline": by_baseline,
+        "by_part": parts,
         "network_precision": inference_from_params(params),
         "n_episodes": len(records),
         "trials_seconds": trials_s,
         "cpu": cpu_description(),
     }
     result["shows"] = what_it_shows(by_training, by_baseline, rows, against)
+    if parts:
+        result["shows"] += " " + parts_text(parts)
     return save(result, started, out_dir, NAME, markdown)
 
 

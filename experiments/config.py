@@ -125,15 +125,15 @@ class Ch6SensingConfig:
     sensing: Sensing = "d415"
     """The sensor of the trials' pictures (trials.sensed's), masks by region growing."""
     planners: tuple[str, ...] = ("multi_step_pull", "bimanual_pull")
-    """ch. 6 planners that read the CP's maps and no other network, run with each candidate;
-    the training-free planner each is paired against in Table 6.3 (its `baseline`) runs once
-    under the same sensor and masks: what learning must beat where sensing is real."""
+    """Planners reading the CP alone, beside each one's Table 6.3 baseline (same sensing)."""
     streams: tuple[str, ...] = ()
     """Dev streams of the ch. 6 trial families (keys of dev.streams)."""
     episodes: int = bounded(100, ge=1)
     """Trials per network, planner and stream."""
     oracle: bool = True
-    """Also both search oracles on the same scenes (they read the world): the ceilings."""
+    """Also both search oracles on the same scenes (they read the world)."""
+    parts: bool = True
+    """Also the params' network's planners and baselines under each of ch6_sensing.PARTS."""
 
     def __post_init__(self) -> None:
         check_training("ch6_sensing", self.training)

@@ -4,6 +4,7 @@ sensing and the oracles; its finding comes from the paired numbers."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 
@@ -14,13 +15,18 @@ from clutterbench.errors import ClutterbenchError
 from experiments.ch6_sensing import (
     BASELINE,
     LABEL,
+    PARTS,
+    by_part,
     check_planners,
     comparisons,
     markdown,
+    part_label,
+    parts_of,
     summary_rows,
     trial_jobs,
     what_it_shows,
 )
+from experiments.ch6_sensing_report import parts_table, parts_text
 from experiments.config import DevConfig, with_dev
 
 STREAM = {"families": {"random": 1}, "n_objects": [3, 5], "catalogue": "various"}
@@ -83,10 +89,13 @@ def test_trials_are_the_sensed_rows_with_each_networks_thresholds(
             {LABEL: preset, "checkpoint": f"{preset}/best.pt"}
             | {"thresholds": str(tmp_path / preset / "thresholds.json")}
         )
-    jobs = trial_jobs(candidates, dev, tiny_params)
     baselines = check_planners(cfg)
     per_stream = len(candidates) * len(cfg.planners) + len(baselines) + 2 * cfg.oracle
-    assert len(jobs) == len(cfg.streams) * per_stream * cfg.episodes
+    parts = len(PARTS) * (len(cfg.planners) + len(baselines))
+    no_parts = dataclasses.replace(dev, ch6_sensing=dataclasses.replace(cfg, parts=False))
+    assert len(trial_jobs(candidates, no_parts, tiny_params)) == per_stream * cfg.episodes
+    jobs = trial_jobs(candidates, dev, tiny_params)
+    assert len(jobs) == len(cfg.streams) * (per_stream + parts) * cfg.episodes
     seen = set()
     for job in jobs:
         label, stream = job.condition.split("/")
@@ -97,16 +106,24 @@ def test_trials_are_the_sensed_rows_with_each_networks_thresholds(
         if planner.startswith("oracle"):  # read the world: no sensor, the simulator's masks
             assert (job.sensing, job.perception, job.model_path) == ("ideal", "instance", None)
             continue
-        assert (job.sensing, job.perception) == (cfg.sensing, "depth")
-        if training == BASELINE:
+        network, _, part = training.partition(" (")
+        if part:  # the params' own network (ideal) or a baseline, under one of PARTS
+            assert part == f"{job.sensing}, {job.perception} masks)"
+            assert (job.sensing, job.perception) != (cfg.sensing, "depth")
+        else:
+            assert (job.sensing, job.perception) == (cfg.sensing, "depth")
+        if network == BASELINE:
             assert job.model_path is None
             continue
-        k = [c[LABEL] for c in candidates].index(training)
+        k = [c[LABEL] for c in candidates].index(network)
         assert str(job.model_path) == candidates[k]["checkpoint"]
         assert job.support.score_threshold == pytest.approx(0.11 * (k + 1))
         assert job.cp_max == pytest.approx(0.11 * (k + 1))
     expected = {(t, p) for t in cfg.training for p in cfg.planners}
     expected |= {(BASELINE, b) for b in baselines} | {("-", "oracle"), ("-", "oracle_hold")}
+    for sensing, masks in parts_of(cfg):
+        expected |= {(part_label("ideal", sensing, masks), p) for p in cfg.planners}
+        expected |= {(part_label(BASELINE, sensing, masks), b) for b in baselines}
     assert seen == expected
 
 
@@ -183,3 +200,41 @@ def test_the_finding_follows_the_paired_numbers(ideal_wins, d415_wins, finding):
         in text
     )
     assert "| dev_ch6_a | multi_step_pull (d415) | success | physics_from_depth |" in text
+
+
+def test_where_the_points_go_is_each_part_against_exact_depth_and_simulator_masks():
+    cfg = _dev(episodes=8, planners=["multi_step_pull"]).ch6_sensing
+    wins = {  # (sensing, masks) -> episodes won, out of 8
+        ("ideal", "instance"): 8,
+        ("d415", "instance"): 6,
+        ("ideal", "depth"): 5,
+    }
+    records = []
+    for label in ("ideal", BASELINE):
+        planner = "multi_step_pull" if label == "ideal" else "physics_from_depth"
+        for (sensing, masks), k in wins.items():
+            records += _records(
+                f"{part_label(label, sensing, masks)}:{planner}", [True] * k + [False] * (8 - k)
+            )
+        records += _records(f"{label}:{planner}", [True] * 2 + [False] * 6)  # d415, depth masks
+    records += _records("d415:multi_step_pull", [True] * 8)
+    parts = by_part(records, cfg, "ideal")
+    assert [(c["row"], c["sensing"], c["masks"]) for c in parts] == [
+        (row, s, m)
+        for row in ("ideal", BASELINE)
+        for s, m in (("d415", "instance"), ("ideal", "depth"), ("d415", "depth"))
+    ]
+    assert [c["difference_points"] for c in parts[:3]] == [-25.0, -37.5, -75.0]
+    assert parts[2]["piles"] == "ideal:multi_step_pull"  # the sensed row itself, not a part
+    assert not by_part(records, dataclasses.replace(cfg, parts=False), "ideal")
+    text = parts_text(parts)
+    assert "multi_step_pull (ideal): -25.0 with d415 depth and simulator masks" in text
+    assert "-75.0 with d415 depth and masks from depth (p = 0.031)" in text
+    rows = summary_rows(records + _records("-:oracle", [True] * 8))
+    table = "\n".join(parts_table({"by_part": parts, "rows": rows, "current": "ideal"}))
+    assert (
+        "| stream | planner (network) | exact depth, simulator masks | d415 depth and simulator "
+        "masks | exact depth and masks from depth | d415 depth and masks from depth |" in table
+    )
+    assert "| dev_ch6_a | physics_from_depth (baseline) | 8/8 = 100.0%" in table
+    assert "2/8 = 25.0% [7.1, 59.1]: -75.0 (0 / 6), p = 0.031 |" in table
