@@ -231,7 +231,7 @@ def summary_rows(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
             row |= {f"{key}_{f}": plain(r[f"{key}_{f}"]) for f in ("k", "n", "rate", "lo", "hi")}
         row["gave_up"] = sum(x["end"] == "gave_up" for x in mine)
         row["missed_grasp"] = sum(x["end"] == "missed_grasp" for x in mine)
-        rows.append(row)
+        rows.append(row | pull_scores(mine))
     oracles = {(r["stream"], r["planner"]): r for r in rows if r[LABEL] == ORACLE_VARIANT}
     for row in rows:
         top = oracles.get((row["stream"], planner_info(row["planner"]).ceiling))
@@ -239,6 +239,22 @@ def summary_rows(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
             gap = 100 * (top[f"{key}_rate"] - row[f"{key}_rate"]) if top else None
             row[f"{key}_below_oracle_points"] = None if row[LABEL] == ORACLE_VARIANT else gap
     return rows
+
+
+def pull_scores(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """How a row's own collapse score (its highest during each pull, max_cp) read the pulls
+    that kept the scene collapse-free and those that collapsed it: their count and mean score,
+    and the pulls it aborted."""
+    steps = [s for r in records for s in r.get("steps") or () if s.get("max_cp") is not None]
+    out: dict[str, Any] = {}
+    for kind, kept in (("safe", True), ("collapsed", False)):
+        scores = [float(s["max_cp"]) for s in steps if s.get("collapse_free") is kept]
+        out[f"pulls_{kind}"] = len(scores)
+        out[f"score_{kind}"] = sum(scores) / len(scores) if scores else None
+    out["aborted"] = sum(
+        bool(s.get("aborted_before_motion") or s.get("aborted_after_motion")) for s in steps
+    )
+    return out
 
 
 def comparisons(

@@ -105,6 +105,29 @@ def parts_table(result: Mapping[str, Any]) -> list[str]:
     return lines
 
 
+def scores_table(result: Mapping[str, Any]) -> list[str]:
+    """The report's table of how each row's own collapse score read its pulls."""
+
+    def mean(v: float | None) -> str:
+        return "-" if v is None else f"{v:.2f}"
+
+    lines = [
+        "",
+        "## The collapse score of each pull (its highest during the pull, max_cp)",
+        "",
+        "| stream | training | planner | pulls kept collapse-free: n, mean score | pulls that "
+        "collapsed: n, mean score | pulls aborted |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in result["rows"]:
+        lines.append(
+            f"| {r['stream']} | {r[LABEL]} | {r['planner']} | {r['pulls_safe']}, "
+            f"{mean(r['score_safe'])} | {r['pulls_collapsed']}, {mean(r['score_collapsed'])} | "
+            f"{r['aborted']} |"
+        )
+    return lines
+
+
 def markdown(result: Mapping[str, Any]) -> str:
     from clutterbench.platform_info import instruction_set
 
@@ -154,6 +177,7 @@ def markdown(result: Mapping[str, Any]) -> str:
             f"{rate_text(r, 'strict_success')} | {below_oracle_text(r)} | {r['gave_up']} | "
             f"{r['missed_grasp']} |"
         )
+    lines += scores_table(result)
     lines += paired_tables(result)
     lines += parts_table(result)
     lines += [

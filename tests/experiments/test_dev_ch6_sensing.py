@@ -22,11 +22,12 @@ from experiments.ch6_sensing import (
     markdown,
     part_label,
     parts_of,
+    pull_scores,
     summary_rows,
     trial_jobs,
     what_it_shows,
 )
-from experiments.ch6_sensing_report import parts_table, parts_text
+from experiments.ch6_sensing_report import parts_table, parts_text, scores_table
 from experiments.config import DevConfig, with_dev
 
 STREAM = {"families": {"random": 1}, "n_objects": [3, 5], "catalogue": "various"}
@@ -238,3 +239,25 @@ def test_where_the_points_go_is_each_part_against_exact_depth_and_simulator_mask
     )
     assert "| dev_ch6_a | physics_from_depth (baseline) | 8/8 = 100.0%" in table
     assert "2/8 = 25.0% [7.1, 59.1]: -75.0 (0 / 6), p = 0.031 |" in table
+
+
+def test_each_rows_collapse_scores_are_read_apart_for_safe_and_collapsing_pulls():
+    steps = [
+        {"max_cp": 0.1, "collapse_free": True, "aborted_before_motion": False},
+        {"max_cp": 0.3, "collapse_free": True, "aborted_after_motion": True},
+        {"max_cp": 0.9, "collapse_free": False},
+        {"max_cp": None, "collapse_free": True},  # a step without a score is no pull read
+    ]
+    records = _records("ideal:multi_step_pull", [True, False])
+    records[0]["steps"], records[1]["steps"] = steps[:2], steps[2:]
+    assert pull_scores(records) == {
+        "pulls_safe": 2,
+        "score_safe": pytest.approx(0.2),
+        "pulls_collapsed": 1,
+        "score_collapsed": pytest.approx(0.9),
+        "aborted": 1,
+    }
+    assert pull_scores(records[:1])["score_collapsed"] is None
+    row = {"stream": "dev_ch6_a", LABEL: "ideal", "planner": "multi_step_pull"}
+    table = "\n".join(scores_table({"rows": [row | pull_scores(records)]}))
+    assert "| dev_ch6_a | ideal | multi_step_pull | 2, 0.20 | 1, 0.90 | 1 |" in table
