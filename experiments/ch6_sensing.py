@@ -231,7 +231,8 @@ def summary_rows(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
             row |= {f"{key}_{f}": plain(r[f"{key}_{f}"]) for f in ("k", "n", "rate", "lo", "hi")}
         row["gave_up"] = sum(x["end"] == "gave_up" for x in mine)
         row["missed_grasp"] = sum(x["end"] == "missed_grasp" for x in mine)
-        rows.append(row | pull_scores(mine))
+        reads_cp = "cp" in planner_info(planner).networks  # max_cp is the CP's score
+        rows.append(row | (pull_scores(mine) if reads_cp else {}))
     oracles = {(r["stream"], r["planner"]): r for r in rows if r[LABEL] == ORACLE_VARIANT}
     for row in rows:
         top = oracles.get((row["stream"], planner_info(row["planner"]).ceiling))
@@ -242,7 +243,7 @@ def summary_rows(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
 
 
 def pull_scores(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """How a row's own collapse score (its highest during each pull, max_cp) read the pulls
+    """How a CP row's collapse score (its highest during each pull, max_cp) read the pulls
     that kept the scene collapse-free and those that collapsed it: their count and mean score,
     and the pulls it aborted."""
     steps = [s for r in records for s in r.get("steps") or () if s.get("max_cp") is not None]

@@ -106,20 +106,20 @@ def parts_table(result: Mapping[str, Any]) -> list[str]:
 
 
 def scores_table(result: Mapping[str, Any]) -> list[str]:
-    """The report's table of how each row's own collapse score read its pulls."""
+    """The report's table of how the CP's collapse score read each CP row's pulls."""
 
     def mean(v: float | None) -> str:
         return "-" if v is None else f"{v:.2f}"
 
     lines = [
         "",
-        "## The collapse score of each pull (its highest during the pull, max_cp)",
+        "## The CP's collapse score of each pull (its highest during the pull, max_cp)",
         "",
         "| stream | training | planner | pulls kept collapse-free: n, mean score | pulls that "
         "collapsed: n, mean score | pulls aborted |",
         "|---|---|---|---|---|---|",
     ]
-    for r in result["rows"]:
+    for r in (r for r in result["rows"] if "pulls_safe" in r):
         lines.append(
             f"| {r['stream']} | {r[LABEL]} | {r['planner']} | {r['pulls_safe']}, "
             f"{mean(r['score_safe'])} | {r['pulls_collapsed']}, {mean(r['score_collapsed'])} | "

@@ -154,6 +154,9 @@ def test_the_finding_follows_the_paired_numbers(ideal_wins, d415_wins, finding):
     by = {(r[LABEL], r["planner"]): r for r in rows}
     assert by["ideal", "multi_step_pull"]["gave_up"] == ideal_wins.count(False)
     assert by["-", "oracle"]["success_below_oracle_points"] is None
+    # the CP's score per pull: only a row that reads the CP has one
+    assert "pulls_safe" in by["ideal", "multi_step_pull"]
+    assert "pulls_safe" not in by[BASELINE, "physics_from_depth"]
     gap = 100 * d415_wins.count(False) / 8
     assert by["d415", "multi_step_pull"]["success_below_oracle_points"] == pytest.approx(gap)
     by_training, by_baseline = comparisons(records, cfg, "ideal")
