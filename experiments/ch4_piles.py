@@ -30,13 +30,11 @@ from typing import TYPE_CHECKING, Any
 from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import load_npz, read_json, write_json
-from experiments.command import OUT, run_command, save
+from experiments.command import OUT, open_recheck, run_command, save
 from experiments.config import (
     Ch4PilesConfig,
     Ch4SensingConfig,
     DevConfig,
-    check_dev_streams,
-    load_dev,
 )
 from experiments.stats import (
     ALPHA,
@@ -401,16 +399,11 @@ def ch4_piles(
     from clutterbench.platform_info import cpu_description
     from clutterbench.precision import inference_from_params
     from clutterbench.trials.ch4.episodes import run_ch4_episode
-    from clutterbench.trials.config import TrialsConfig
     from clutterbench.trials.core.harness import run_episodes
     from clutterbench.trials.core.records import write_records
 
     started = time.perf_counter()
-    base = load_section(BaseConfig, "base", params)
-    dev = load_dev(params)
-    trials = load_section(TrialsConfig, "trials", params)
-    check_dev_streams(dev, trials)
-    cfg = dev.ch4_piles
+    base, dev, trials, cfg = open_recheck(params, "ch4_piles")
     dataset, ds = ch4_dataset(cfg, params)
     candidates = candidate_networks(cfg, dataset, params, data_dir, scratch)
     precision = inference_from_params(params)

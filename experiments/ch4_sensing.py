@@ -28,10 +28,9 @@ from pathlib import Path
 from typing import Any
 
 from clutterbench.config import BaseConfig, as_dict, load_section
-from clutterbench.errors import ClutterbenchError
 from experiments.ch4_piles import candidate_data, candidate_network, ch4_dataset, summary_rows
-from experiments.command import OUT, run_command, save
-from experiments.config import Ch4SensingConfig, DevConfig, check_dev_streams, load_dev
+from experiments.command import OUT, open_recheck, run_command, save
+from experiments.config import Ch4SensingConfig, DevConfig
 from experiments.stats import ALPHA, CRITERIA, below_oracle_text, paired, rate_text
 
 SCRATCH = Path("data/dev/ch4_sensing")
@@ -279,16 +278,9 @@ def ch4_sensing(
     from clutterbench.platform_info import cpu_description
     from clutterbench.precision import inference_from_params
     from clutterbench.trials.ch4.episodes import run_ch4_episode
-    from clutterbench.trials.config import TrialsConfig
 
     started = time.perf_counter()
-    base = load_section(BaseConfig, "base", params)
-    dev = load_dev(params)
-    trials = load_section(TrialsConfig, "trials", params)
-    check_dev_streams(dev, trials)
-    cfg = dev.ch4_sensing
-    if not cfg.streams:
-        raise ClutterbenchError("dev.ch4_sensing.streams: no dev stream to run on")
+    base, dev, _, cfg = open_recheck(params, "ch4_sensing")
     dataset, _ = ch4_dataset(cfg, params, "ch4_sensing")
     candidates = candidate_networks(cfg, dataset, params, data_dir, scratch)
     jobs = trial_jobs(candidates, dev, params)

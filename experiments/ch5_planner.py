@@ -33,9 +33,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from clutterbench.config import BaseConfig, as_dict, load_section
-from clutterbench.errors import ClutterbenchError
-from experiments.command import OUT, run_command, save
-from experiments.config import DevConfig, check_dev_streams, load_dev
+from experiments.command import OUT, open_recheck, run_command, save
+from experiments.config import DevConfig
 from experiments.stats import (
     ALPHA,
     CRITERIA,
@@ -241,17 +240,10 @@ def _variants(variants: Mapping[str, Mapping[str, Any]]) -> str:
 def ch5_planner(params: Mapping[str, Any], out_dir: Path = OUT) -> dict[str, Any]:
     """Run the recheck of dev.ch5_planner; writes out_dir/ch5_planner.{json,md}."""
     from clutterbench.trials.ch5.episodes import run_ch5_episode
-    from clutterbench.trials.config import TrialsConfig
     from clutterbench.trials.core.harness import run_episodes
 
     started = time.perf_counter()
-    base = load_section(BaseConfig, "base", params)
-    dev = load_dev(params)
-    trials = load_section(TrialsConfig, "trials", params)
-    check_dev_streams(dev, trials)
-    cfg = dev.ch5_planner
-    if not cfg.streams:
-        raise ClutterbenchError("dev.ch5_planner.streams: no dev stream to run on")
+    base, dev, trials, cfg = open_recheck(params, "ch5_planner")
     jobs = trial_jobs(dev, params)
     results = run_episodes("dev ch5 planner", run_ch5_episode, jobs, trials.workers)
     records = [r.record for r in results]

@@ -33,8 +33,8 @@ from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.errors import ClutterbenchError
 from experiments.ch4_piles import candidate_network
 from experiments.ch4_sensing import LABEL, run_and_pair, what_it_shows, with_training_sensing
-from experiments.command import OUT, run_command, save
-from experiments.config import Ch5SensingConfig, DevConfig, check_dev_streams, load_dev
+from experiments.command import OUT, open_recheck, run_command, save
+from experiments.config import Ch5SensingConfig, DevConfig
 from experiments.detector_sensing import dataset_dir
 from experiments.stats import CRITERIA, below_oracle_text, plain, rate_text
 
@@ -256,16 +256,9 @@ def ch5_sensing(
     from clutterbench.platform_info import cpu_description
     from clutterbench.precision import inference_from_params
     from clutterbench.trials.ch5.episodes import run_ch5_episode
-    from clutterbench.trials.config import TrialsConfig
 
     started = time.perf_counter()
-    base = load_section(BaseConfig, "base", params)
-    dev = load_dev(params)
-    trials = load_section(TrialsConfig, "trials", params)
-    check_dev_streams(dev, trials)
-    cfg = dev.ch5_sensing
-    if not cfg.streams:
-        raise ClutterbenchError("dev.ch5_sensing.streams: no dev stream to run on")
+    base, dev, _, cfg = open_recheck(params, "ch5_sensing")
     candidates = candidate_networks(cfg, params, data_dir, scratch)
     jobs = trial_jobs(candidates, dev, params)
     records, trials_s, against, comparisons = run_and_pair(

@@ -70,8 +70,8 @@ from typing import TYPE_CHECKING, Any
 
 from clutterbench.config import BaseConfig, as_dict, load_section
 from clutterbench.errors import ClutterbenchError
-from experiments.command import OUT, run_command, save
-from experiments.config import DevConfig, check_dev_streams, load_dev
+from experiments.command import OUT, open_recheck, run_command, save
+from experiments.config import DevConfig
 from experiments.stats import (
     ALPHA,
     CRITERIA,
@@ -384,17 +384,10 @@ def ch6_pull(
     """Run the recheck of dev.<section>; writes out_dir/<section>.{json,md}."""
     from clutterbench.parallel import ParallelConfig
     from clutterbench.trials.ch6.episodes import run_ch6_episode
-    from clutterbench.trials.config import TrialsConfig
     from clutterbench.trials.core.harness import run_episodes
 
     started = time.perf_counter()
-    base = load_section(BaseConfig, "base", params)
-    dev = load_dev(params)
-    trials = load_section(TrialsConfig, "trials", params)
-    check_dev_streams(dev, trials)
-    cfg = getattr(dev, section)
-    if not cfg.streams:
-        raise ClutterbenchError(f"dev.{section}.streams: no dev stream to run on")
+    base, dev, trials, cfg = open_recheck(params, section)
     jobs = trial_jobs(dev, params, section)
     parallel = load_section(ParallelConfig, "parallel", params)
     results = run_episodes("dev ch6 pull", run_ch6_episode, jobs, trials.workers, parallel)

@@ -37,8 +37,8 @@ from experiments.ch4_piles import candidate_network
 from experiments.ch4_sensing import LABEL, comparisons_of, run_and_pair, with_training_sensing
 from experiments.ch6_pull import ORACLE_VARIANT, THRESHOLDS, condition_label
 from experiments.ch6_sensing_report import markdown, parts_text
-from experiments.command import OUT, run_command, save
-from experiments.config import Ch6SensingConfig, DevConfig, check_dev_streams, load_dev
+from experiments.command import OUT, open_recheck, run_command, save
+from experiments.config import Ch6SensingConfig, DevConfig
 from experiments.detector_sensing import dataset_dir
 from experiments.stats import ALPHA, CRITERIA, paired, plain
 
@@ -379,16 +379,10 @@ def ch6_sensing(
     from clutterbench.platform_info import cpu_description
     from clutterbench.precision import inference_from_params
     from clutterbench.trials.ch6.episodes import planner_info, run_ch6_episode
-    from clutterbench.trials.config import ConditionConfig, TrialsConfig
+    from clutterbench.trials.config import ConditionConfig
 
     started = time.perf_counter()
-    base = load_section(BaseConfig, "base", params)
-    dev = load_dev(params)
-    trials = load_section(TrialsConfig, "trials", params)
-    check_dev_streams(dev, trials)
-    cfg = dev.ch6_sensing
-    if not cfg.streams:
-        raise ClutterbenchError("dev.ch6_sensing.streams: no dev stream to run on")
+    base, dev, trials, cfg = open_recheck(params, "ch6_sensing")
     check_planners(cfg)
     if not THRESHOLDS.exists():
         raise ClutterbenchError(f"{THRESHOLDS} missing (the baselines read it); run support")

@@ -1,5 +1,6 @@
-"""What every dev-stream recheck does at its end: its result saved as JSON and Markdown under
-experiments/reports/, and its command line (params.yaml, seeding and one-line errors as a stage)."""
+"""What every dev-stream recheck does at its start and end: its configs read and checked, its
+result saved as JSON and Markdown under experiments/reports/, and its command line (params.yaml,
+seeding and one-line errors as a stage)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,25 @@ from typing import Any
 from clutterbench.io import write_json, write_text
 
 OUT = Path("experiments/reports")
+
+
+def open_recheck(params: Mapping[str, Any], section: str) -> tuple[Any, Any, Any, Any]:
+    """A trials recheck's configs -> (base, dev, trials, dev.<section>): the dev streams
+    checked against the tables' (check_dev_streams); one line when the recheck names no dev
+    stream to run on."""
+    from clutterbench.config import BaseConfig, load_section
+    from clutterbench.errors import ClutterbenchError
+    from clutterbench.trials.config import TrialsConfig
+    from experiments.config import check_dev_streams, load_dev
+
+    base = load_section(BaseConfig, "base", params)
+    dev = load_dev(params)
+    trials = load_section(TrialsConfig, "trials", params)
+    check_dev_streams(dev, trials)
+    cfg = getattr(dev, section)
+    if not cfg.streams:
+        raise ClutterbenchError(f"dev.{section}.streams: no dev stream to run on")
+    return base, dev, trials, cfg
 
 
 def save(

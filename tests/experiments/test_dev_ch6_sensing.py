@@ -28,6 +28,7 @@ from experiments.ch6_sensing import (
     what_it_shows,
 )
 from experiments.ch6_sensing_report import parts_table, parts_text, scores_table
+from experiments.command import open_recheck
 from experiments.config import DevConfig, with_dev
 
 STREAM = {"families": {"random": 1}, "n_objects": [3, 5], "catalogue": "various"}
@@ -264,3 +265,11 @@ def test_each_rows_collapse_scores_are_read_apart_for_safe_and_collapsing_pulls(
     row = {"stream": "dev_ch6_a", LABEL: "ideal", "planner": "multi_step_pull"}
     table = "\n".join(scores_table({"rows": [row | pull_scores(records)]}))
     assert "| dev_ch6_a | ideal | multi_step_pull | 2, 0.20 | 1, 0.90 | 1 |" in table
+
+
+def test_a_recheck_opens_with_its_section_and_refuses_one_without_streams(tiny_params):
+    base, dev, trials, cfg = open_recheck(tiny_params, "ch6_sensing")
+    assert cfg == dev.ch6_sensing and base.scale == "tiny" and trials.ch6.model == "cp_focal"
+    tiny_params["dev"]["ch6_sensing"]["streams"] = []
+    with pytest.raises(ClutterbenchError, match="dev.ch6_sensing.streams: no dev stream to run"):
+        open_recheck(tiny_params, "ch6_sensing")
