@@ -72,7 +72,8 @@ bench: setup
 	python -m clutterbench.bench
 
 # After a whole `make repro`: the wall time each stage recorded (reports/timing/stages/), as the
-# measured record reports/run_times/<scale>_<cpu>.{json,md}, and the README's run-time table from them
+# measured record reports/run_times/<scale>_<cpu>.{json,md}; the README's run-time table and
+# docs/run-times.md's list of records are rewritten from them
 .PHONY: run-times
 run-times: setup
 	python -m clutterbench.bench.run_times

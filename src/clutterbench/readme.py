@@ -6,10 +6,11 @@ disagree):
 - the pull-consequence leaderboard: the ranked predictor table and the planners' rates of
   reports/leaderboard/leaderboard.md, which stage testset, `clutterbench evaluate-predictor`
   and `clutterbench evaluate-agent --leaderboard` write;
-- run times: every whole-run record in reports/run_times/ (`make run-times` records one).
+- run times: every whole-run record in reports/run_times/ (`make run-times` records one);
+  and in docs/run-times.md, every record, whole or partial, in a sentence each.
 
-`python -m clutterbench.readme` rewrites README.md; `--check` only says which block is stale
-(exit 1)."""
+`python -m clutterbench.readme` rewrites README.md and docs/run-times.md; `--check` only says
+which block is stale (exit 1)."""
 
 from __future__ import annotations
 
@@ -19,17 +20,22 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from clutterbench.bench.run_times import OUT as RUN_TIMES
 from clutterbench.bench.run_times import (
+    DOC_BEGIN,
+    DOC_END,
     RUN_TIMES_BEGIN,
     RUN_TIMES_END,
     committed_records,
     readme_block,
+    records_block,
 )
+from clutterbench.bench.run_times import OUT as RUN_TIMES
+from clutterbench.bench.run_times import PARTIAL as PARTIAL_RUN_TIMES
 from clutterbench.errors import ClutterbenchError
 from clutterbench.io import write_text
 
 README = Path("README.md")
+RUN_TIMES_DOC = Path("docs/run-times.md")
 SUMMARY = Path("reports/tables/summary.md")
 LEADERBOARD = Path("reports/leaderboard/leaderboard.md")
 
@@ -43,6 +49,8 @@ class Block:
     end: str
     body: Callable[[Path], str]
     """The repository root -> the text between the markers."""
+    path: Path = README
+    """The file it lives in, from the repository root."""
 
 
 def summary_body(root: Path) -> str:
@@ -82,6 +90,13 @@ def run_times_body(root: Path) -> str:
     return block[len(RUN_TIMES_BEGIN) : -len(RUN_TIMES_END)].strip("\n") + "\n"
 
 
+def run_time_records_body(root: Path) -> str:
+    block = records_block(
+        committed_records(root / RUN_TIMES), committed_records(root / PARTIAL_RUN_TIMES), "../"
+    )
+    return block[len(DOC_BEGIN) : -len(DOC_END)].strip("\n") + "\n"
+
+
 BLOCKS = (
     Block("summary", "<!-- summary:begin -->", "<!-- summary:end -->", summary_body),
     Block(
@@ -91,6 +106,7 @@ BLOCKS = (
         leaderboard_body,
     ),
     Block("run-times", RUN_TIMES_BEGIN, RUN_TIMES_END, run_times_body),
+    Block("run-time records", DOC_BEGIN, DOC_END, run_time_records_body, RUN_TIMES_DOC),
 )
 
 
@@ -103,14 +119,20 @@ def with_block(text: str, block: Block, body: str, where: Path = README) -> str:
 
 
 def synced(text: str, root: Path, where: Path = README) -> str:
-    """`text` (the README) with every generated block rewritten from root's files."""
+    """`text` (the file `where`) with every generated block it holds rewritten from root's
+    files."""
     for block in BLOCKS:
-        text = with_block(text, block, block.body(root), where)
+        if block.path == where:
+            text = with_block(text, block, block.body(root), where)
     return text
 
 
-def stale_blocks(text: str, root: Path) -> list[str]:
-    return [b.name for b in BLOCKS if with_block(text, b, b.body(root)) != text]
+def stale_blocks(text: str, root: Path, where: Path = README) -> list[str]:
+    return [
+        b.name
+        for b in BLOCKS
+        if b.path == where and with_block(text, b, b.body(root), where) != text
+    ]
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -118,19 +140,25 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--check", action="store_true", help="only say which block is stale")
     args = ap.parse_args(argv)
     root = Path.cwd()
-    path = root / README
-    text = path.read_text()
+    files = dict.fromkeys(b.path for b in BLOCKS)
     if args.check:
-        stale = stale_blocks(text, root)
+        stale = [
+            f"{f}: {', '.join(s)}"
+            for f in files
+            if (s := stale_blocks((root / f).read_text(), root, f))
+        ]
         if stale:
-            print(f"{README}: stale generated blocks: {', '.join(stale)} (`make readme`)")
+            print(f"stale generated blocks: {'; '.join(stale)} (`make readme`)")
             sys.exit(1)
-        print(f"{README}: every generated block matches its source")
+        print(f"{', '.join(map(str, files))}: every generated block matches its source")
         return
-    new = synced(text, root)
-    if new != text:
-        write_text(path, new)
-    print(f"{README}: {', '.join(b.name for b in BLOCKS)} blocks rewritten from their sources")
+    for where in files:
+        text = (root / where).read_text()
+        new = synced(text, root, where)
+        if new != text:
+            write_text(root / where, new)
+        names = ", ".join(b.name for b in BLOCKS if b.path == where)
+        print(f"{where}: {names} blocks rewritten from their sources")
 
 
 if __name__ == "__main__":

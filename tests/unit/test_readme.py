@@ -1,5 +1,6 @@
-"""The README's generated blocks (clutterbench.readme): each is its committed source, so a
-hand edit of a block, or a source rewritten without `make readme`, fails here."""
+"""The generated blocks of the README and docs/run-times.md (clutterbench.readme): each is its
+committed source, so a hand edit of a block, or a source rewritten without `make readme`,
+fails here."""
 
 from __future__ import annotations
 
@@ -8,7 +9,14 @@ from pathlib import Path
 import pytest
 
 from clutterbench.errors import ClutterbenchError
-from clutterbench.readme import BLOCKS, leaderboard_body, stale_blocks, synced, with_block
+from clutterbench.readme import (
+    BLOCKS,
+    RUN_TIMES_DOC,
+    leaderboard_body,
+    stale_blocks,
+    synced,
+    with_block,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -39,6 +47,15 @@ def test_every_generated_block_of_the_readme_is_its_source():
     text = (ROOT / "README.md").read_text()
     assert stale_blocks(text, ROOT) == []
     assert synced(text, ROOT) == text
+
+
+def test_the_run_times_page_lists_every_committed_record_and_no_time_by_hand():
+    text = (ROOT / RUN_TIMES_DOC).read_text()
+    assert stale_blocks(text, ROOT, RUN_TIMES_DOC) == []
+    assert synced(text, ROOT, RUN_TIMES_DOC) == text
+    records = next(b for b in BLOCKS if b.path == RUN_TIMES_DOC)
+    edited = with_block(text, records, "- **99.0 min**, whole run\n", RUN_TIMES_DOC)
+    assert stale_blocks(edited, ROOT, RUN_TIMES_DOC) == ["run-time records"]
 
 
 def test_a_hand_edit_of_a_block_is_stale(tmp_path):

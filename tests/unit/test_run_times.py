@@ -183,3 +183,21 @@ def test_the_readmes_run_time_table_is_the_committed_records():
     text = (root / "README.md").read_text()
     block = text[text.index(RUN_TIMES_BEGIN) : text.index(RUN_TIMES_END) + len(RUN_TIMES_END)]
     assert block == readme_block(committed_records(root / "reports/run_times"))
+
+
+def test_the_run_times_page_lists_whole_runs_then_partial_ones_each_linked(tmp_path):
+    from clutterbench.bench.run_times import records_block
+
+    whole = _record(140.0) | {"shares": {"trials": {}}, "shared": []}
+    part = _record(60.0, cpu="Intel Xeon", family=6) | {"partial": True, "missing": ["trials"]}
+    shared = _record(170.0, family=26) | {"shares": {"trials": {}}, "shared": ["trials"]}
+    block = records_block([whole, shared], [part], "../")
+    lines = block.splitlines()
+    first = next(i for i, line in enumerate(lines) if line.startswith("- **140.0 min**"))
+    assert lines.index("**Partial runs** (1):") > first
+    assert "every stage had the cores to itself" in lines[first]
+    assert "(../reports/run_times/default_amd_epyc_f25m17.md)" in lines[first]
+    assert "1 stage(s) shared the cores" in block and "not run: trials" in block
+    assert "(../reports/run_times/partial/default_intel_xeon_f6m17.md)" in block
+    assert "training 70.0, everything else 70.0" in lines[first]
+    assert "- none" in records_block([], [], "")
