@@ -24,6 +24,7 @@ from clutterbench.bench.sim_profile import bench_sim_profile
 from clutterbench.bench.train_profile import bench_train_profile
 from clutterbench.bench.train_rate import bench_train_rate
 from clutterbench.bench.trials import bench_trials
+from clutterbench.bench.trials_rate import bench_trials_rate
 from clutterbench.bench.yamakuzushi import bench_ch3
 
 
@@ -40,6 +41,7 @@ PARTS: list[tuple[str, Callable[[], object]]] = [
     ("models", bench_models),  # models.json, models.md (with the memory part)
     ("grouped", bench_grouped),  # grouped.json, grouped.md (needs data and trained models)
     ("trials", bench_trials),  # trials.json, trials.md (needs trained models)
+    ("trials_rate", bench_trials_rate),  # trials_rate.json, .md (per condition; after support)
     ("ch3", bench_ch3),  # ch3.json, ch3.md (the ConvNet line needs models/slide_convnet)
     ("ch5", bench_ch5),  # ch5.json, ch5.md (needs the detector and the ch. 5 network)
     ("arm", bench_arm),  # arm.json, arm.md (ManiSkill Pandas vs the kinematic pull)
