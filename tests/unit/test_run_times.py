@@ -80,6 +80,9 @@ def test_a_record_names_the_stages_that_shared_the_cores_and_leaves_dev_timings_
         timing(tmp_path, name, 30.0, **alone)
     rec = collect(tmp_path, {"train@a", "report", "trials"})
     assert rec["shared"] == [] and "had the cores to itself" in table(rec)
+    # a stage of a second or two: dvc's own work beside it is no sharing worth naming
+    timing(tmp_path, "report", 2.0, busy_cores=0.9, other_cores=4.8, steal_cores=0.0)
+    assert collect(tmp_path, {"train@a", "report", "trials"})["shared"] == []
 
 
 def test_stage_name_is_dvc_s():

@@ -99,7 +99,10 @@ def collect(
     shares = {r["stage"]: {k: r[k] for k in SHARE_KEYS} for r in runs if "busy_cores" in r}
     if shares:
         extra["shares"] = shares
-        extra["shared"] = sorted(n for n, v in shares.items() if shared(v))
+        seconds = {r["stage"]: r["seconds"] for r in runs}
+        extra["shared"] = sorted(
+            n for n, v in shares.items() if shared(v) and seconds[n] >= SHARED_MIN_S
+        )
     return extra | {
         "cpu_model": runs[0]["cpu_model"],
         "logical_cpus": runs[0]["logical_cpus"],
@@ -116,6 +119,10 @@ SHARE_KEYS = ("busy_cores", "other_cores", "steal_cores")
 SHARED_CORES = 0.25
 """A stage shared the cores when other work (or the hypervisor's other machines) took more
 than this many cores on average while it ran: its time is then an upper bound."""
+SHARED_MIN_S = 10.0
+"""A stage shorter than this is never named as sharing the cores: over a second or two,
+dvc's own work beside it (hashing its outputs, writing the lock) reads as several cores of
+other work, and its minutes hardly count."""
 
 
 def shared(share: dict[str, float | None]) -> bool:
