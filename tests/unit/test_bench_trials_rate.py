@@ -27,9 +27,13 @@ def _row(name, planner, per, episodes=200, steps=(1, 2)):
 
 def test_the_report_ranks_conditions_and_sums_planners(tmp_path):
     rows = [_row("a", "p", 0.3), _row("b", "q", 6.0), _row("c", "p", 0.9)]
-    (tmp_path / "b").mkdir()
-    (tmp_path / "b" / "records.jsonl").write_text(
-        "\n".join(json.dumps({"steps": [0] * n}) for n in (2, 3, 4)) + "\n"
+    (tmp_path / "trials" / "b").mkdir(parents=True)
+    (tmp_path / "trials" / "b" / "records.jsonl").write_text(
+        "\n".join(
+            json.dumps({"condition": "b", "episode": i, "steps": [0] * n})
+            for i, n in enumerate((2, 3, 4))
+        )
+        + "\n"
     )
     committed_steps(rows, tmp_path)
     assert rows[1]["committed_steps"] == [2, 3] and rows[0]["committed_steps"] is None

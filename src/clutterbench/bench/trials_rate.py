@@ -21,7 +21,6 @@ episodes per condition (default EPISODES).
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from pathlib import Path
@@ -119,15 +118,15 @@ def measure(episodes: int) -> dict[str, Any]:
     }
 
 
-def committed_steps(rows: list[dict[str, Any]], reports: Path = Path("reports/trials")) -> None:
-    """Each row's committed steps of the same episodes (None where none are committed)."""
+def committed_steps(rows: list[dict[str, Any]], reports: Path = Path("reports")) -> None:
+    """Each row's committed steps of the same episodes (sim_profile.committed_steps of stage
+    trials; None where they are not all committed)."""
+    from clutterbench.bench.sim_profile import committed_steps as steps_of
+
+    known = steps_of("trials", reports)
     for row in rows:
-        path = reports / row["condition"] / "records.jsonl"
-        if not path.is_file():
-            row["committed_steps"] = None
-            continue
-        lines = path.read_text().splitlines()[: row["episodes_sampled"]]
-        row["committed_steps"] = [len(json.loads(line)["steps"]) for line in lines]
+        steps = [known.get((row["condition"], i)) for i in range(row["episodes_sampled"])]
+        row["committed_steps"] = None if None in steps else steps
 
 
 def markdown(res: dict[str, Any]) -> str:
