@@ -102,7 +102,14 @@ def chosen_thresholds(
     from clutterbench.sim.config import SimConfig
     from clutterbench.support.config import SupportEvalConfig
     from clutterbench.support.evaluate import choose_all, contact_edge_rate
-    from clutterbench.support.run import SupportPaths, load_predictors, val_sweep, write_thresholds
+    from clutterbench.support.run import (
+        SupportPaths,
+        ValChoice,
+        load_predictors,
+        val_scenes,
+        val_sweep,
+        write_thresholds,
+    )
 
     cfg = load_section(SupportEvalConfig, "support", params)
     sim = load_section(SimConfig, "sim", params)
@@ -112,12 +119,12 @@ def chosen_thresholds(
     paths = dataclasses.replace(
         SupportPaths.of(cfg, out, out), model=checkpoint, gen_dir=gen_dir, split_file=split_file
     )
-    val, sweep = val_sweep(cfg, sim, paths, models, read)
+    val = val_scenes(cfg, sim, paths, read)
+    sweep = val_sweep(val, cfg, models)
     chosen = choose_all(sweep)
     box = read_json(THRESHOLDS)["box_head"]
-    write_thresholds(
-        out, chosen, contact_edge_rate(val, chosen["coverage"]), sweep, len(val), precision, box
-    )
+    edge_rate = contact_edge_rate(val, chosen["coverage"])
+    write_thresholds(out, ValChoice(sweep, chosen, edge_rate, box, {}), len(val), precision, {})
     return out / "thresholds.json"
 
 

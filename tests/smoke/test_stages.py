@@ -239,9 +239,18 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     assert {"pull_coverage_gap", "pull_collapse_coverage_gap"} <= set(chosen)
     # as a robot sees: sensed rows in Tables 6.2 and 6.3, the decomposition's sensing part,
     # the test set's sensed track
+    sensed_choice = json.loads((a / "reports/support/thresholds.json").read_text())["sensed"]
     for name in trials.sensed.of:
         recs = read_records(a / "reports/trials" / f"{name}_{trials.sensed.sensing}/records.jsonl")
         assert {(r["sensing"], r["perception"]) for r in recs} == {("d415", "depth")}, name
+        # ... with the thresholds chosen on the val scenes as that sensor returned them
+        cond = trials.stage_conditions([])[f"{name}_{trials.sensed.sensing}"]
+        if planner_info(cond.planner).maps in ("deletion", "pull"):
+            summary = json.loads(
+                (a / "reports/trials" / f"{name}_{trials.sensed.sensing}/summary.json").read_text()
+            )
+            method = planner_info(cond.planner).support_method(cond.rule, trials.ch6.pull_map_meaning)
+            assert summary["support"] == sensed_choice["d415"]["chosen"][method], name
     assert "sensing" in dec.columns and dec["sensing"].notna().any()
     assert t62.iloc[:, 0].str.contains("on d415 depth").sum() > 1
     sensed_set = json.loads((a / "data/testset_sensed/d415/manifest.json").read_text())

@@ -74,4 +74,5 @@ class SupportEvalConfig:
     sensing: tuple[Literal["structured_light", "d415"], ...] = ()
     """Depth sensors (sim/sensor.py) under which every method is scored again on the same
     test scenes, their depth images sensed (the masks stay the simulator's): Table 6.2's
-    method@<sensor> rows; thresholds stay those chosen on exact val depth."""
+    method@<sensor> rows, each sensor with the thresholds and fusion chosen on the val scenes'
+    depth as it returns them (Table 6.3's sensed rows under it read the same choice)."""

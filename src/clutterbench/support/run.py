@@ -104,6 +104,32 @@ def load_predictors(model: Path, image_size: int) -> Predictors:
     return Predictors(predictor, heads, head_predictors)
 
 
+@dataclass(frozen=True)
+class ValChoice:
+    """What the stage chooses on the val scenes as one sensor returns their depth: every
+    method's sweep and thresholds, the random row's edge rate, the box head's edge thresholds
+    and the box head fused with physics from depth."""
+
+    sweep: pd.DataFrame
+    chosen: dict
+    p_edge: float
+    box: dict[str, dict[str, float]]
+    fusion: dict[str, dict[str, Any]]
+
+
+@dataclass(frozen=True)
+class ValInputs:
+    """What every choice on val scenes reads besides the scenes themselves."""
+
+    cfg: SupportEvalConfig
+    models: Predictors
+    box_maps: BoxMaps
+    outcome: dict[str, float]  # the box head's outcome thresholds (stage box_head, val pairs)
+    simulate: SimulatePulls
+    contacts: FittedContacts | None
+    edge_precision: float | None  # trials.ch6.box_edge_precision
+
+
 def run_support(
     params: dict,
     seed: int,
@@ -117,59 +143,94 @@ def run_support(
     outputs; returns each method's mean precision and recall over the test scenes. `ch6`: the
     trials' ch. 6 params (the `trials` section's `ch6`: the trials' pull, the fitted scenes,
     the box head's fusion), parsed by the stage: the support stage stands below the trials
-    and imports none of them."""
+    and imports none of them. Each sensor of cfg.sensing gets its own choice, made on the val
+    scenes' depth as that sensor returns it, for its rows here and the trials' rows under it."""
     precision = inference_from_params(params)
     models = load_predictors(paths.model, sim.camera.image_size)
     read = {"heads": models.heads, "collapse_free": label_thresholds(params)}
 
-    # 1. thresholds on validation scenes
-    val, sweep = val_sweep(cfg, sim, paths, models, read)
-    write_text(paths.out / "val_sweep.csv", sweep.to_csv(index=False))
-    chosen = choose_all(sweep)
-    p_edge = contact_edge_rate(val, chosen["coverage"])
-    box_maps = BoxMaps.from_paths(paths.model, paths.box_head, sim.camera, "pull", 0.5)
-    outcome = read_json(paths.box_metrics)["thresholds"]["box_head"]
-    box_chosen = choose_edge_thresholds(val, box_maps, outcome)
+    # 1. thresholds on validation scenes, on exact depth and as each sensor returns it
+    val = val_scenes(cfg, sim, paths, read)
     catalogue = load_section(GenerateConfig, "generate", params).datasets[cfg.val_dataset].catalogue
-    fusion = choose_box_fusion(
-        val,
-        box_maps,
+    inputs = ValInputs(
+        cfg,
+        models,
+        BoxMaps.from_paths(paths.model, paths.box_head, sim.camera, "pull", 0.5),
+        read_json(paths.box_metrics)["thresholds"]["box_head"],
         fitted_pulls_of(params, cfg, sim, ch6, catalogue),
         fitted_contacts_of(cfg, sim, ch6, catalogue),
         ch6.box_edge_precision,
     )
-    write_json(paths.out / "box_fusion.json", {"chosen": fusion, "val_scenes": len(val)})
+    choice = choose_on_val(val, inputs)
+    write_text(paths.out / "val_sweep.csv", choice.sweep.to_csv(index=False))
+    sensed = {
+        s: choose_on_val([sensed_scene(sc, s, sim.camera) for sc in val], inputs, s)
+        for s in cfg.sensing
+    }
+    fusion = {"chosen": choice.fusion, "val_scenes": len(val)}
+    if sensed:
+        fusion["sensed"] = {s: {"chosen": c.fusion} for s, c in sensed.items()}
+    write_json(paths.out / "box_fusion.json", fusion)
 
     # 2. test scenes from their own stream, with every removal simulated
     generate_test_scenes(cfg, sim, parallel, seed, ch6, models.heads, paths.scenes)
     rng = np.random.default_rng([seed, 62])
-    physics_depth = PhysicsDepthSupport(cfg, sim, chosen[SUPPORT_RULE], ch6.physics_depth_settle_s)
+    physics_depth = PhysicsDepthSupport(
+        cfg, sim, choice.chosen[SUPPORT_RULE], ch6.physics_depth_settle_s
+    )
     scenes_in = all_scenes(
         paths.scenes, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera, **read
     )
-    tail = (
+    test = TestInputs(
         physics_depth,
         seed,
-        (box_maps, box_chosen),
-        (
-            fitted_pulls_of(params, cfg, sim, ch6, cfg.test.catalogue),
-            fusion,
-            fitted_contacts_of(cfg, sim, ch6, cfg.test.catalogue),
-        ),
+        inputs.box_maps,
+        fitted_pulls_of(params, cfg, sim, ch6, cfg.test.catalogue),
+        fitted_contacts_of(cfg, sim, ch6, cfg.test.catalogue),
     )
-    rows, panels, truth = score_test_scenes(scenes_in, cfg, models, chosen, p_edge, rng, *tail)
-    rows += sensed_rows(cfg, sim, paths, read, (models, chosen, p_edge), tail)
+    rows, panels, truth = score_test_scenes(scenes_in, cfg, models, choice, rng, test)
+    rows += sensed_rows(cfg, sim, paths, read, models, sensed, test)
     # edges: removing X moves Y, X and Y touch; <head>_edges: the trials' pull of X marks Y
     # under that head's label kind, X and Y touch
     truths = {f"{head_prefix(h)}edges": edges for h, edges in truth.items()}
     write_json(paths.scenes / "truth.json", truths | {"moved_threshold_m": cfg.moved_threshold_m})
     scenes = pd.DataFrame(rows)
     write_text(paths.out / "scenes.csv", scenes.to_csv(index=False))
-    write_thresholds(paths.out, chosen, p_edge, sweep, len(val), precision, box_chosen)
+    write_thresholds(paths.out, choice, len(val), precision, sensed)
     support_figure(
         panels, paths.out / "figure.png", "Inferred (white, dashed) and true (pink) support"
     )
     return scenes.groupby("method", sort=False)[["precision", "recall"]].mean()
+
+
+def choose_on_val(val: list[Scene], inputs: ValInputs, sensing: str = "ideal") -> ValChoice:
+    """Every choice the stage makes on the val scenes `val` (their depth as `sensing`
+    returned it): each method's thresholds (Table 6.2's criterion, best f1 of mean precision
+    and recall), the box head's edge thresholds and its fusion with physics from depth."""
+    sweep = val_sweep(val, inputs.cfg, inputs.models, sensing)
+    chosen = choose_all(sweep)
+    return ValChoice(
+        sweep,
+        chosen,
+        contact_edge_rate(val, chosen["coverage"]),
+        choose_edge_thresholds(val, inputs.box_maps, inputs.outcome),
+        choose_box_fusion(
+            val, inputs.box_maps, inputs.simulate, inputs.contacts, inputs.edge_precision
+        ),
+    )
+
+
+@dataclass(frozen=True)
+class TestInputs:
+    """What scoring the test scenes reads besides the scenes and the choice on val scenes:
+    physics from depth (its own rows), the seed, the box head and the fitted scenes' pulls and
+    contacts (None: the head's contact)."""
+
+    physics_depth: PhysicsDepthSupport
+    seed: int
+    box_maps: BoxMaps
+    simulate: SimulatePulls
+    contacts: FittedContacts | None
 
 
 def sensed_rows(
@@ -177,33 +238,30 @@ def sensed_rows(
     sim: SimConfig,
     paths: SupportPaths,
     read: dict[str, Any],
-    scoring: tuple[Predictors, dict, float],
-    tail: tuple[Any, ...],
+    models: Predictors,
+    choices: dict[str, ValChoice],
+    test: TestInputs,
 ) -> list[dict]:
     """Every method's rows on the test scenes again under each sensor of cfg.sensing (their
-    depth sensed, support/evaluate.py sensed_scene), named method@<sensor>; the thresholds
-    and fusion chosen on exact val depth."""
+    depth sensed, support/evaluate.py sensed_scene), named method@<sensor>, each with the
+    thresholds and fusion chosen on the val scenes as that sensor returned them."""
     rows: list[dict] = []
     for k, sensing in enumerate(cfg.sensing):
         scenes = all_scenes(
             paths.scenes, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera, **read
         )
         sensed = (sensed_scene(sc, sensing, sim.camera) for sc in scenes)
-        rng = np.random.default_rng([tail[1], 62, k + 1])
-        more, _, _ = score_test_scenes(sensed, cfg, *scoring, rng, *tail)
+        rng = np.random.default_rng([test.seed, 62, k + 1])
+        more, _, _ = score_test_scenes(sensed, cfg, models, choices[sensing], rng, test)
         rows += [r | {"method": f"{r['method']}@{sensing}"} for r in more]
     return rows
 
 
-def val_sweep(
-    cfg: SupportEvalConfig,
-    sim: SimConfig,
-    paths: SupportPaths,
-    models: Predictors,
-    read: dict[str, Any],
-) -> tuple[list[Scene], pd.DataFrame]:
-    """The val scenes and every method's threshold sweep over their evidence."""
-    val = split_scenes(
+def val_scenes(
+    cfg: SupportEvalConfig, sim: SimConfig, paths: SupportPaths, read: dict[str, Any]
+) -> list[Scene]:
+    """The first cfg.val_scenes scenes of the val dataset's val split."""
+    return split_scenes(
         paths.gen_dir,
         paths.split_file,
         "val",
@@ -213,8 +271,15 @@ def val_sweep(
         sim.camera,
         **read,
     )
+
+
+def val_sweep(
+    val: list[Scene], cfg: SupportEvalConfig, models: Predictors, sensing: str = "ideal"
+) -> pd.DataFrame:
+    """Every method's threshold sweep over the val scenes' evidence."""
     evidence_of: dict[str, tuple[list, list]] = {h: ([], []) for h in ("deletion", *models.heads)}
-    with progress_bar("support: val heatmaps", total=len(val)) as advance:
+    label = "support: val heatmaps" + ("" if sensing == "ideal" else f" ({sensing} depth)")
+    with progress_bar(label, total=len(val)) as advance:
         for sc in val:
             for head, (cp_ev, oracle_ev) in evidence_of.items():
                 view = sc.view(head)
@@ -225,11 +290,10 @@ def val_sweep(
                 )
                 oracle_ev.append(evidence(view, oracle_heatmaps(view.moved, view.masks)))
             advance(1)
-    sweep = pd.concat(
+    return pd.concat(
         [sweep_all(cp, oracle, cfg, head_prefix(h)) for h, (cp, oracle) in evidence_of.items()],
         ignore_index=True,
     )
-    return val, sweep
 
 
 def generate_test_scenes(
@@ -263,17 +327,13 @@ def score_test_scenes(
     scenes_in: Any,
     cfg: SupportEvalConfig,
     models: Predictors,
-    chosen: dict,
-    p_edge: float,
+    choice: ValChoice,
     rng: np.random.Generator,
-    physics_depth: PhysicsDepthSupport,
-    seed: int,
-    box: tuple[BoxMaps, dict[str, dict[str, float]]],
-    fusion: tuple[SimulatePulls, dict[str, dict[str, Any]], FittedContacts | None],
+    test: TestInputs,
 ) -> tuple[list[dict], list[SupportPanel], dict[str, dict[str, list]]]:
-    """Every method's rows on every test scene, the figure's panels and each head's true edges;
-    `box`: the box head and its chosen thresholds; `fusion`: physics from depth's pulls, the
-    fusion chosen on val scenes and the fitted scenes' contacts (None: the head's contact)."""
+    """Every method's rows on every test scene, the figure's panels and each head's true edges,
+    with the thresholds, box-head edges and fusion of `choice` (chosen on val scenes)."""
+    chosen, p_edge = choice.chosen, choice.p_edge
     heads = models.heads
     chosen_of = {h: {m: p for m, p in chosen.items() if method_head(m)[0] == h} for h in heads}
     deletion = {m: p for m, p in chosen.items() if method_head(m)[0] == "deletion"}
@@ -283,15 +343,16 @@ def score_test_scenes(
         for sc in scenes_in:
             heat = predicted_heatmaps(sc, models.deletion)
             scene_rows, edges = evaluate_scene(sc, heat, deletion, p_edge, rng)
-            rows += scene_rows + [physics_depth_row(physics_depth, sc, seed)]
+            rows += scene_rows + [physics_depth_row(test.physics_depth, sc, test.seed)]
             truth["deletion"][str(sc.index)] = sorted(map(list, sc.true_edges))
             for head in heads:  # no random row: rng draws stay the deletion rows'
                 view = sc.view(head)
                 head_heat = predicted_heatmaps(view, models.of_head[head])
                 rows += evaluate_scene(view, head_heat, chosen_of[head], None, rng)[0]
                 truth[head][str(sc.index)] = sorted(map(list, view.true_edges))
-            rows += box_rows(sc, *box)
-            fused = fusion_rows(answer_scene(sc, box[0], fusion[0], fusion[2]), fusion[1])
+            rows += box_rows(sc, test.box_maps, choice.box)
+            answers = answer_scene(sc, test.box_maps, test.simulate, test.contacts)
+            fused = fusion_rows(answers, choice.fusion)
             where = {"scene": sc.index, "family": sc.family, "n_objects": sc.n_objects}
             rows += [where | {"visible": len(sc.ids)} | r for r in fused]
             if len(panels) < cfg.figure_scenes:
@@ -358,29 +419,28 @@ def fitted_contacts_of(
 
 def write_thresholds(
     out: Path,
-    chosen: dict,
-    p_edge: float,
-    sweep: pd.DataFrame,
+    choice: ValChoice,
     n_val: int,
     precision: Precision,
-    box_chosen: dict[str, dict[str, float]],
+    sensed: dict[str, ValChoice],
 ) -> None:
     """thresholds.json: each method's chosen thresholds, its val metrics at them, the box
     head's thresholds per pull head (`box_head`: edge, outcome), the val scene count and the
-    network precision the heatmaps were inferred at."""
-    thresholds = {m: as_dict(p) for m, p in chosen.items()} | {"random": {"p_edge": p_edge}}
-    thresholds[SUPPORT_METHOD] = as_dict(chosen[SUPPORT_RULE])
-    val_at = {m: val_metrics_at(sweep, m, p) for m, p in chosen.items()}
-    write_json(
-        out / "thresholds.json",
-        {
-            "chosen": thresholds,
-            "val": val_at,
-            "box_head": box_chosen,
-            "val_scenes": n_val,
-            "network_precision": precision,
-        },
-    )
+    network precision the heatmaps were inferred at; under `sensed`, per sensor, the same
+    chosen on the val scenes as that sensor returned them."""
+    data = threshold_fields(choice) | {"val_scenes": n_val, "network_precision": precision}
+    if sensed:
+        data["sensed"] = {s: threshold_fields(c) for s, c in sensed.items()}
+    write_json(out / "thresholds.json", data)
+
+
+def threshold_fields(choice: ValChoice) -> dict[str, Any]:
+    """A choice's part of thresholds.json: chosen, val (metrics at them), box_head."""
+    thresholds = {m: as_dict(p) for m, p in choice.chosen.items()}
+    thresholds |= {"random": {"p_edge": choice.p_edge}}
+    thresholds[SUPPORT_METHOD] = as_dict(choice.chosen[SUPPORT_RULE])
+    val_at = {m: val_metrics_at(choice.sweep, m, p) for m, p in choice.chosen.items()}
+    return {"chosen": thresholds, "val": val_at, "box_head": choice.box}
 
 
 def physics_depth_row(physics_depth: PhysicsDepthSupport, scene: Scene, seed: int) -> dict:

@@ -363,14 +363,16 @@ def _rounded(d: dict[str, Any]) -> dict[str, Any]:
 
 
 def planner_support(
-    thresholds: Path, planner: str, rule: str, ch6: Any
+    thresholds: Path, planner: str, rule: str, ch6: Any, sensing: str = "ideal"
 ) -> tuple[SupportParams, float]:
     """A CP planner's support thresholds and its abort threshold cp_max: the support stage's
-    choice on validation scenes for its method (Planner.support_method), the pull-head
+    choice on validation scenes (their depth as `sensing` returns it) for its method
+    (Planner.support_method), the pull-head
     planners' overridden by trials.ch6.pull_prob_threshold / pull_score_threshold where set
     (chosen on dev streams); cp_max: trials.ch6.cp_max, else the score threshold."""
     declared = planner_info(planner)
-    support = chosen_support(thresholds, declared.support_method(rule, ch6.pull_map_meaning))
+    method = declared.support_method(rule, ch6.pull_map_meaning)
+    support = chosen_support(thresholds, method, sensing)
     if declared.maps == "pull":
         over = {
             "prob_threshold": ch6.pull_prob_threshold,
@@ -380,10 +382,13 @@ def planner_support(
     return support, ch6.cp_max if ch6.cp_max is not None else support.score_threshold
 
 
-def box_fields(thresholds: Path, planner: str, ch6: Any) -> tuple[dict[str, Any], float | None]:
+def box_fields(
+    thresholds: Path, planner: str, ch6: Any, sensing: str = "ideal"
+) -> tuple[dict[str, Any], float | None]:
     """A box planner's job fields (its head's checkpoint, edge threshold and, learned plus
     physics, its fusion's weights) and its cp_max (the outcome threshold), all chosen on
-    validation scenes by the support stage, cp_max overridden by trials.ch6.box_cp_max where
+    validation scenes (their depth as `sensing` returns it) by the support stage, cp_max
+    overridden by trials.ch6.box_cp_max where
     set (chosen on dev streams); ({}, None) for any other planner. One line when the box
     head is missing."""
     declared = planner_info(planner)
@@ -393,12 +398,12 @@ def box_fields(thresholds: Path, planner: str, ch6: Any) -> tuple[dict[str, Any]
         raise ClutterbenchError(f"{BOX_HEAD} missing (planner {planner} reads it); run box_head")
     if declared.maps == "box_physics":
         edge, outcome, weights, contact = box_fusion(
-            thresholds, ch6.pull_map_meaning, ch6.box_contact
+            thresholds, ch6.pull_map_meaning, ch6.box_contact, sensing
         )
         fields = {"box_head_path": BOX_HEAD, "box_edge_threshold": edge, "box_fusion": weights}
         fields |= {"box_contact": contact}
     else:
-        edge, outcome = box_thresholds(thresholds, ch6.pull_map_meaning)
+        edge, outcome = box_thresholds(thresholds, ch6.pull_map_meaning, sensing)
         fields = {"box_head_path": BOX_HEAD, "box_edge_threshold": edge}
     return fields, outcome if ch6.box_cp_max is None else ch6.box_cp_max
 
@@ -413,7 +418,8 @@ def condition_jobs(
     thresholds: Path,
 ) -> tuple[list[Ch6Job], SupportParams, float]:
     """Condition `cond`'s episode jobs, with its support rule's thresholds (chosen on
-    validation scenes by the support stage, `thresholds`) and its abort threshold cp_max;
+    validation scenes as its sensor returns them by the support stage, `thresholds`) and its
+    abort threshold cp_max;
     one-line errors when a network is missing."""
     declared = planner_info(cond.planner)
     networks = {"cp": trials.ch6.model, "ch4": trials.ch6.ch4_model}
@@ -434,8 +440,8 @@ def condition_jobs(
             f"robot sees ({cond.planner} reads the world: {declared.world}) on the kinematic "
             f"executor ({cond.executor})"
         )
-    support, cp_max = planner_support(thresholds, cond.planner, cond.rule, trials.ch6)
-    box, box_cp_max = box_fields(thresholds, cond.planner, trials.ch6)
+    support, cp_max = planner_support(thresholds, cond.planner, cond.rule, trials.ch6, cond.sensing)
+    box, box_cp_max = box_fields(thresholds, cond.planner, trials.ch6, cond.sensing)
     cp_max = box_cp_max if box_cp_max is not None else cp_max
     jobs = ch6_jobs(
         name,

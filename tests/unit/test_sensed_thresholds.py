@@ -1,0 +1,88 @@
+"""A sensed chapter 6 row runs with what the support stage chose on the val scenes as its
+sensor returned them (thresholds.json and box_fusion.json `sensed.<sensor>`); an ideal row
+with what it chose on exact depth; a sensor the stage chose nothing for is one line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from clutterbench.errors import ClutterbenchError
+from clutterbench.trials.ch6.episodes import box_fields, planner_support
+from clutterbench.trials.ch6.planners import planner_info
+from clutterbench.trials.config import Ch6TrialParams
+
+CH6 = Ch6TrialParams()
+RULE = "coverage_gap"
+
+
+def _support(prob: float, score: float) -> dict:
+    return {
+        "rule": "coverage",
+        "prob_threshold": prob,
+        "score_threshold": score,
+        "bbox_margin_px": 2,
+        "adjacency_iou": 0.05,
+        "max_gap_m": 0.07,
+    }
+
+
+def _choice(prob: float, score: float, edge: float) -> dict:
+    methods = {planner_info(p).support_method(RULE, CH6.pull_map_meaning) for p in PLANNERS}
+    heads = {
+        "pull": {"edge": edge, "outcome": 0.5},
+        "pull_collapse": {"edge": edge, "outcome": 0.45},
+    }
+    return {"chosen": {m: _support(prob, score) for m in methods}, "box_head": heads}
+
+
+def _fusion(edge: float, w: float) -> dict:
+    one = {"edge": edge, "outcome": 0.4, "weights": [w, 1.0, 2.0]}
+    return {"chosen": {"pull": one, "pull_collapse": one}}
+
+
+PLANNERS = ("multi_step", "multi_step_pull", "bimanual_box", "multi_step_box_physics")
+
+
+@pytest.fixture
+def project(tmp_path, monkeypatch) -> Path:
+    """A project whose support stage chose apart on exact and on d415 val depth."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "models/box_head").mkdir(parents=True)
+    (tmp_path / "models/box_head/best.pt").write_bytes(b"")
+    out = tmp_path / "reports/support"
+    out.mkdir(parents=True)
+    ideal, sensed = _choice(0.4, 0.2, 0.45), _choice(0.6, 0.5, 0.7)
+    (out / "thresholds.json").write_text(json.dumps(ideal | {"sensed": {"d415": sensed}}))
+    fusion = _fusion(0.3, 0.1) | {"sensed": {"d415": _fusion(0.8, 0.9)}}
+    (out / "box_fusion.json").write_text(json.dumps(fusion))
+    return out / "thresholds.json"
+
+
+@pytest.mark.parametrize("planner", ["multi_step", "multi_step_pull"])
+def test_a_cp_row_reads_the_thresholds_of_its_own_sensor(project, planner):
+    ideal, _ = planner_support(project, planner, RULE, CH6)
+    sensed, cp_max = planner_support(project, planner, RULE, CH6, "d415")
+    assert (ideal.prob_threshold, ideal.score_threshold) == (0.4, 0.2)
+    assert (sensed.prob_threshold, sensed.score_threshold) == (0.6, 0.5)
+    assert cp_max == (CH6.cp_max if CH6.cp_max is not None else 0.5)
+
+
+def test_a_box_row_reads_the_edges_and_fusion_of_its_own_sensor(project):
+    box, _ = box_fields(project, "bimanual_box", CH6)
+    assert box["box_edge_threshold"] == 0.45
+    box, _ = box_fields(project, "bimanual_box", CH6, "d415")
+    assert box["box_edge_threshold"] == 0.7
+    fused, _ = box_fields(project, "multi_step_box_physics", CH6)
+    assert (fused["box_edge_threshold"], fused["box_fusion"][0]) == (0.3, 0.1)
+    fused, _ = box_fields(project, "multi_step_box_physics", CH6, "d415")
+    assert (fused["box_edge_threshold"], fused["box_fusion"][0]) == (0.8, 0.9)
+
+
+def test_a_sensor_the_support_stage_chose_nothing_for_is_one_line(project):
+    with pytest.raises(ClutterbenchError, match="structured_light to support.sensing"):
+        planner_support(project, "multi_step_pull", RULE, CH6, "structured_light")
+    with pytest.raises(ClutterbenchError, match="box_fusion.json: nothing chosen"):
+        box_fields(project, "bimanual_box_physics", CH6, "structured_light")
