@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from clutterbench.errors import ClutterbenchError
+from clutterbench.report.build import support_thresholds
 from clutterbench.trials.ch6.episodes import box_fields, planner_support
 from clutterbench.trials.ch6.planners import planner_info
 from clutterbench.trials.config import Ch6TrialParams
@@ -39,7 +40,7 @@ def _choice(prob: float, score: float, edge: float) -> dict:
 
 
 def _fusion(edge: float, w: float) -> dict:
-    one = {"edge": edge, "outcome": 0.4, "weights": [w, 1.0, 2.0]}
+    one = {"edge": edge, "outcome": 0.4, "weights": [w, 1.0, 2.0], "physics_edge": edge / 2}
     return {"chosen": {"pull": one, "pull_collapse": one}}
 
 
@@ -86,3 +87,12 @@ def test_a_sensor_the_support_stage_chose_nothing_for_is_one_line(project):
         planner_support(project, "multi_step_pull", RULE, CH6, "structured_light")
     with pytest.raises(ClutterbenchError, match="box_fusion.json: nothing chosen"):
         box_fields(project, "bimanual_box_physics", CH6, "structured_light")
+
+
+def test_table_6_2_shows_each_sensed_row_the_thresholds_it_ran_with(project):
+    shown = support_thresholds(project, project.with_name("box_fusion.json"))
+    pull = planner_info("multi_step_pull").support_method(RULE, CH6.pull_map_meaning)
+    assert (shown[pull]["prob_threshold"], shown[f"{pull}@d415"]["prob_threshold"]) == (0.4, 0.6)
+    assert (shown["pull_box"]["edge"], shown["pull_box@d415"]["edge"]) == (0.45, 0.7)
+    assert (shown["pull_box_fused"]["edge"], shown["pull_box_fused@d415"]["edge"]) == (0.3, 0.8)
+    assert shown["pull_physics_pull@d415"] == {"edge": 0.4}

@@ -191,11 +191,24 @@ def support_thresholds(path: Path, fusion: Path | None = None) -> dict[str, Any]
     """Each Table 6.2 method's thresholds: the rules' (`chosen`), the box head's per pull
     head (`box_head`, as method `<head>_box`) and, from `fusion` where given, the box head
     fused with physics from depth (as method `<head>_box_fused`) and physics from depth's
-    pulls alone (`<head>_physics_pull`)."""
-    box = json_key(path, "box_head") if "box_head" in read_json(path) else {}
-    fused = json_key(fusion, "chosen") if fusion is not None else {}
+    pulls alone (`<head>_physics_pull`); then, for each sensor the support stage chose on
+    (`sensed`), the same chosen on its depth, as methods `<method>@<sensor>`."""
+    json_key(path, "chosen")  # one line if the file has none
+    data = read_json(path)
+    fused = {"chosen": json_key(fusion, "chosen")} | read_json(fusion) if fusion else {}
+    out = _choice_thresholds(data, fused)
+    for sensor, choice in data.get("sensed", {}).items():
+        mine = _choice_thresholds(choice, fused.get("sensed", {}).get(sensor, {}))
+        out |= {f"{method}@{sensor}": t for method, t in mine.items()}
+    return out
+
+
+def _choice_thresholds(choice: dict[str, Any], fusion: dict[str, Any]) -> dict[str, Any]:
+    """One choice's thresholds per method (support_thresholds)."""
+    box = choice.get("box_head", {})
+    fused = fusion.get("chosen", {})
     return (
-        dict(json_key(path, "chosen"))
+        dict(choice["chosen"])
         | {f"{head}_box": t for head, t in box.items()}
         | {
             f"{head}_box_fused": {k: v for k, v in t.items() if k != "physics_edge"}

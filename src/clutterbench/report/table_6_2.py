@@ -196,7 +196,19 @@ def _notes(scenes: pd.DataFrame, figures: Mapping[str, Any], scale: str) -> list
         ]
         + _pull_notes(scenes)
         + _estimate_notes(scenes)
+        + _sensed_notes(scenes)
     )
+
+
+def _sensed_notes(scenes: pd.DataFrame) -> list[str]:
+    """What the rows under a sensor (support.sensing) read."""
+    if not scenes["method"].astype(str).str.contains("@").any():
+        return []
+    return [
+        "rows 'on <sensor> depth': the same test scenes with their depth images through that "
+        "sensor model (the masks stay the simulator's), every threshold, the box head's edges "
+        "and its fusion chosen on the same validation scenes through the same sensor."
+    ]
 
 
 def _pull_notes(scenes: pd.DataFrame) -> list[str]:

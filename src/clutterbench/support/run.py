@@ -3,6 +3,7 @@ truth, thresholds, figure) on test scenes generated from their own stream."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -175,21 +176,25 @@ def run_support(
     # 2. test scenes from their own stream, with every removal simulated
     generate_test_scenes(cfg, sim, parallel, seed, ch6, models.heads, paths.scenes)
     rng = np.random.default_rng([seed, 62])
-    physics_depth = PhysicsDepthSupport(
-        cfg, sim, choice.chosen[SUPPORT_RULE], ch6.physics_depth_settle_s
-    )
+
+    def physics_depth(c: ValChoice) -> PhysicsDepthSupport:  # its contact: the rule's choice
+        return PhysicsDepthSupport(cfg, sim, c.chosen[SUPPORT_RULE], ch6.physics_depth_settle_s)
+
     scenes_in = all_scenes(
         paths.scenes, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera, **read
     )
     test = TestInputs(
-        physics_depth,
+        physics_depth(choice),
         seed,
         inputs.box_maps,
         fitted_pulls_of(params, cfg, sim, ch6, cfg.test.catalogue),
         fitted_contacts_of(cfg, sim, ch6, cfg.test.catalogue),
     )
     rows, panels, truth = score_test_scenes(scenes_in, cfg, models, choice, rng, test)
-    rows += sensed_rows(cfg, sim, paths, read, models, sensed, test)
+    sensed_tests = {
+        s: dataclasses.replace(test, physics_depth=physics_depth(c)) for s, c in sensed.items()
+    }
+    rows += sensed_rows(cfg, sim, paths, read, models, sensed, sensed_tests)
     # edges: removing X moves Y, X and Y touch; <head>_edges: the trials' pull of X marks Y
     # under that head's label kind, X and Y touch
     truths = {f"{head_prefix(h)}edges": edges for h, edges in truth.items()}
@@ -240,19 +245,20 @@ def sensed_rows(
     read: dict[str, Any],
     models: Predictors,
     choices: dict[str, ValChoice],
-    test: TestInputs,
+    tests: dict[str, TestInputs],
 ) -> list[dict]:
     """Every method's rows on the test scenes again under each sensor of cfg.sensing (their
     depth sensed, support/evaluate.py sensed_scene), named method@<sensor>, each with the
-    thresholds and fusion chosen on the val scenes as that sensor returned them."""
+    thresholds and fusion chosen on the val scenes as that sensor returned them (`choices`)
+    and physics from depth on that choice's contact thresholds (`tests`)."""
     rows: list[dict] = []
     for k, sensing in enumerate(cfg.sensing):
         scenes = all_scenes(
             paths.scenes, "scenes", cfg.moved_threshold_m, cfg.min_pixels, sim.camera, **read
         )
         sensed = (sensed_scene(sc, sensing, sim.camera) for sc in scenes)
-        rng = np.random.default_rng([test.seed, 62, k + 1])
-        more, _, _ = score_test_scenes(sensed, cfg, models, choices[sensing], rng, test)
+        rng = np.random.default_rng([tests[sensing].seed, 62, k + 1])
+        more, _, _ = score_test_scenes(sensed, cfg, models, choices[sensing], rng, tests[sensing])
         rows += [r | {"method": f"{r['method']}@{sensing}"} for r in more]
     return rows
 
