@@ -249,7 +249,9 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
             summary = json.loads(
                 (a / "reports/trials" / f"{name}_{trials.sensed.sensing}/summary.json").read_text()
             )
-            method = planner_info(cond.planner).support_method(cond.rule, trials.ch6.pull_map_meaning)
+            method = planner_info(cond.planner).support_method(
+                cond.rule, trials.ch6.pull_map_meaning
+            )
             assert summary["support"] == sensed_choice["d415"]["chosen"][method], name
     assert "sensing" in dec.columns and dec["sensing"].notna().any()
     assert t62.iloc[:, 0].str.contains("on d415 depth").sum() > 1
