@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import os
 import random
 import sys
@@ -50,10 +51,20 @@ def run_stage(main: Callable[[dict[str, Any], BaseConfig], None]) -> None:
         sys.exit(2)
 
 
+MAX_STAGE_NAME = 120
+"""A longer name (a debugging run of many conditions: stages/trials.py a b c ...) is cut to
+its first argument, a count and a digest of the rest, so its timing file can be written."""
+
+
 def stage_name(argv: list[str]) -> str:
-    """dvc's name of the stage a command line runs: stages/train.py cp_focal -> train@cp_focal."""
+    """dvc's name of the stage a command line runs: stages/train.py cp_focal -> train@cp_focal;
+    a command line of many arguments: trials@<first>_and_<n>_more_<digest of them all>."""
     stem = Path(argv[0]).stem
-    return f"{stem}@{'_'.join(argv[1:])}" if argv[1:] else stem
+    name = f"{stem}@{'_'.join(argv[1:])}" if argv[1:] else stem
+    if len(name) <= MAX_STAGE_NAME:
+        return name
+    digest = hashlib.sha256("\0".join(argv[1:]).encode()).hexdigest()[:12]
+    return f"{stem}@{argv[1][:60]}_and_{len(argv) - 2}_more_{digest}"
 
 
 def record_wall_time(

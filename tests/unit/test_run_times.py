@@ -90,6 +90,14 @@ def test_stage_name_is_dvc_s():
     assert stage_name(["stages/report.py"]) == "report"
 
 
+def test_a_debugging_run_of_many_conditions_gets_a_name_a_file_can_have(tmp_path):
+    many = ["stages/trials.py", *(f"multi_step_box_physics_{i}_d415" for i in range(12))]
+    name = stage_name(many)
+    assert name.startswith("trials@multi_step_box_physics_0_d415_and_11_more_")
+    assert len(name) <= 120 and name != stage_name([*many[:-1], "random_d415"])
+    (tmp_path / f".{name}.json.tmp-123456").write_text("{}")  # as write_json's temp file
+
+
 def test_minutes_per_stage_group_and_their_sum(tmp_path):
     timing(tmp_path, "train@a", 120.0)
     timing(tmp_path, "train@b", 60.0)
