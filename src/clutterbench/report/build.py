@@ -193,9 +193,11 @@ def support_thresholds(path: Path, fusion: Path | None = None) -> dict[str, Any]
     fused with physics from depth (as method `<head>_box_fused`) and physics from depth's
     pulls alone (`<head>_physics_pull`); then, for each sensor the support stage chose on
     (`sensed`), the same chosen on its depth, as methods `<method>@<sensor>`."""
-    json_key(path, "chosen")  # one line if the file has none
     data = read_json(path)
-    fused = {"chosen": json_key(fusion, "chosen")} | read_json(fusion) if fusion else {}
+    json_key(path, "chosen")  # one line if either file has no choice
+    fused = read_json(fusion) if fusion is not None else {}
+    if fusion is not None:
+        json_key(fusion, "chosen")
     out = _choice_thresholds(data, fused)
     for sensor, choice in data.get("sensed", {}).items():
         mine = _choice_thresholds(choice, fused.get("sensed", {}).get(sensor, {}))
