@@ -156,11 +156,32 @@ def iter_in_workers(
                     yield result
         else:
             ctx = mp.get_context("spawn")
-            with ctx.Pool(min(workers, len(jobs)), worker_init, (1,)) as pool:
+            with _one_blas_thread(), ctx.Pool(min(workers, len(jobs)), worker_init, (1,)) as pool:
                 results = pool.imap(_call, [(label, fn, job) for job in jobs])
                 for n, result in zip(units, results):
                     advance(n)
                     yield result
+
+
+BLAS_THREADS = "OPENBLAS_NUM_THREADS"
+"""numpy's OpenBLAS reads it once, when numpy loads. Unset, every worker process starts one
+OpenBLAS thread per core, which spins between the small products of box fits and geometry:
+with one worker per core they take cores from the other workers (0.5 of a core measured
+beside one physics-from-depth episode)."""
+
+
+@contextmanager
+def _one_blas_thread() -> Iterator[None]:
+    """Spawned workers inherit this process' environment: one OpenBLAS thread each, as torch
+    has one thread each (worker_init), unless the user set a count."""
+    if BLAS_THREADS in os.environ:
+        yield
+        return
+    os.environ[BLAS_THREADS] = "1"
+    try:
+        yield
+    finally:
+        del os.environ[BLAS_THREADS]
 
 
 @contextmanager

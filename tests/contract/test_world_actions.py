@@ -241,3 +241,29 @@ def test_a_held_box_still_resting_on_another_is_not_lowered_into_it(stack3, phys
     before = world.poses()[2].copy()
     world.lower_onto_support(2)
     assert np.allclose(world.poses()[2][:3], before[:3], atol=1e-6)
+
+
+def test_packed_poses_are_the_entities_poses_through_every_action(stack3, physics):
+    """`poses` and `positions` read PhysX's packed state in one call; they must be the
+    entities' own poses to the bit, whatever the boxes went through: held, gripped mid-pull,
+    parked, released, inserted, rendered."""
+    world = BoxWorld.from_spec(stack3, physics, render=True)
+
+    def same() -> None:
+        assert np.array_equal(world.poses(), world.entity_poses())
+        assert np.array_equal(world.positions(), world.entity_poses()[:, :3])
+
+    same()
+    world.hold([1])
+    world.pull_step(2, 0.03, lift_m=0.005)
+    same()
+    world.pull_step(2, 0.0)
+    same()
+    world.lift_out(0)
+    same()
+    world.release([1, 2])
+    world.settle_action()
+    same()
+    world.insert(np.array([0.1, 0.1, 0.02]), np.array([0.14, 0.0, 0.0705, 1, 0, 0, 0]))
+    observe(world, CAM)
+    same()

@@ -130,3 +130,19 @@ def test_a_ray_task_on_a_node_without_the_project_is_one_line(monkeypatch):
         "trials: condition multi_step, stream ch6_3_10, index 0, seed 7: the project "
         "directory /no/such/project is not on Ray node "
     )
+
+
+def _blas_threads(_job: int) -> str | None:
+    return os.environ.get("OPENBLAS_NUM_THREADS")
+
+
+def test_spawned_workers_run_numpys_blas_on_one_thread_unless_the_user_set_it(monkeypatch):
+    """An OpenBLAS thread per core in every worker spins between small products and takes
+    cores from the other workers: spawned workers get OPENBLAS_NUM_THREADS=1, a count the
+    user set is kept, and this process' environment is left as it was."""
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    assert map_in_workers("blas", _blas_threads, [0, 1], 2) == ["1", "1"]
+    assert "OPENBLAS_NUM_THREADS" not in os.environ
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")
+    assert map_in_workers("blas", _blas_threads, [0, 1], 2) == ["2", "2"]
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "2"
