@@ -397,6 +397,35 @@ def test_a_support_scene_under_a_sensor_keeps_its_masks_and_truth():
     assert one.gaps_m.shape == (2, 2) and not np.array_equal(one.gaps_m, scene.gaps_m)
 
 
+def test_the_box_heads_scenes_pass_through_its_sensor():
+    """support.box_head.sensing: ideal leaves the scenes as they are; with a preset the val
+    and test scenes are the preset's own (as the support stage's sensed rows see them) and
+    the train scenes the preset randomised by the spread, seeded by the stage's seed and
+    the picture: reruns equal, another seed another draw."""
+    from clutterbench.sim.config import CameraConfig, SimConfig
+    from clutterbench.sim.noise import TrainSensingConfig
+    from clutterbench.support.box_run import as_sensed
+    from clutterbench.support.evaluate import Scene, sensed_scene
+
+    depth = np.full((64, 64), 0.7, np.float32)
+    depth[20:40, 10:30], depth[20:40, 34:54] = 0.55, 0.6
+    masks = np.zeros((2, 64, 64), dtype=bool)
+    masks[0, 20:40, 10:30] = masks[1, 20:40, 34:54] = True
+    eye = np.eye(2, dtype=bool)
+    scenes = [Scene(0, "random", depth, [0, 1], masks, ~eye, eye, 2, gaps_m=np.zeros((2, 2)))]
+    sim = SimConfig(camera=CameraConfig(image_size=64))
+    assert as_sensed(scenes, TrainSensingConfig(), sim, 3) is scenes
+    d415 = TrainSensingConfig(preset="d415", spread=0.5)
+    (val,) = as_sensed(scenes, d415, sim, None)
+    assert np.array_equal(val.depth_m, sensed_scene(scenes[0], "d415", sim.camera).depth_m)
+    (train,), (again,), (other,) = (as_sensed(scenes, d415, sim, s) for s in (3, 3, 4))
+    assert np.array_equal(train.depth_m, again.depth_m)
+    unspread = sensed_scene(scenes[0], "d415", sim.camera, 0.0, 3)  # same seed, no spread
+    for a, b in ((train, val), (train, other), (train, unspread)):
+        assert not np.array_equal(a.depth_m, b.depth_m)
+    assert train.masks is masks and train.ids == [0, 1]
+
+
 @pytest.mark.parametrize("size", SIZES)
 @pytest.mark.parametrize("name", SENSORS)
 def test_a_steep_slope_is_no_step_at_any_image_size(name, size):

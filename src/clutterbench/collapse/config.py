@@ -12,7 +12,7 @@ from clutterbench.data.labels import LABEL_KINDS, OUTPUT_CHANNELS
 from clutterbench.errors import ClutterbenchError
 from clutterbench.models import ARCHS, parse_net_config
 from clutterbench.precision import check_precision, resolve_precision
-from clutterbench.sim.noise import DepthAugmentation, DepthNoiseConfig
+from clutterbench.sim.noise import DepthAugmentation, DepthNoiseConfig, TrainSensingConfig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,19 +114,6 @@ def check_labels(m: TrainModelConfig, key: str) -> None:
     if (m.loss == "ce") != (n_classes > 1):
         need = "ce" if n_classes > 1 else "bce or focal"
         raise ClutterbenchError(f"{key}.loss: {m.loss} does not fit n_classes {n_classes} ({need})")
-
-
-@dataclasses.dataclass(frozen=True)
-class TrainSensingConfig:
-    """The depth sensor the networks train on: train.sensing, detector.sensing (sim/sensor.py,
-    docs/sensing.md)."""
-
-    preset: Literal["ideal", "structured_light", "d415"] = "ideal"
-    """A preset of sim/sensor.py PRESETS: its model replaces the parametric noise (train.noise)
-    on every training image of a model with `noise: true`; ideal: the parametric noise."""
-    spread: float = bounded(0.2, ge=0.0, le=0.95)
-    """Each image's sensor noise is the preset's, each randomised field scaled by a factor
-    drawn in [1 - spread, 1 + spread] (sim.sensor.randomized)."""
 
 
 def depth_augmentation(

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Protocol
+from typing import Literal, Protocol
 
 import numpy as np
 
@@ -42,3 +42,16 @@ class DepthAugmentation(Protocol):
     above (`DepthNoiseConfig`) or a depth sensor's model (`sim.sensor.SensedAugmentation`)."""
 
     def apply(self, depth_m: np.ndarray, rng: np.random.Generator) -> np.ndarray: ...
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainSensingConfig:
+    """The depth sensor the networks train on: train.sensing, detector.sensing,
+    support.box_head.sensing (sim/sensor.py, docs/sensing.md)."""
+
+    preset: Literal["ideal", "structured_light", "d415"] = "ideal"
+    """A preset of sim/sensor.py PRESETS: its model replaces the parametric noise (train.noise)
+    on every training image of a model with `noise: true`; ideal: the parametric noise."""
+    spread: float = bounded(0.2, ge=0.0, le=0.95)
+    """Each image's sensor noise is the preset's, each randomised field scaled by a factor
+    drawn in [1 - spread, 1 + spread] (sim.sensor.randomized)."""

@@ -26,6 +26,7 @@ from clutterbench.models.checkpoint import checkpoint_heads, load_checkpoint
 from clutterbench.planning.ch6.support import edge_precision_recall
 from clutterbench.precision import inference_from_params
 from clutterbench.sim.config import SimConfig
+from clutterbench.sim.noise import TrainSensingConfig
 from clutterbench.support.box_train import (
     THRESHOLDS,
     Pairs,
@@ -36,7 +37,7 @@ from clutterbench.support.box_train import (
     train_box_head,
 )
 from clutterbench.support.config import SupportEvalConfig
-from clutterbench.support.evaluate import Scene, all_scenes, split_scenes
+from clutterbench.support.evaluate import Scene, all_scenes, sensed_scene, split_scenes
 
 
 @dataclass(frozen=True)
@@ -72,8 +73,10 @@ def run_box_head(
     pairs: dict[str, Pairs] = {}
     for split, limit in (("train", bh.train_scenes), ("val", bh.val_scenes)):
         scenes = split_scenes(paths.gen_dir, paths.split_file, split, limit, **read)
+        scenes = as_sensed(scenes, bh.sensing, sim, seed if split == "train" else None)
         pairs[split] = collect(scenes, predictor, f"box_head: {split} scenes", len(scenes))
     test_scenes = list(all_scenes(paths.gen_dir, bh.test_dataset, **read))
+    test_scenes = as_sensed(test_scenes, bh.sensing, sim, None)
     pairs["test"] = collect(test_scenes, predictor, "box_head: test scenes", len(test_scenes))
     for split, p in pairs.items():
         if not len(p):
@@ -108,6 +111,7 @@ def run_box_head(
                 k: dict(zip(OUTPUTS, v.y.sum(0).astype(int).tolist())) for k, v in pairs.items()
             },
             "thresholds": chosen,
+            **_sensing_field(bh.sensing),
             "test": {
                 m: {
                     r["output"]: {
@@ -121,6 +125,29 @@ def run_box_head(
     )
     calibration_figure(test_methods, pairs["test"], paths.out / "calibration.png")
     return summary
+
+
+def as_sensed(
+    scenes: list[Scene], sensing: TrainSensingConfig, sim: SimConfig, train_seed: int | None
+) -> list[Scene]:
+    """The scenes as the box head's sensor (support.box_head.sensing) returns their depth:
+    unchanged for ideal; the train scenes (`train_seed` given) with the preset's noise
+    randomised by its spread, seeded by `train_seed` and each picture; the val and test
+    scenes through the preset itself, as the support stage's sensed rows see them."""
+    if sensing.preset == "ideal":
+        return scenes
+    if train_seed is None:
+        return [sensed_scene(sc, sensing.preset, sim.camera) for sc in scenes]
+    return [
+        sensed_scene(sc, sensing.preset, sim.camera, sensing.spread, train_seed) for sc in scenes
+    ]
+
+
+def _sensing_field(sensing: TrainSensingConfig) -> dict[str, Any]:
+    """metrics.json's record of the sensor it trained on; none for ideal (as before)."""
+    if sensing.preset == "ideal":
+        return {}
+    return {"sensing": {"preset": sensing.preset, "spread": sensing.spread}}
 
 
 def _round(v: float) -> float | None:

@@ -10,6 +10,7 @@ from typing import Literal
 
 from clutterbench.config import bounded, cores_field
 from clutterbench.data.trial_params import SceneStreamConfig
+from clutterbench.sim.noise import TrainSensingConfig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -30,6 +31,11 @@ class BoxHeadConfig:
     """Passes over the training pairs; the epoch of least val loss is kept."""
     batch_size: int = bounded(256, ge=1)
     lr: float = bounded(0.001, gt=0.0)
+    sensing: TrainSensingConfig = TrainSensingConfig()
+    """The sensor whose depth it trains on ({preset, spread}; ideal: the exact depth): with a
+    preset, every train scene's depth passes through that sensor, its noise randomised by the
+    spread, and its val and test scenes' through the preset itself, so its epoch and outcome
+    thresholds are chosen, and its scores taken, as that sensor returns the depth."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -209,15 +209,29 @@ def all_scenes(
             )
 
 
-def sensed_scene(scene: Scene, sensing: str, camera: CameraConfig) -> Scene:
+def sensed_scene(
+    scene: Scene, sensing: str, camera: CameraConfig, spread: float = 0.0, seed: int = 0
+) -> Scene:
     """`scene` as the sensor `sensing` (sim/sensor.py) would have returned its depth image,
-    seeded by the picture as every observation is (sim/render.py observe), its surface gaps
-    measured on that depth; masks and truth unchanged."""
+    seeded by `seed` and the picture as every observation is (sim/render.py observe), its
+    surface gaps measured on that depth; masks and truth unchanged. `spread` > 0: the preset's
+    noise randomised around it first (sim.sensor.randomized, a training augmentation)."""
     from clutterbench.perception.gaps import surface_gaps
-    from clutterbench.sim.sensor import focal_px, observation_rng, pinhole, preset, sense
+    from clutterbench.sim.sensor import (
+        focal_px,
+        observation_rng,
+        pinhole,
+        preset,
+        randomized,
+        sense,
+    )
 
     model = pinhole(focal_px(scene.depth_m.shape[0], camera.fovy_deg), scene.depth_m.shape)
-    depth_m = sense(scene.depth_m, model, preset(sensing), observation_rng(0, scene.depth_m))
+    rng = observation_rng(seed, scene.depth_m)
+    sensor = preset(sensing)
+    if spread > 0.0:
+        sensor = randomized(sensor, rng, spread)
+    depth_m = sense(scene.depth_m, model, sensor, rng)
     gaps = scene.gaps_m
     if gaps is not None:
         with np.errstate(invalid="ignore", divide="ignore"):
