@@ -38,8 +38,7 @@ may be what that box rests on (resting contacts overlap a little, a tilted box's
 """A pulled box counts as out once its back face is this far in front of the opening."""
 CONTACT_SEPARATION_M = 0.001
 """Two boxes touch when PhysX reports a contact point closer than this."""
-_PACKED = 13
-"""Floats per dynamic body in `PhysxCpuSystem.pack()`: pose (q, p), linear and angular velocity."""
+_PACKED = 13  # floats per dynamic body in PhysxCpuSystem.pack(): q, p, velocities
 
 
 @dataclasses.dataclass(frozen=True)
@@ -151,11 +150,8 @@ class BoxWorld:
 
     # -- state ------------------------------------------------------------------------------
     def _packed(self) -> np.ndarray:
-        """(N, 13) float32: each box's PhysX state as the system packs it, [qw, qx, qy, qz,
-        x, y, z, linear velocity, angular velocity], in the order the boxes were added (the
-        boxes are the system's only dynamic bodies). One call instead of one pose object per
-        box: the same float32 values as the entities' poses (`entity_poses`, a unit test
-        holds them equal), an order of magnitude faster."""
+        """(N, 13) float32: the boxes' PhysX state (q, p, velocities) in one call, in the order
+        they were added (the only dynamic bodies); the entities' poses to the bit (a test)."""
         raw = np.frombuffer(self.system.pack(), dtype=np.float32, count=self.n * _PACKED)
         return raw.reshape(self.n, _PACKED)
 
@@ -168,11 +164,8 @@ class BoxWorld:
 
     def entity_poses(self) -> np.ndarray:
         """`poses` read box by box from the entities (the definition `poses` matches)."""
-        out = np.empty((self.n, 7))
-        for i, e in enumerate(self.entities):
-            p = e.pose
-            out[i, :3], out[i, 3:] = p.p, p.q
-        return out
+        poses = [(*e.pose.p, *e.pose.q) for e in self.entities]
+        return np.array(poses, dtype=np.float64).reshape(-1, 7)
 
     def positions(self) -> np.ndarray:
         return self._packed()[:, 4:7].astype(np.float64)
@@ -223,8 +216,7 @@ class BoxWorld:
         dynamic[sorted(self.removed)] = False
         if not dynamic.any():
             return True
-        # np.linalg.norm's and np.clip's arithmetic, without their Python wrappers (this runs
-        # after every check window of every settle); the turn only where nothing moved.
+        # np.linalg.norm's and np.clip's arithmetic without their wrappers; turns if no move
         shift = after[dynamic, :3] - before[dynamic, :3]
         move = np.sqrt(np.add.reduce(shift * shift, axis=1))
         if not (move <= self.cfg.rest_linear_m_s * dt).all():
@@ -348,11 +340,9 @@ class BoxWorld:
         n_steps = int(np.ceil(distance_m / dx - 1e-9))
         if n_steps == 0:
             return self._result(before, self._still(self.poses(), self.poses(), 1))
-        # The gripper's targets along the pull, k * dx from its start (float32 start, float64
-        # offsets, as sapien.Pose takes them); the loop only sets them and steps.
         path = np.tile(np.array(start.p), (n_steps, 1)).astype(np.float64)
         path[:, 0] -= np.arange(done + 1, done + n_steps + 1) * dx
-        body, q = self.bodies[target], start.q
+        body, q = self.bodies[target], start.q  # the targets above: k * dx from the start
         physx_step, clock = self.system.step, time.perf_counter
         inside = 0.0  # wall time inside the PhysX steps, as `step` counts it
         for p in path[:-1]:
