@@ -4,31 +4,17 @@ clutterbench.support.box_run)."""
 from pathlib import Path
 
 from clutterbench.config import BaseConfig, load_section
-from clutterbench.data.config import GenerateConfig
-from clutterbench.errors import ClutterbenchError
 from clutterbench.sim.config import SimConfig
 from clutterbench.stage import run_stage
-from clutterbench.support.box_run import BoxHeadPaths, run_box_head
+from clutterbench.support.box_run import BoxHeadPaths, check_datasets, run_box_head
 from clutterbench.support.config import SupportEvalConfig
 
 
 def box_head(params: dict, base: BaseConfig) -> None:
     cfg = load_section(SupportEvalConfig, "support", params)
-    gen = load_section(GenerateConfig, "generate", params)
+    check_datasets(cfg, params)
     sim = load_section(SimConfig, "sim", params)
-    for key, name in (
-        ("val_dataset", cfg.val_dataset),
-        ("box_head.test_dataset", cfg.box_head.test_dataset),
-    ):
-        if name not in gen.datasets:
-            raise ClutterbenchError(f"support.{key}: unknown dataset '{name}'")
-    paths = BoxHeadPaths(
-        cp_model=Path(f"models/{cfg.model}/best.pt"),
-        gen_dir=Path("data/generate"),
-        split_file=Path(f"data/split/{cfg.val_dataset}.json"),
-        model_dir=Path("models/box_head"),
-        out=Path("reports/box_head"),
-    )
+    paths = BoxHeadPaths.of(cfg, Path("models/box_head"), Path("reports/box_head"))
     summary = run_box_head(params, base.seed, cfg, sim, paths)
     for out, s in summary.items():
         print(

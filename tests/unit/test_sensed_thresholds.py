@@ -45,14 +45,17 @@ def _fusion(edge: float, w: float) -> dict:
 
 
 PLANNERS = ("multi_step", "multi_step_pull", "bimanual_box", "multi_step_box_physics")
+IDEAL_HEAD = Path("models/box_head/best.pt")  # stage box_head's
+D415_HEAD = Path("models/box_head_sensed/d415/best.pt")  # stage box_head_sensed's
 
 
 @pytest.fixture
 def project(tmp_path, monkeypatch) -> Path:
     """A project whose support stage chose apart on exact and on d415 val depth."""
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "models/box_head").mkdir(parents=True)
-    (tmp_path / "models/box_head/best.pt").write_bytes(b"")
+    for head in (IDEAL_HEAD, D415_HEAD):
+        (tmp_path / head).parent.mkdir(parents=True)
+        (tmp_path / head).write_bytes(b"")
     out = tmp_path / "reports/support"
     out.mkdir(parents=True)
     ideal, sensed = _choice(0.4, 0.2, 0.45), _choice(0.6, 0.5, 0.7)
@@ -71,20 +74,28 @@ def test_a_cp_row_reads_the_thresholds_of_its_own_sensor(project, planner):
     assert cp_max == (CH6.cp_max if CH6.cp_max is not None else 0.5)
 
 
-def test_a_box_row_reads_the_edges_and_fusion_of_its_own_sensor(project):
+def test_a_box_row_reads_the_head_edges_and_fusion_of_its_own_sensor(project):
     box, _ = box_fields(project, "bimanual_box", CH6)
-    assert box["box_edge_threshold"] == 0.45
+    assert (box["box_edge_threshold"], box["box_head_path"]) == (0.45, IDEAL_HEAD)
     box, _ = box_fields(project, "bimanual_box", CH6, "d415")
-    assert box["box_edge_threshold"] == 0.7
+    assert (box["box_edge_threshold"], box["box_head_path"]) == (0.7, D415_HEAD)
     fused, _ = box_fields(project, "multi_step_box_physics", CH6)
     assert (fused["box_edge_threshold"], fused["box_fusion"][0]) == (0.3, 0.1)
     fused, _ = box_fields(project, "multi_step_box_physics", CH6, "d415")
     assert (fused["box_edge_threshold"], fused["box_fusion"][0]) == (0.8, 0.9)
+    assert fused["box_head_path"] == D415_HEAD
 
 
 def test_a_sensor_the_support_stage_chose_nothing_for_is_one_line(project):
     with pytest.raises(ClutterbenchError, match="structured_light to support.sensing"):
         planner_support(project, "multi_step_pull", RULE, CH6, "structured_light")
+    with pytest.raises(
+        ClutterbenchError, match="structured_light/best.pt missing .* box_head_sensed"
+    ):
+        box_fields(project, "bimanual_box_physics", CH6, "structured_light")
+    head = Path("models/box_head_sensed/structured_light/best.pt")
+    head.parent.mkdir(parents=True)
+    head.write_bytes(b"")
     with pytest.raises(ClutterbenchError, match="box_fusion.json: nothing chosen"):
         box_fields(project, "bimanual_box_physics", CH6, "structured_light")
 
@@ -96,3 +107,13 @@ def test_table_6_2_shows_each_sensed_row_the_thresholds_it_ran_with(project):
     assert (shown["pull_box"]["edge"], shown["pull_box@d415"]["edge"]) == (0.45, 0.7)
     assert (shown["pull_box_fused"]["edge"], shown["pull_box_fused@d415"]["edge"]) == (0.3, 0.8)
     assert shown["pull_physics_pull@d415"] == {"edge": 0.4}
+
+
+def test_the_support_stage_refuses_a_sensor_whose_box_head_was_not_trained(project):
+    """Its sensed choice and rows read the head of their sensor (stage box_head_sensed): one
+    line naming that stage when it is missing, never the exact-depth head instead."""
+    from clutterbench.sim.config import SimConfig
+    from clutterbench.support.run import sensed_box_head
+
+    with pytest.raises(ClutterbenchError, match="structured_light depth; run stage box_head_sen"):
+        sensed_box_head(None, Path("models/cp/best.pt"), SimConfig(), "structured_light")  # type: ignore[arg-type]

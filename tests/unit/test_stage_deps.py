@@ -68,8 +68,9 @@ CHAPTER_STAGES = {
 """A chapter's code -> the stages an edit of it reruns (the arm-level stage executes ch. 4's and
 ch. 6's steps; the noise stage replays ch. 6's episodes and runs its search oracles). Table
 6.2's support stage also reads ch. 6's support rule, named below, and so does the box head
-(stages box_head and testset, which scores it); none of them reads the trials' code (the
-support layer stands below the trials: its physics-from-depth model is perception's)."""
+(stages box_head, box_head_sensed and testset, which scores it); none of them reads the
+trials' code (the support layer stands below the trials: its physics-from-depth model is
+perception's)."""
 SUPPORT_READS = {"planning/ch6/support.py"}
 BOX_HEAD_READS = {"planning/ch6/support.py"}
 REPORT_READS = "trials/ch6/planners/"
@@ -96,7 +97,7 @@ def test_an_edit_of_one_chapter_reruns_only_its_stages(chapter):
     for f in files:
         rel = str(f.relative_to(ROOT / "src" / "clutterbench"))
         want = CHAPTER_STAGES[chapter] | ({"support"} if rel in SUPPORT_READS else set())
-        want |= {"box_head", "testset"} if rel in BOX_HEAD_READS else set()
+        want |= {"box_head", "box_head_sensed", "testset"} if rel in BOX_HEAD_READS else set()
         want |= {"report"} if rel.startswith(REPORT_READS) else set()
         got = stages_depending_on(f"src/clutterbench/{rel}")
         assert got == want, f"an edit of {rel} reruns {sorted(got)}, not {sorted(want)}"

@@ -48,6 +48,31 @@ class BoxHeadPaths:
     model_dir: Path  # best.pt
     out: Path  # metrics.json, scores.csv, log.csv, calibration.png
 
+    @classmethod
+    def of(cls, cfg: SupportEvalConfig, model_dir: Path, out: Path) -> BoxHeadPaths:
+        """The pipeline's inputs of `cfg` (models/, data/generate, data/split), these outputs."""
+        return cls(
+            cp_model=Path(f"models/{cfg.model}/best.pt"),
+            gen_dir=Path("data/generate"),
+            split_file=Path(f"data/split/{cfg.val_dataset}.json"),
+            model_dir=model_dir,
+            out=out,
+        )
+
+
+def check_datasets(cfg: SupportEvalConfig, params: dict) -> None:
+    """One line when the val or the test dataset of the box head is not generated."""
+    from clutterbench.config import load_section
+    from clutterbench.data.config import GenerateConfig
+
+    datasets = load_section(GenerateConfig, "generate", params).datasets
+    for key, name in (
+        ("val_dataset", cfg.val_dataset),
+        ("box_head.test_dataset", cfg.box_head.test_dataset),
+    ):
+        if name not in datasets:
+            raise ClutterbenchError(f"support.{key}: unknown dataset '{name}'")
+
 
 def run_box_head(
     params: dict, seed: int, cfg: SupportEvalConfig, sim: SimConfig, paths: BoxHeadPaths

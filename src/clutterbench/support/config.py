@@ -6,6 +6,7 @@ Imports no SAPIEN and no torch, so that the report stage can read them.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 from typing import Literal
 
 from clutterbench.config import bounded, cores_field
@@ -82,3 +83,18 @@ class SupportEvalConfig:
     test scenes, their depth images sensed (the masks stay the simulator's): Table 6.2's
     method@<sensor> rows, each sensor with the thresholds and fusion chosen on the val scenes'
     depth as it returns them (Table 6.3's sensed rows under it read the same choice)."""
+
+
+SENSED_BOX_HEADS = Path("models/box_head_sensed")
+"""Stage box_head_sensed: one box head per sensor of support.sensing, <sensor>/best.pt."""
+SENSED_BOX_REPORTS = Path("reports/box_head_sensed")
+"""Its reports: <sensor>/metrics.json (the outcome thresholds it chose), scores, log."""
+
+
+def box_head_files(sensing: str) -> tuple[Path, Path]:
+    """(checkpoint, metrics.json) of the box head that reads depth as `sensing` returns it:
+    stage box_head's for ideal, stage box_head_sensed's, trained on that sensor's depth, for
+    a sensor of support.sensing."""
+    if sensing == "ideal":
+        return Path("models/box_head/best.pt"), Path("reports/box_head/metrics.json")
+    return SENSED_BOX_HEADS / sensing / "best.pt", SENSED_BOX_REPORTS / sensing / "metrics.json"

@@ -39,7 +39,7 @@ from clutterbench.support.box_fusion import (
     learned_contact,
 )
 from clutterbench.support.box_run import box_rows, choose_edge_thresholds
-from clutterbench.support.config import SupportEvalConfig
+from clutterbench.support.config import SupportEvalConfig, box_head_files
 from clutterbench.support.evaluate import (
     PULL_HEADS,
     Scene,
@@ -164,8 +164,9 @@ def run_support(
     )
     choice = choose_on_val(val, inputs)
     write_text(paths.out / "val_sweep.csv", choice.sweep.to_csv(index=False))
+    sensed_inputs = {s: sensed_box_head(inputs, paths.model, sim, s) for s in cfg.sensing}
     sensed = {
-        s: choose_on_val([sensed_scene(sc, s, sim.camera) for sc in val], inputs, s)
+        s: choose_on_val([sensed_scene(sc, s, sim.camera) for sc in val], sensed_inputs[s], s)
         for s in cfg.sensing
     }
     fusion = {"chosen": choice.fusion, "val_scenes": len(val)}
@@ -192,7 +193,10 @@ def run_support(
     )
     rows, panels, truth = score_test_scenes(scenes_in, cfg, models, choice, rng, test)
     sensed_tests = {
-        s: dataclasses.replace(test, physics_depth=physics_depth(c)) for s, c in sensed.items()
+        s: dataclasses.replace(
+            test, physics_depth=physics_depth(c), box_maps=sensed_inputs[s].box_maps
+        )
+        for s, c in sensed.items()
     }
     rows += sensed_rows(cfg, sim, paths, read, models, sensed, sensed_tests)
     # edges: removing X moves Y, X and Y touch; <head>_edges: the trials' pull of X marks Y
@@ -206,6 +210,23 @@ def run_support(
         panels, paths.out / "figure.png", "Inferred (white, dashed) and true (pink) support"
     )
     return scenes.groupby("method", sort=False)[["precision", "recall"]].mean()
+
+
+def sensed_box_head(inputs: ValInputs, model: Path, sim: SimConfig, sensing: str) -> ValInputs:
+    """`inputs` with the box head trained on `sensing`'s depth (stage box_head_sensed) and
+    the outcome thresholds it chose on its val pairs; one line when that stage has not
+    trained one for this sensor."""
+    head, metrics = box_head_files(sensing)
+    if not head.is_file() or not metrics.is_file():
+        raise ClutterbenchError(
+            f"{head}: no box head trained on {sensing} depth; run stage box_head_sensed "
+            "(support.sensing names the sensors it trains for)"
+        )
+    return dataclasses.replace(
+        inputs,
+        box_maps=BoxMaps.from_paths(model, head, sim.camera, "pull", 0.5),
+        outcome=read_json(metrics)["thresholds"]["box_head"],
+    )
 
 
 def choose_on_val(val: list[Scene], inputs: ValInputs, sensing: str = "ideal") -> ValChoice:

@@ -26,6 +26,7 @@ from clutterbench.sim import benchmark
 from clutterbench.sim.config import CameraConfig, PhysicsConfig, SimConfig
 from clutterbench.sim.pull import SceneState, execute_pull, world_at
 from clutterbench.sim.spec import SceneSpec
+from clutterbench.support.config import box_head_files
 from clutterbench.trials.ch6.jobs import Ch6Job
 from clutterbench.trials.ch6.oracle import SearchOracle
 from clutterbench.trials.ch6.planners import (  # noqa: F401  (register_planner, PLANNERS: the documented entry points)
@@ -394,17 +395,19 @@ def box_fields(
     declared = planner_info(planner)
     if not declared.reads_box_head:
         return {}, None
-    if not BOX_HEAD.exists():
-        raise ClutterbenchError(f"{BOX_HEAD} missing (planner {planner} reads it); run box_head")
+    head = box_head_files(sensing)[0]  # a sensed row's: trained on its sensor's depth
+    if not head.exists():
+        stage = "box_head" if sensing == "ideal" else "box_head_sensed"
+        raise ClutterbenchError(f"{head} missing (planner {planner} reads it); run {stage}")
     if declared.maps == "box_physics":
         edge, outcome, weights, contact = box_fusion(
             thresholds, ch6.pull_map_meaning, ch6.box_contact, sensing
         )
-        fields = {"box_head_path": BOX_HEAD, "box_edge_threshold": edge, "box_fusion": weights}
+        fields = {"box_head_path": head, "box_edge_threshold": edge, "box_fusion": weights}
         fields |= {"box_contact": contact}
     else:
         edge, outcome = box_thresholds(thresholds, ch6.pull_map_meaning, sensing)
-        fields = {"box_head_path": BOX_HEAD, "box_edge_threshold": edge}
+        fields = {"box_head_path": head, "box_edge_threshold": edge}
     return fields, outcome if ch6.box_cp_max is None else ch6.box_cp_max
 
 
