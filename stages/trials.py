@@ -57,6 +57,8 @@ def trials(params: dict, base: BaseConfig) -> None:
             "cp_max": cp_max,
             "support": as_dict(support),
         }
+        if (cond.sensing, cond.perception) != ("ideal", "instance"):  # as its records say
+            about[name] |= {"sensing": cond.sensing, "perception": cond.perception}
     parallel = load_section(ParallelConfig, "parallel", params)
     results = run_episodes("trials", run_ch6_episode, jobs, cfg.workers, parallel)
     pfd = [c for c in conditions.values() if planner_info(c.planner).world == "fitted"]

@@ -243,12 +243,13 @@ def test_dvc_repro_tiny_end_to_end(repro_twice):
     for name in trials.sensed.of:
         recs = read_records(a / "reports/trials" / f"{name}_{trials.sensed.sensing}/records.jsonl")
         assert {(r["sensing"], r["perception"]) for r in recs} == {("d415", "depth")}, name
+        summary = json.loads(
+            (a / "reports/trials" / f"{name}_{trials.sensed.sensing}/summary.json").read_text()
+        )
+        assert (summary["sensing"], summary["perception"]) == ("d415", "depth"), name
         # ... with the thresholds chosen on the val scenes as that sensor returned them
         cond = trials.stage_conditions([])[f"{name}_{trials.sensed.sensing}"]
         if planner_info(cond.planner).maps in ("deletion", "pull"):
-            summary = json.loads(
-                (a / "reports/trials" / f"{name}_{trials.sensed.sensing}/summary.json").read_text()
-            )
             method = planner_info(cond.planner).support_method(
                 cond.rule, trials.ch6.pull_map_meaning
             )
