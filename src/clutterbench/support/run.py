@@ -162,9 +162,9 @@ def run_support(
         fitted_contacts_of(cfg, sim, ch6, catalogue),
         ch6.box_edge_precision,
     )
+    sensed_inputs = {s: sensed_box_head(inputs, paths.model, sim, s) for s in cfg.sensing}
     choice = choose_on_val(val, inputs)
     write_text(paths.out / "val_sweep.csv", choice.sweep.to_csv(index=False))
-    sensed_inputs = {s: sensed_box_head(inputs, paths.model, sim, s) for s in cfg.sensing}
     sensed = {
         s: choose_on_val([sensed_scene(sc, s, sim.camera) for sc in val], sensed_inputs[s], s)
         for s in cfg.sensing
