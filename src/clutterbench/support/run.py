@@ -75,10 +75,11 @@ class SupportPaths:
     @classmethod
     def of(cls, cfg: SupportEvalConfig, out: Path, scenes: Path) -> SupportPaths:
         """The pipeline's inputs of `cfg` (models/, data/generate, data/split), these outputs."""
+        box_head, box_metrics = box_head_files("ideal")
         return cls(
             model=Path(f"models/{cfg.model}/best.pt"),
-            box_head=Path("models/box_head/best.pt"),
-            box_metrics=Path("reports/box_head/metrics.json"),
+            box_head=box_head,
+            box_metrics=box_metrics,
             gen_dir=Path("data/generate"),
             split_file=Path(f"data/split/{cfg.val_dataset}.json"),
             out=out,
