@@ -27,8 +27,10 @@ OPT_IN = (
     "multi_step_pull_truth_3_5",
     "multi_step_truth_10",
     "multi_step_pull_truth_10",
+    "physics_from_depth_hold_10",
 )
-"""The committed opt-in set: the deletion- and pull-truth rows of the 3-5 and 10-box streams."""
+"""The committed opt-in set: the deletion- and pull-truth rows of the 3-5 and 10-box streams,
+and the 10-box stream's training-free holding row (no learned holding row runs there)."""
 
 
 def _trials(**opt_in) -> TrialsConfig:
