@@ -231,6 +231,10 @@ class Ch6PullConfig:
     against: Mapping[str, str] = dataclasses.field(default_factory=dict)
     """Planner -> the planner it is also compared with, under each variant, episode by
     episode (both in `planners`); with it, one variant is enough."""
+    sensing: Sensing = "ideal"
+    """The planners' sensor (box head, thresholds: that sensor's); the oracles read the world."""
+    perception: Literal["instance", "depth"] = "instance"
+    """The planners' masks: the simulator's, or region growing on the (sensed) depth."""
 
     def __post_init__(self) -> None:
         from clutterbench.trials.config import Ch6TrialParams
@@ -433,32 +437,8 @@ class DevConfig:
         for name in self.streams:
             if not name.startswith(DEV_PREFIX):
                 raise ValueError(f"streams.{name}: a dev stream's name starts with '{DEV_PREFIX}'")
-        for check, names in (
-            ("ch4_piles", self.ch4_piles.streams),
-            ("ch4_sensing", self.ch4_sensing.streams),
-            ("ch5_sensing", self.ch5_sensing.streams),
-            ("ch6_sensing", self.ch6_sensing.streams),
-            ("ch5_planner", self.ch5_planner.streams),
-            ("perturbed_fit", self.perturbed_fit.streams),
-            ("ch6_pull", self.ch6_pull.streams),
-            ("ch6_pull_thresholds", self.ch6_pull_thresholds.streams),
-            ("ch6_pull_watch", self.ch6_pull_watch.streams),
-            ("ch6_no_plan", self.ch6_no_plan.streams),
-            ("ch6_no_plan_thresholds", self.ch6_no_plan_thresholds.streams),
-            ("ch6_idle_hold", self.ch6_idle_hold.streams),
-            ("ch6_clear", self.ch6_clear.streams),
-            ("ch6_hold", self.ch6_hold.streams),
-            ("ch6_vs_pfd", self.ch6_vs_pfd.streams),
-            ("ch6_box", self.ch6_box.streams),
-            ("ch6_box_physics", self.ch6_box_physics.streams),
-            ("ch6_box_hold", self.ch6_box_hold.streams),
-            ("ch6_release", self.ch6_release.streams),
-            ("ch6_fit_hypotheses", self.ch6_fit_hypotheses.streams),
-            ("ch6_box_contact", self.ch6_box_contact.streams),
-            ("ch6_box_cp_max", self.ch6_box_cp_max.streams),
-            ("ch6_box_edge", self.ch6_box_edge.streams),
-        ):
-            for name in names:
+        for check in (f.name for f in dataclasses.fields(self) if f.name != "streams"):
+            for name in getattr(getattr(self, check), "streams", ()):
                 if name not in self.streams:
                     raise ValueError(
                         f"{check}.streams: unknown dev stream '{name}' "

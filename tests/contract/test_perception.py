@@ -248,3 +248,38 @@ def test_match_segments_takes_the_box_covering_most_pixels():
     masks[2, :2, 4:] = True  # 4 px of box 4
     seg = Segmentation(ids=[0, 1, 2], masks=masks, source="depth")
     assert match_segments(seg, instance) == [1, None, 4]
+
+
+@pytest.mark.parametrize("size_px", [64, 96])
+def test_the_camera_model_of_a_config_is_the_renderers(physics, size_px):
+    """A dataset's image comes without its camera model; CameraConfig.model gives the one the
+    renderer pictured it with."""
+    camera = CameraConfig(image_size=size_px)
+    obs = observe(BoxWorld(Shelf(), physics, render=True), camera)
+    model = camera.model(Shelf().height_m)
+    np.testing.assert_allclose(model.K, obs.camera.K, atol=1e-9)
+    np.testing.assert_allclose(model.T_world_from_cam, obs.camera.T_world_from_cam, atol=1e-9)
+
+
+def test_a_scene_segmented_from_exact_depth_keeps_its_boxes_and_truth(physics):
+    """support/evaluate.py segmented_scene on a real picture of two boxes apart: region growing
+    finds both, each under its own id, with its truth."""
+    from clutterbench.support.evaluate import Scene, segmented_scene
+
+    camera = CameraConfig(image_size=64)
+    obs = observe(BoxWorld.from_spec(TWO_APART, physics, render=True), camera)
+    ids = obs.visible_boxes(20)
+    scene = Scene(
+        index=0,
+        family="random",
+        depth_m=obs.depth_m,
+        ids=ids,
+        masks=np.stack([obs.instance == b + 1 for b in ids]),
+        moved=np.array([[False, True], [False, False]]),
+        contact=np.zeros((2, 2), bool),
+        n_objects=2,
+    )
+    out = segmented_scene(scene, camera, min_pixels=20)
+    assert out.ids == [0, 1] and out.moved.tolist() == scene.moved.tolist()
+    for a, b in zip(out.masks, scene.masks):
+        assert iou(a, b) > 0.8

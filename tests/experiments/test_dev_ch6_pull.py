@@ -386,3 +386,35 @@ def test_a_precise_graph_variant_gets_its_fusion_chosen_again_with_that_precisio
     assert asked == [("precise", "head", 0.9)]
     assert got["support:multi_step_box_physics"] == 0.5
     assert got["precise:bimanual_box_physics"] == 0.9
+
+
+def test_a_sensed_recheck_shows_its_planners_the_sensor_and_the_oracles_the_world(
+    root, tmp_path, monkeypatch
+):
+    """dev.<section>.sensing / perception: the planners see through the sensor with masks from
+    depth and read the thresholds chosen for it; the oracles read the world."""
+    params = with_dev(load_params(root / "params.yaml"))
+    params["base"]["scale"] = "tiny"
+    params["dev"]["ch6_pull"] |= {"sensing": "d415", "perception": "depth", "oracle": True}
+    params["dev"]["ch6_pull"] |= {"planners": ["multi_step_pull"]}
+    trials = load_section(TrialsConfig, "trials", params)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "models" / trials.ch6.model).mkdir(parents=True)
+    (tmp_path / "models" / trials.ch6.model / "best.pt").write_bytes(b"")
+    chosen = {"rule": "coverage", "prob_threshold": 0.5, "score_threshold": 0.3}
+    chosen |= {"bbox_margin_px": 2, "adjacency_iou": 0.0, "max_gap_m": 0.05}
+    exact = {rule: chosen for rule in ("pull_coverage_gap", "pull_collapse_coverage_gap")}
+    exact["coverage_gap"] = chosen  # the oracles' (read, never used)
+    sensed = {rule: chosen | {"score_threshold": 0.7} for rule in exact if "pull" in rule}
+    thresholds = {"chosen": exact, "sensed": {"d415": {"chosen": sensed}}}
+    (tmp_path / "t.json").write_text(json.dumps(thresholds))
+    monkeypatch.setattr(ch6_pull, "THRESHOLDS", tmp_path / "t.json")
+    jobs = trial_jobs(load_section(DevConfig, "dev", params), params)
+    planners = [j for j in jobs if j.planner == "multi_step_pull"]
+    oracles = [j for j in jobs if j.planner.startswith("oracle")]
+    assert planners and oracles
+    assert {(j.sensing, j.perception, j.cp_max) for j in planners} == {("d415", "depth", 0.7)}
+    assert {(j.sensing, j.perception) for j in oracles} == {("ideal", "instance")}
+    assert "through the `d415` sensor preset and masks from depth" in ch6_pull.seen_text(
+        {"sensing": "d415", "perception": "depth"}
+    )

@@ -4,10 +4,14 @@ that only read configs (train, evaluate, report) do not load the simulator."""
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from clutterbench.config import bounded
+
+if TYPE_CHECKING:
+    from clutterbench.observation import CameraModel
 
 FAMILY_NAMES = (
     "shelved",
@@ -83,6 +87,21 @@ class CameraConfig:
         # Camera at the shelf opening's centre, looking +x (into the shelf): SAPIEN cameras
         # look along their local +x with +z up, so gravity is down in the image.
         return np.array([-self.distance_m, 0.0, shelf_height_m / 2])
+
+    def model(self, shelf_height_m: float) -> CameraModel:
+        """The OpenCV camera model of this camera at position_m, as sim/render.py's camera_model
+        reads it from the renderer (a contract test holds them equal), for images that come
+        without one (a dataset's): square pixels of f = (H / 2) / tan(fovy / 2), the principal
+        point at the image centre, looking +x with image right -y and image down -z."""
+        from clutterbench.observation import CameraModel
+
+        f = (self.image_size / 2) / np.tan(np.deg2rad(self.fovy_deg) / 2)
+        c = self.image_size / 2
+        T = np.eye(4)
+        T[:3, :3] = [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]  # columns: x, y, z
+        T[:3, 3] = self.position_m(shelf_height_m)
+        K = np.array([[f, 0.0, c], [0.0, f, c], [0.0, 0.0, 1.0]])
+        return CameraModel(K=K, T_world_from_cam=T)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -25,6 +25,7 @@ from clutterbench.io import atomic_path, write_json, write_text
 from clutterbench.models.checkpoint import checkpoint_heads, load_checkpoint
 from clutterbench.planning.ch6.support import edge_precision_recall
 from clutterbench.precision import inference_from_params
+from clutterbench.progress import progress_bar
 from clutterbench.sim.config import SimConfig
 from clutterbench.sim.noise import TrainSensingConfig
 from clutterbench.support.box_train import (
@@ -36,8 +37,14 @@ from clutterbench.support.box_train import (
     score_methods,
     train_box_head,
 )
-from clutterbench.support.config import SupportEvalConfig
-from clutterbench.support.evaluate import Scene, all_scenes, sensed_scene, split_scenes
+from clutterbench.support.config import BoxHeadConfig, SupportEvalConfig
+from clutterbench.support.evaluate import (
+    Scene,
+    all_scenes,
+    segmented_scene,
+    sensed_scene,
+    split_scenes,
+)
 
 
 @dataclass(frozen=True)
@@ -99,9 +106,10 @@ def run_box_head(
     for split, limit in (("train", bh.train_scenes), ("val", bh.val_scenes)):
         scenes = split_scenes(paths.gen_dir, paths.split_file, split, limit, **read)
         scenes = as_sensed(scenes, bh.sensing, sim, seed if split == "train" else None)
+        scenes = as_seen(scenes, bh, sim, cfg.min_pixels, split)
         pairs[split] = collect(scenes, predictor, f"box_head: {split} scenes", len(scenes))
     test_scenes = list(all_scenes(paths.gen_dir, bh.test_dataset, **read))
-    test_scenes = as_sensed(test_scenes, bh.sensing, sim, None)
+    test_scenes = as_seen(as_sensed(test_scenes, bh.sensing, sim, None), bh, sim, cfg.min_pixels)
     pairs["test"] = collect(test_scenes, predictor, "box_head: test scenes", len(test_scenes))
     for split, p in pairs.items():
         if not len(p):
@@ -166,6 +174,23 @@ def as_sensed(
     return [
         sensed_scene(sc, sensing.preset, sim.camera, sensing.spread, train_seed) for sc in scenes
     ]
+
+
+def as_seen(
+    scenes: list[Scene], bh: BoxHeadConfig, sim: SimConfig, min_pixels: int, split: str = "test"
+) -> list[Scene]:
+    """The scenes with the masks a sensed head trains on (support.box_head.sensed_masks):
+    unchanged for the simulator's or on exact depth; for depth, each scene's sensed depth
+    segmented by region growing (support/evaluate.py segmented_scene); for both, the scenes
+    with the simulator's masks and then again with those."""
+    if bh.sensing.preset == "ideal" or bh.sensed_masks == "instance":
+        return scenes
+    out = []
+    with progress_bar(f"box_head: {split} scenes' masks from depth", len(scenes)) as advance:
+        for sc in scenes:
+            out.append(segmented_scene(sc, sim.camera, min_pixels))
+            advance(1)
+    return scenes + out if bh.sensed_masks == "both" else out
 
 
 def _sensing_field(sensing: TrainSensingConfig) -> dict[str, Any]:

@@ -37,6 +37,12 @@ class BoxHeadConfig:
     preset, every train scene's depth passes through that sensor, its noise randomised by the
     spread, and its val and test scenes' through the preset itself, so its epoch and outcome
     thresholds are chosen, and its scores taken, as that sensor returns the depth."""
+    sensed_masks: Literal["instance", "depth", "both"] = "instance"
+    """The object masks of a head trained on a sensor (stage box_head_sensed): the simulator's
+    (as Table 6.2's sensed rows read theirs), region growing on the sensed depth, each segment
+    named by the box its grasp takes (as the trials' rows of `perception: depth` see theirs;
+    support/evaluate.py segmented_scene), or both (each scene once with each), in its train,
+    val and test scenes alike. The exact-depth head (stage box_head) keeps the simulator's."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -239,6 +239,56 @@ def sensed_scene(
     return dataclasses.replace(scene, depth_m=depth_m, gaps_m=gaps)
 
 
+def segmented_scene(scene: Scene, camera: CameraConfig, min_pixels: int) -> Scene:
+    """`scene` with its masks as a robot without ground truth has them, as the trials' rows of
+    `perception: depth` see theirs (perception/seen.py): its depth image (sensed, if it was)
+    segmented by region growing, each segment named by the box its grasp takes. A segment
+    under `min_pixels` or whose grasp takes no visible box is left out; each pair's truth is
+    that of the boxes their grasps take, none between two segments of one box; surface gaps
+    measured again on the new masks (if the scene had them)."""
+    from clutterbench.observation import Observation
+    from clutterbench.perception.depth_segmentation import shelf_roi
+    from clutterbench.perception.seen import see_segments
+    from clutterbench.sim.shelf import Shelf
+
+    shelf = Shelf()  # every chapter 6 scene's
+    instance = np.zeros(scene.depth_m.shape, dtype=np.uint8)
+    for box, mask in zip(scene.ids, scene.masks):
+        instance[mask] = box + 1
+    obs = Observation(scene.depth_m, instance, camera.model(shelf.height_m))
+    seen = see_segments(obs, shelf_roi(shelf), scene.n_objects, min_pixels)
+    counts = np.bincount(seen.obs.instance.ravel(), minlength=256)
+    kept = [
+        i
+        for i, box in sorted(seen.grasps.items())
+        if box in scene.ids and counts[i + 1] >= min_pixels
+    ]
+    rows = np.array([scene.ids.index(seen.grasps[i]) for i in kept], dtype=np.int64)
+    other = rows[:, None] != rows[None, :]  # two segments of one box: no truth between them
+
+    def pairs(m: np.ndarray) -> np.ndarray:
+        return m[np.ix_(rows, rows)] & other
+
+    masks = (
+        np.stack([seen.obs.instance == i + 1 for i in kept])
+        if kept
+        else np.zeros((0, *instance.shape), bool)
+    )
+    gaps = None
+    if scene.gaps_m is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            gaps = surface_gaps(camera_points(scene.depth_m, camera), masks)
+    return dataclasses.replace(
+        scene,
+        ids=kept,
+        masks=masks,
+        moved=pairs(scene.moved),
+        contact=pairs(scene.contact),
+        gaps_m=gaps,
+        moved_by={head: pairs(m) for head, m in scene.moved_by.items()},
+    )
+
+
 def evidence(scene: Scene, heatmaps: np.ndarray) -> SceneEvidence:
     return SceneEvidence(heatmaps, scene.masks, scene.ids, scene.true_edges, scene.gaps_m)
 
